@@ -1,0 +1,117 @@
+"""What every filter shares: input checks, missing measurements and the output register.
+
+Input checks are thorough once and cheap after that: a covariance that a trackkit filter
+produced is symmetric by construction and is remembered (by identity, weakly), so only
+covariances from outside (a user's prior, a hand-edited belief) pay for the full symmetry and
+positive-semi-definiteness check. Shapes and finiteness are checked on every call.
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from trackkit.belief import Gaussian, Innovation
+from trackkit.linalg import check_covariance, symmetrize
+
+Array = NDArray[np.float64]
+
+_produced: weakref.WeakValueDictionary[int, np.ndarray] = weakref.WeakValueDictionary()
+
+
+def register(P: Array) -> Array:
+    """Mark ``P`` as produced (and so already checked) by a trackkit filter."""
+    _produced[id(P)] = P
+    return P
+
+
+def produced(P: Any) -> bool:
+    return _produced.get(id(P)) is P
+
+
+def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
+    """Return ``(mean, cov)`` as float arrays after checking them.
+
+    Raises ``ValueError`` naming ``where`` (e.g. ``"EKF.predict belief"``) on a wrong state
+    length, mismatched shapes, non-finite entries, or (for covariances from outside) an
+    asymmetric or non-PSD covariance.
+    """
+    x, P = b.mean, b.cov
+    if not (isinstance(x, np.ndarray) and x.dtype == np.float64):
+        x = np.asarray(x, dtype=float)
+    if x.ndim < 1:
+        raise ValueError(f"{where}.mean is a scalar; expected shape (..., n)")
+    if n is not None and x.shape[-1] != n:
+        raise ValueError(
+            f"{where}.mean has shape {x.shape}; the model's state has {n} components, "
+            f"so expected (..., {n})"
+        )
+    if not np.isfinite(np.sum(x)):
+        raise ValueError(f"{where}.mean has non-finite entries; expected finite values")
+    if produced(P):
+        if P.shape[-2:] != (x.shape[-1],) * 2:
+            raise ValueError(f"{where}.cov has shape {P.shape}; expected (..., {x.shape[-1]}, "
+                             f"{x.shape[-1]})")
+        if not np.isfinite(np.sum(P)):
+            raise ValueError(f"{where}.cov has non-finite entries; expected finite values")
+    else:
+        P = check_covariance(P, f"{where}.cov", n=x.shape[-1])
+    return x, P
+
+
+def check_measurement(z: ArrayLike, m: int, where: str) -> Array:
+    z = np.asarray(z, dtype=float)
+    if z.ndim < 1 or z.shape[-1] != m:
+        raise ValueError(
+            f"{where}: z has shape {z.shape}; the sensor measures {m} components, so "
+            f"expected (..., {m}) (nan marks a missing measurement)"
+        )
+    return z
+
+
+def missing_rows(z: Array) -> Array | None:
+    """Boolean mask of rows with any nan in z, or None when nothing is missing."""
+    nan = np.isnan(z)
+    if not nan.any():
+        return None
+    return nan.any(-1)
+
+
+def output(x: Array, P: Array) -> Gaussian:
+    """Package a filter result: symmetric covariance, registered as produced."""
+    return Gaussian(x, register(symmetrize(P)))
+
+
+def keep_prior_where_missing(
+    miss: Array | None, prior: tuple[Array, Array], post: Gaussian, innov: Innovation
+) -> tuple[Gaussian, Innovation]:
+    """For rows without a measurement the update returns the prediction and a nan residual."""
+    if miss is None:
+        return post, innov
+    x0, P0 = prior
+    shape = np.broadcast_shapes(miss.shape, post.mean.shape[:-1])
+    miss = np.broadcast_to(miss, shape)
+    x = np.where(miss[..., None], x0, post.mean)
+    P = np.where(miss[..., None, None], P0, post.cov)
+    r = np.where(miss[..., None], np.nan, innov.residual)
+    return Gaussian(x, register(P)), Innovation(r, innov.cov)
+
+
+class Filter:
+    """Base of the stateless filter strategies.
+
+    ``predict(belief, motion, dt) -> belief`` and ``update(belief, z, sensor) ->
+    (belief, Innovation)``; ``estimate(belief) -> Gaussian``.
+    """
+
+    name: str = "Filter"
+
+    def estimate(self, belief: Gaussian) -> Gaussian:
+        return belief
+
+    def __repr__(self) -> str:
+        fields = ", ".join(f"{k}={v!r}" for k, v in vars(self).items())
+        return f"{type(self).__name__}({fields})"

@@ -1,0 +1,191 @@
+"""Kalman filters linearised by Jacobians: KF, EKF (first and second order) and IEKF.
+
+Notation follows the textbook: prediction ``x- = f(x)``, ``P- = F P F^T + Q``; update with
+``S = H P- H^T + R``, ``K = P- H^T S^{-1}``, ``x+ = x- + K r`` and the Joseph form
+``P+ = (I - K H) P- (I - K H)^T + K R K^T``. Every kernel works on any leading batch shape.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from trackkit.belief import Gaussian, Innovation
+from trackkit.filters.base import (
+    Filter,
+    check_belief,
+    check_measurement,
+    keep_prior_where_missing,
+    missing_rows,
+    output,
+)
+from trackkit.linalg import solve_psd, symmetrize
+
+__all__ = ["KF", "EKF", "IEKF"]
+
+Array = NDArray[np.float64]
+
+
+def _T(A: Array) -> Array:
+    return np.swapaxes(A, -1, -2)
+
+
+def sandwich(A: Array, P: Array) -> Array:
+    """``A P A^T`` for symmetric P ``(..., n, n)`` and A ``(k, n)`` or ``(..., k, n)``.
+
+    For an unbatched A, the batch is folded into the rows of two plain matrix products
+    (``P A^T``, then ``(A P) A^T`` using ``(P A^T)^T = A P``), which is several times faster
+    than a stacked matmul of many tiny matrices.
+    """
+    if A.ndim == 2:
+        n, k = P.shape[-1], A.shape[0]
+        PAt = (np.ascontiguousarray(P).reshape(-1, n) @ A.T).reshape(P.shape[:-1] + (k,))
+        return (np.ascontiguousarray(_T(PAt)).reshape(-1, n) @ A.T).reshape(
+            P.shape[:-2] + (k, k)
+        )
+    return A @ P @ _T(A)
+
+
+def _predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
+    """``x- = f(x, dt)``, ``P- = F P F^T + Q`` with F the Jacobian of f at x."""
+    F = motion.jacobian(x, dt)
+    return output(motion.f(x, dt), sandwich(np.asarray(F), P) + motion.noise(x, dt))
+
+
+def _condition(
+    x: Array, P: Array, r: Array, H: Array, R: Array
+) -> tuple[Array, Array, Array]:
+    """Kalman update for residual r: returns ``(x+, P+, S)``; Joseph-form covariance."""
+    PHt = P @ _T(H)
+    S = symmetrize(H @ PHt + R)
+    K = _T(solve_psd(S, _T(PHt)))
+    x_new = x + (K @ r[..., None])[..., 0]
+    A = np.eye(x.shape[-1]) - K @ H
+    P_new = A @ P @ _T(A) + K @ R @ _T(K)
+    return x_new, P_new, S
+
+
+def _second_order_terms(Hs: Array, P: Array) -> tuple[Array, Array]:
+    """Second-order EKF corrections from the measurement Hessians ``Hs`` (..., m, n, n).
+
+    ``dz_i = 1/2 tr(Hs_i P)`` added to the predicted measurement and
+    ``B_ij = 1/2 tr(Hs_i P Hs_j P)`` added to the innovation covariance.
+    """
+    HP = Hs @ P[..., None, :, :]
+    dz = 0.5 * np.trace(HP, axis1=-2, axis2=-1)
+    B = 0.5 * np.einsum("...iab,...jba->...ij", HP, HP)
+    return dz, B
+
+
+def _dim_x(motion_or_sensor) -> int | None:
+    return getattr(motion_or_sensor, "dim_x", None)
+
+
+class _Linearised(Filter):
+    """Shared prediction of the Jacobian-based filters."""
+
+    def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
+        """``x- = f(x, dt)``; ``P- = F P F^T + Q``."""
+        x, P = check_belief(belief, _dim_x(motion), f"{self.name}.predict belief")
+        return _predict(x, P, motion, dt)
+
+    def predict_with_cross(self, belief: Gaussian, motion, dt: ArrayLike):
+        """Prediction and the cross-covariance ``Cov(x_k, x_{k+1}) = P F^T`` (for RTS)."""
+        x, P = check_belief(belief, _dim_x(motion), f"{self.name}.predict belief")
+        F = np.asarray(motion.jacobian(x, dt))
+        return _predict(x, P, motion, dt), P @ _T(F)
+
+    def _inputs(self, belief, z, sensor):
+        x, P = check_belief(belief, None, f"{self.name}.update belief")
+        z = check_measurement(z, sensor.dim_z, f"{self.name}.update")
+        return x, P, z
+
+
+class KF(_Linearised):
+    """Linear Kalman filter: motion and sensor must be linear (``model.linear``)."""
+
+    name = "KF"
+
+    def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
+        if not getattr(motion, "linear", False):
+            raise TypeError(f"KF needs a linear motion model; {type(motion).__name__} is "
+                            "nonlinear (use EKF, IEKF, UKF or CKF)")
+        return super().predict(belief, motion, dt)
+
+    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+        """``r = z - H x-``; ``K = P- H^T S^{-1}``; Joseph-form covariance."""
+        if not getattr(sensor, "linear", False):
+            raise TypeError(f"KF needs a linear sensor model; {type(sensor).__name__} is "
+                            "nonlinear (use EKF, IEKF, UKF or CKF)")
+        x, P, z = self._inputs(belief, z, sensor)
+        H, R = np.asarray(sensor.jacobian(x)), sensor.noise
+        miss = missing_rows(z)
+        r = sensor.residual(z, sensor.h(x))
+        if miss is not None:
+            r = np.where(np.isnan(r), 0.0, r)
+        xn, Pn, S = _condition(x, P, r, H, R)
+        return keep_prior_where_missing(miss, (x, P), output(xn, Pn), Innovation(r, S))
+
+
+class EKF(_Linearised):
+    """Extended Kalman filter, first order (``order=1``) or second order (``order=2``).
+
+    The second-order filter adds the measurement-Hessian terms of Athans, Wishner and
+    Bertolini: ``zhat_i = h_i(x-) + 1/2 tr(Hs_i P-)`` and
+    ``S = H P- H^T + R + B``, ``B_ij = 1/2 tr(Hs_i P- Hs_j P-)``; the prediction stays first
+    order (the motion models here are linear or mildly nonlinear over one step).
+    """
+
+    name = "EKF"
+
+    def __init__(self, order: int = 1) -> None:
+        if order not in (1, 2):
+            raise ValueError(f"EKF order = {order!r}; expected 1 or 2")
+        self.order = order
+
+    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+        x, P, z = self._inputs(belief, z, sensor)
+        miss = missing_rows(z)
+        zhat = sensor.h(x)
+        H, R = np.asarray(sensor.jacobian(x)), sensor.noise
+        if self.order == 2:
+            dz, B = _second_order_terms(sensor.hessian(x), P)
+            zhat, R = zhat + dz, R + B
+        r = sensor.residual(z, zhat)
+        if miss is not None:
+            r = np.where(np.isnan(r), 0.0, r)
+        xn, Pn, S = _condition(x, P, r, H, R)
+        return keep_prior_where_missing(miss, (x, P), output(xn, Pn), Innovation(r, S))
+
+
+class IEKF(_Linearised):
+    """Iterated EKF (Gauss-Newton on the measurement, Bell and Cathey 1993).
+
+    From ``x_0 = x-``: ``H_i = J_h(x_i)``, ``K_i = P- H_i^T (H_i P- H_i^T + R)^{-1}`` and
+    ``x_{i+1} = x- + K_i (z - h(x_i) - H_i (x- - x_i))`` for ``iterations`` steps (1 is the
+    EKF); the covariance is the Joseph form with the last ``K_i, H_i``. The returned innovation
+    is the one at the prediction, ``z - h(x-)`` with its S, as used for gating and NIS.
+    """
+
+    name = "IEKF"
+
+    def __init__(self, iterations: int = 5) -> None:
+        if not (isinstance(iterations, int | np.integer) and iterations >= 1):
+            raise ValueError(f"IEKF iterations = {iterations!r}; expected an integer >= 1")
+        self.iterations = int(iterations)
+
+    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+        x0, P, z = self._inputs(belief, z, sensor)
+        miss = missing_rows(z)
+        R = sensor.noise
+        if miss is not None:
+            z = np.where(miss[..., None], sensor.h(x0), z)
+        xi = x0
+        for i in range(self.iterations):
+            H = np.asarray(sensor.jacobian(xi))
+            r = sensor.residual(z, sensor.h(xi)) - (H @ (x0 - xi)[..., None])[..., 0]
+            xn, Pn, S = _condition(x0, P, r, H, R)
+            if i == 0:
+                innov = Innovation(r, S)
+            xi = xn
+        return keep_prior_where_missing(miss, (x0, P), output(xn, Pn), innov)

@@ -1,0 +1,50 @@
+"""Running a filter over a measurement sequence, streaming by default."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from trackkit.belief import Gaussian, Innovation
+
+__all__ = ["run_filter"]
+
+
+def run_filter(
+    f,
+    prior: Any,
+    motion,
+    sensor,
+    measurements: Iterable[ArrayLike],
+    dt: float | Iterable[float],
+    history: bool = False,
+    on_step: Callable[[int, Any, Innovation], None] | None = None,
+) -> tuple[Any, Gaussian | None]:
+    """Filter ``measurements`` (an iterable of ``(..., m)`` arrays, nan where missing).
+
+    Each step is predict by ``dt`` then update; the first measurement is taken at the prior's
+    time plus one step. ``sensor`` may be one model or an iterable of per-step models (a moving
+    observer). Working memory is that of one belief (runs x n^2); with ``history=True`` the
+    filtered means and covariances are stacked along a new leading time axis.
+    ``on_step(k, belief, innovation)`` lets metrics be accumulated as the run streams.
+    """
+    b = prior
+    dts = iter(dt) if np.ndim(dt) else None
+    sensors = iter(sensor) if isinstance(sensor, list | tuple) else None
+    means, covs = [], []
+    for k, z in enumerate(measurements):
+        step = next(dts) if dts is not None else dt
+        s = next(sensors) if sensors is not None else sensor
+        b = f.predict(b, motion, step)
+        b, innov = f.update(b, z, s)
+        if on_step is not None:
+            on_step(k, b, innov)
+        if history:
+            g = f.estimate(b)
+            means.append(g.mean)
+            covs.append(g.cov)
+    hist = Gaussian(np.stack(means), np.stack(covs)) if history and means else None
+    return b, hist

@@ -1,0 +1,51 @@
+"""Fixed-interval smoothing: Rauch-Tung-Striebel for every filter in trackkit.
+
+With the filter's one-step prediction ``x-_{k+1}, P-_{k+1}`` from ``(x_k, P_k)`` and the
+cross-covariance ``C_k = Cov(x_k, x_{k+1})`` (``P_k F^T`` for KF/EKF, the sigma-point sum
+for UKF/CKF, which makes this the unscented RTS smoother of Sarkka 2008):
+
+    G_k  = C_k (P-_{k+1})^{-1}
+    xs_k = x_k + G_k (xs_{k+1} - x-_{k+1})
+    Ps_k = P_k + G_k (Ps_{k+1} - P-_{k+1}) G_k^T
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from trackkit.belief import Gaussian
+from trackkit.filters.base import check_belief, register
+from trackkit.linalg import solve_psd, symmetrize
+
+__all__ = ["smooth"]
+
+
+def smooth(f, filtered: Gaussian, motion, dt: ArrayLike | Sequence[float]) -> Gaussian:
+    """RTS-smooth a filtered sequence whose mean is ``(T, ..., n)`` and cov ``(T, ..., n, n)``.
+
+    ``dt`` is one step length, or ``T - 1`` of them (``dt[k]`` from step k to k + 1).
+    ``motion`` may also be a sequence of ``T - 1`` models. Returns the smoothed sequence.
+    """
+    x, P = check_belief(filtered, getattr(motion, "dim_x", None), "smooth filtered")
+    T = x.shape[0]
+    if x.ndim < 2:
+        raise ValueError(f"smooth filtered.mean has shape {x.shape}; expected (T, ..., n)")
+    dts = np.broadcast_to(np.asarray(dt, dtype=float), (T - 1,) + np.shape(dt)[1:]) if (
+        np.ndim(dt) == 0) else np.asarray(dt, dtype=float)
+    if dts.shape[0] != T - 1:
+        raise ValueError(f"smooth dt has {dts.shape[0]} steps; expected T - 1 = {T - 1}")
+    motions = list(motion) if isinstance(motion, Sequence) else [motion] * (T - 1)
+    if len(motions) != T - 1:
+        raise ValueError(f"smooth motion has {len(motions)} models; expected T - 1 = {T - 1}")
+    xs, Ps = np.empty_like(x), np.empty_like(P)
+    xs[-1], Ps[-1] = x[-1], P[-1]
+    for k in range(T - 2, -1, -1):
+        pred, C = f.predict_with_cross(Gaussian(x[k], register(P[k])), motions[k], dts[k])
+        G = np.swapaxes(solve_psd(pred.cov, np.swapaxes(C, -1, -2), "predicted covariance"),
+                        -1, -2)
+        xs[k] = x[k] + (G @ (xs[k + 1] - pred.mean)[..., None])[..., 0]
+        Ps[k] = symmetrize(P[k] + G @ (Ps[k + 1] - pred.cov) @ np.swapaxes(G, -1, -2))
+    return Gaussian(xs, register(Ps))

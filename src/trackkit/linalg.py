@@ -1,0 +1,105 @@
+"""Batched linear algebra for covariances: symmetrise, check, factor, solve.
+
+All functions take arrays with leading batch axes, ``(..., n, n)``, and never loop in Python
+over them. Errors name the quantity (``name``) so that a user learns *which* covariance
+was bad, not just that a Cholesky failed somewhere.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["symmetrize", "cholesky", "solve_psd", "check_covariance", "quadratic_form"]
+
+Array = NDArray[np.float64]
+
+
+def symmetrize(P: Array) -> Array:
+    """``(P + P^T) / 2`` over the last two axes."""
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
+
+
+def _where_bad(mask: NDArray[np.bool_]) -> str:
+    idx = np.argwhere(mask)
+    first = tuple(int(i) for i in idx[0]) if idx.size else ()
+    return f"{int(mask.sum())} of {mask.size} batch rows (first at index {first})"
+
+
+def cholesky(P: Array, name: str = "covariance") -> Array:
+    """Lower Cholesky factor ``L`` with ``L L^T = P``, batched.
+
+    Raises ``ValueError`` naming ``name`` and the first failing batch row when some ``P`` is
+    not positive definite; nothing is repaired (no jitter is added).
+    """
+    try:
+        return np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        P = np.asarray(P)
+        eig_min = np.linalg.eigvalsh(P)[..., 0] if P.size else np.zeros(0)
+        bad = ~(eig_min > 0)
+        where = _where_bad(np.atleast_1d(bad)) if P.ndim > 2 else "the matrix"
+        raise ValueError(
+            f"{name} is not positive definite: smallest eigenvalue "
+            f"{float(np.min(eig_min)):.3g} in {where}; expected a symmetric positive "
+            f"definite matrix of shape {P.shape}"
+        ) from None
+
+
+def solve_psd(S: Array, B: Array, name: str = "innovation covariance") -> Array:
+    """``S^{-1} B`` for symmetric positive-definite ``S`` of shape ``(..., m, m)``.
+
+    ``B`` has shape ``(..., m, k)``. For m = 1 and m = 2, the usual sizes of a tracking
+    measurement, the explicit inverse is used: it is exact for SPD matrices of that size and
+    avoids LAPACK's per-matrix call overhead, which dominates small batched problems.
+    """
+    m = S.shape[-1]
+    if m == 1:
+        s = S[..., 0, 0]
+        if not np.all(s > 0):
+            raise ValueError(f"{name} is not positive definite: {_where_bad(~(s > 0))}")
+        return B / S[..., :1, :]
+    if m == 2:
+        a, b, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+        det = a * d - b * b
+        if not (np.all(det > 0) and np.all(a > 0)):
+            bad = ~((det > 0) & (a > 0))
+            raise ValueError(f"{name} is not positive definite: {_where_bad(bad)}")
+        inv = np.stack([np.stack([d, -b], -1), np.stack([-b, a], -1)], -2) / det[..., None, None]
+        return inv @ B
+    L = cholesky(S, name)
+    y = np.linalg.solve(L, B)
+    return np.linalg.solve(np.swapaxes(L, -1, -2), y)
+
+
+def quadratic_form(S: Array, r: Array, name: str = "innovation covariance") -> Array:
+    """``r^T S^{-1} r`` over the last axis of ``r`` (shape ``(..., m)``), e.g. NIS or NEES."""
+    return (r * solve_psd(S, r[..., None], name)[..., 0]).sum(-1)
+
+
+def check_covariance(P: Array, name: str, n: int | None = None, psd: bool = True) -> Array:
+    """Validate a batched covariance and return it as a float array.
+
+    Checks the trailing shape ``(n, n)``, finiteness, symmetry (to 1e-9 relative) and, when
+    ``psd``, positive semi-definiteness via the eigenvalues. Raises ``ValueError`` that names
+    ``name``, the shape and what was expected.
+    """
+    P = np.asarray(P, dtype=float)
+    if P.ndim < 2 or P.shape[-1] != P.shape[-2] or (n is not None and P.shape[-1] != n):
+        want = f"(..., {n}, {n})" if n is not None else "(..., n, n)"
+        raise ValueError(f"{name} has shape {P.shape}; expected {want}")
+    if not np.all(np.isfinite(P)):
+        raise ValueError(f"{name} has non-finite entries: {_where_bad(~np.isfinite(P))}")
+    scale = np.max(np.abs(P), axis=(-1, -2), keepdims=True)
+    asym = np.abs(P - np.swapaxes(P, -1, -2)) > 1e-9 * np.maximum(scale, 1e-300)
+    if np.any(asym):
+        raise ValueError(f"{name} is not symmetric: {_where_bad(asym.any(axis=(-1, -2)))}")
+    if psd:
+        eig_min = np.linalg.eigvalsh(P)[..., 0]
+        bad = eig_min < -1e-10 * np.max(scale, axis=(-1, -2))
+        if np.any(bad):
+            raise ValueError(
+                f"{name} is not positive semi-definite: smallest eigenvalue "
+                f"{float(np.min(eig_min)):.3g} in {_where_bad(np.atleast_1d(bad))}"
+            )
+    return P

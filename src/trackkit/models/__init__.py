@@ -1,0 +1,47 @@
+"""Motion and sensor models."""
+
+from trackkit.models.discretize import discretize
+from trackkit.models.motion import (
+    ConstantAcceleration,
+    ConstantVelocity,
+    ContinuousLinear,
+    CoordinatedTurn,
+    KnownTurnRate,
+    LinearMotion,
+    MotionModel,
+    RandomSine,
+    Singer,
+)
+from trackkit.models.sensors import (
+    AzimuthElevation,
+    Bearing,
+    BearingFrequency,
+    MultipathDelay,
+    Position,
+    RangeBearing,
+    SensorModel,
+    Sine,
+    Stack,
+)
+
+__all__ = [
+    "discretize",
+    "MotionModel",
+    "LinearMotion",
+    "ContinuousLinear",
+    "ConstantVelocity",
+    "ConstantAcceleration",
+    "Singer",
+    "KnownTurnRate",
+    "CoordinatedTurn",
+    "RandomSine",
+    "SensorModel",
+    "Position",
+    "Bearing",
+    "RangeBearing",
+    "AzimuthElevation",
+    "BearingFrequency",
+    "MultipathDelay",
+    "Sine",
+    "Stack",
+]

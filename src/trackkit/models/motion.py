@@ -1,0 +1,408 @@
+"""Motion models ``x_{k+1} = f(x_k, dt) + w``, ``w ~ N(0, Q(x, dt))``.
+
+Each model is a small frozen dataclass with vectorised methods over leading batch axes:
+``f(x, dt)``, ``jacobian(x, dt)`` (shape broadcastable to ``(..., n, n)``) and
+``noise(x, dt)`` (Q, broadcastable to ``(..., n, n)``). ``dt`` is a float or an array that
+broadcasts against the batch axes (asynchronous steps). State ordering follows DESIGN.md:
+positions, then velocities, then accelerations, then extras.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from trackkit.models.discretize import discretize
+
+__all__ = [
+    "MotionModel",
+    "LinearMotion",
+    "ContinuousLinear",
+    "ConstantVelocity",
+    "ConstantAcceleration",
+    "Singer",
+    "KnownTurnRate",
+    "CoordinatedTurn",
+    "RandomSine",
+]
+
+Array = NDArray[np.float64]
+
+
+def _apply(F: Array, x: Array) -> Array:
+    """``F x`` for ``F`` of shape ``(n, n)`` or ``(..., n, n)`` and ``x`` of shape ``(..., n)``."""
+    if F.ndim == 2:
+        return x @ F.T
+    return (F @ x[..., None])[..., 0]
+
+
+def _per_axis(value: ArrayLike, dim: int, name: str) -> Array:
+    v = np.broadcast_to(np.asarray(value, dtype=float), (dim,)) if np.ndim(value) == 0 else (
+        np.asarray(value, dtype=float)
+    )
+    if v.shape != (dim,):
+        raise ValueError(f"{name} has shape {v.shape}; expected a scalar or ({dim},)")
+    if np.any(v < 0) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} = {v.tolist()}; expected finite values >= 0")
+    return v
+
+
+def _blocks(B: Array, per_axis: Array) -> Array:
+    """Interleave a per-axis block into the state ordering [pos..., vel..., acc...].
+
+    ``B`` has shape ``(..., k, k)`` (one axis's block, e.g. [[1, dt], [0, 1]]) and the result
+    has ``result[..., i*d + a, j*d + b] = B[..., i, j] * per_axis[a] * (a == b)``.
+    """
+    d = per_axis.shape[0]
+    k = B.shape[-1]
+    out = B[..., :, None, :, None] * np.diag(per_axis)[:, None, :]
+    return out.reshape(B.shape[:-2] + (k * d, k * d))
+
+
+def _dt(dt: ArrayLike) -> Array:
+    return np.asarray(dt, dtype=float)
+
+
+class MotionModel:
+    """Interface of every motion model (documentation only; models are duck-typed)."""
+
+    dim_x: int
+    linear: bool = False
+    #: which state components are angles (wrapped in residuals, averaged circularly)
+    angular: tuple[bool, ...] | None = None
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+@dataclass(frozen=True, eq=False)
+class LinearMotion(MotionModel):
+    """``x' = F x + w``, ``w ~ N(0, Q)`` with constant F and Q (``dt`` is ignored)."""
+
+    F: Array
+    Q: Array
+    linear: bool = field(default=True, init=False)
+
+    def __post_init__(self) -> None:
+        F = np.asarray(self.F, dtype=float)
+        Q = np.asarray(self.Q, dtype=float)
+        if F.ndim != 2 or F.shape[0] != F.shape[1] or Q.shape != F.shape:
+            raise ValueError(f"F has shape {F.shape} and Q {Q.shape}; expected both (n, n)")
+        object.__setattr__(self, "F", F)
+        object.__setattr__(self, "Q", Q)
+
+    @property
+    def dim_x(self) -> int:
+        return self.F.shape[0]
+
+    def f(self, x: Array, dt: ArrayLike = 0.0) -> Array:
+        return _apply(self.F, x)
+
+    def jacobian(self, x: Array, dt: ArrayLike = 0.0) -> Array:
+        return self.F
+
+    def noise(self, x: Array, dt: ArrayLike = 0.0) -> Array:
+        return self.Q
+
+
+@dataclass(frozen=True, eq=False)
+class ContinuousLinear(MotionModel):
+    """``dx/dt = A x + L w`` with white ``w`` of spectral density ``Qc``, discretised exactly
+    (Van Loan) for each ``dt``."""
+
+    A: Array
+    L: Array
+    Qc: Array
+    linear: bool = field(default=True, init=False)
+
+    @property
+    def dim_x(self) -> int:
+        return np.shape(self.A)[0]
+
+    def matrices(self, dt: ArrayLike) -> tuple[Array, Array]:
+        return discretize(self.A, self.L, self.Qc, dt)
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        return _apply(self.matrices(dt)[0], x)
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        return self.matrices(dt)[0]
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        return self.matrices(dt)[1]
+
+
+@dataclass(frozen=True, eq=False)
+class ConstantVelocity(MotionModel):
+    """Nearly constant velocity (continuous white-noise acceleration), state [p..., v...].
+
+    Per axis with spectral density q:  F = [[1, dt], [0, 1]],
+    Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]]. ``q`` is a scalar or one value per axis.
+    """
+
+    dim: int = 2
+    q: ArrayLike = 1.0
+    linear: bool = field(default=True, init=False)
+
+    def __post_init__(self) -> None:
+        if self.dim not in (1, 2, 3):
+            raise ValueError(f"dim = {self.dim!r}; expected 1, 2 or 3")
+        object.__setattr__(self, "q", _per_axis(self.q, self.dim, "q"))
+
+    @property
+    def dim_x(self) -> int:
+        return 2 * self.dim
+
+    def _F(self, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        one, zero = np.ones_like(dt), np.zeros_like(dt)
+        B = np.stack([np.stack([one, dt], -1), np.stack([zero, one], -1)], -2)
+        return _blocks(B, np.ones(self.dim))
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        if np.ndim(dt) == 0:
+            d = self.dim
+            return np.concatenate([x[..., :d] + dt * x[..., d:], x[..., d:]], axis=-1)
+        return _apply(self._F(dt), x)
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        return self._F(dt)
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        B = np.stack(
+            [np.stack([dt**3 / 3, dt**2 / 2], -1), np.stack([dt**2 / 2, dt], -1)], -2
+        )
+        return _blocks(B, self.q)
+
+
+@dataclass(frozen=True, eq=False)
+class ConstantAcceleration(MotionModel):
+    """Nearly constant acceleration (continuous white-noise jerk), state [p..., v..., a...].
+
+    Per axis: F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]],
+    Q = q [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]].
+    """
+
+    dim: int = 2
+    q: ArrayLike = 1.0
+    linear: bool = field(default=True, init=False)
+
+    def __post_init__(self) -> None:
+        if self.dim not in (1, 2, 3):
+            raise ValueError(f"dim = {self.dim!r}; expected 1, 2 or 3")
+        object.__setattr__(self, "q", _per_axis(self.q, self.dim, "q"))
+
+    @property
+    def dim_x(self) -> int:
+        return 3 * self.dim
+
+    def _F(self, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        one, zero = np.ones_like(dt), np.zeros_like(dt)
+        B = np.stack(
+            [
+                np.stack([one, dt, dt**2 / 2], -1),
+                np.stack([zero, one, dt], -1),
+                np.stack([zero, zero, one], -1),
+            ],
+            -2,
+        )
+        return _blocks(B, np.ones(self.dim))
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        return _apply(self._F(dt), x)
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        return self._F(dt)
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        B = np.stack(
+            [
+                np.stack([dt**5 / 20, dt**4 / 8, dt**3 / 6], -1),
+                np.stack([dt**4 / 8, dt**3 / 3, dt**2 / 2], -1),
+                np.stack([dt**3 / 6, dt**2 / 2, dt], -1),
+            ],
+            -2,
+        )
+        return _blocks(B, self.q)
+
+
+@dataclass(frozen=True, eq=False)
+class Singer(MotionModel):
+    """Singer manoeuvre model: acceleration is a first-order Gauss-Markov process.
+
+    Per axis ``da/dt = -a / tau + w`` with ``E[w w] = 2 sigma^2 / tau`` so that the stationary
+    acceleration standard deviation is ``sigma``; state [p..., v..., a...]. F and Q are the
+    exact discretisation (Van Loan), which equals Singer's closed form.
+    """
+
+    dim: int = 2
+    tau: float = 20.0
+    sigma: ArrayLike = 1.0
+    linear: bool = field(default=True, init=False)
+
+    def __post_init__(self) -> None:
+        if self.dim not in (1, 2, 3):
+            raise ValueError(f"dim = {self.dim!r}; expected 1, 2 or 3")
+        if not (np.isfinite(self.tau) and self.tau > 0):
+            raise ValueError(f"tau = {self.tau!r}; expected a finite time constant > 0 s")
+        object.__setattr__(self, "sigma", _per_axis(self.sigma, self.dim, "sigma"))
+
+    @property
+    def dim_x(self) -> int:
+        return 3 * self.dim
+
+    def _axis(self, dt: ArrayLike) -> tuple[Array, Array]:
+        A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0 / self.tau]])
+        L = np.array([[0.0], [0.0], [1.0]])
+        return discretize(A, L, [[2.0 / self.tau]], dt)
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        return _apply(self.jacobian(x, dt), x)
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        return _blocks(self._axis(dt)[0], np.ones(self.dim))
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        return _blocks(self._axis(dt)[1], self.sigma**2)
+
+
+def _turn_terms(w: Array, dt: Array) -> tuple[Array, Array, Array, Array, Array, Array]:
+    """``s = sin(w dt)/w``, ``c = (1 - cos(w dt))/w``, their w-derivatives, cos and sin.
+
+    Near ``w = 0`` the ratios are evaluated by their Taylor series (to w^3), so CT is smooth
+    through straight-line motion.
+    """
+    wt = w * dt
+    small = np.abs(wt) < 1e-3
+    ws = np.where(small, 1.0, w)  # safe divisor
+    sin, cos = np.sin(wt), np.cos(wt)
+    s = np.where(small, dt - w**2 * dt**3 / 6, sin / ws)
+    c = np.where(small, w * dt**2 / 2 - w**3 * dt**4 / 24, (1 - cos) / ws)
+    ds = np.where(small, -w * dt**3 / 3 + w**3 * dt**5 / 30, (wt * cos - sin) / ws**2)
+    dc = np.where(small, dt**2 / 2 - w**2 * dt**4 / 8, (wt * sin - (1 - cos)) / ws**2)
+    return s, c, ds, dc, cos, sin
+
+
+def _turn_F(w: Array, dt: Array) -> Array:
+    s, c, _, _, cos, sin = _turn_terms(w, dt)
+    one, zero = np.ones_like(s), np.zeros_like(s)
+    return np.stack(
+        [
+            np.stack([one, zero, s, -c], -1),
+            np.stack([zero, one, c, s], -1),
+            np.stack([zero, zero, cos, -sin], -1),
+            np.stack([zero, zero, sin, cos], -1),
+        ],
+        -2,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class KnownTurnRate(MotionModel):
+    """Constant turn at a known rate ``omega`` (rad/s, positive counter-clockwise), state
+    [x, y, vx, vy]; Q is the constant-velocity Q with density q."""
+
+    omega: float = 0.0
+    q: ArrayLike = 1.0
+    linear: bool = field(default=True, init=False)
+    dim_x: int = field(default=4, init=False)
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        return _apply(self.jacobian(x, dt), x)
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        return _turn_F(np.asarray(float(self.omega)), _dt(dt))
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        return ConstantVelocity(2, self.q).noise(x, dt)
+
+
+@dataclass(frozen=True, eq=False)
+class CoordinatedTurn(MotionModel):
+    """Coordinated turn with the turn rate in the state, [x, y, vx, vy, omega].
+
+    x' = x + s vx - c vy,  y' = y + c vx + s vy,  [vx', vy'] = Rot(omega dt) [vx, vy],
+    omega' = omega, with s = sin(omega dt)/omega and c = (1 - cos(omega dt))/omega (omega
+    positive counter-clockwise). Q is the CV Q (density q) on the kinematic block and
+    ``q_omega dt`` on omega.
+    """
+
+    q: ArrayLike = 1.0
+    q_omega: float = 1e-4
+    dim_x: int = field(default=5, init=False)
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        px, py, vx, vy, w = (x[..., i] for i in range(5))
+        s, c, _, _, cos, sin = _turn_terms(w, dt)
+        return np.stack(
+            [px + s * vx - c * vy, py + c * vx + s * vy, cos * vx - sin * vy,
+             sin * vx + cos * vy, w + 0 * dt],
+            -1,
+        )
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        vx, vy, w = x[..., 2], x[..., 3], x[..., 4]
+        s, c, ds, dc, cos, sin = _turn_terms(w, dt)
+        J = np.zeros(np.broadcast_shapes(w.shape, dt.shape) + (5, 5))
+        J[..., :4, :4] = _turn_F(w, dt)
+        J[..., 0, 4] = ds * vx - dc * vy
+        J[..., 1, 4] = dc * vx + ds * vy
+        J[..., 2, 4] = -dt * (sin * vx + cos * vy)
+        J[..., 3, 4] = dt * (cos * vx - sin * vy)
+        J[..., 4, 4] = 1.0
+        return J
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        Q = np.zeros(dt.shape + (5, 5))
+        Q[..., :4, :4] = ConstantVelocity(2, self.q).noise(x, dt)
+        Q[..., 4, 4] = self.q_omega * dt
+        return Q
+
+
+@dataclass(frozen=True, eq=False)
+class RandomSine(MotionModel):
+    """Seed 001's random-sine demo (S3): state [theta, omega, a], phase, angular velocity and
+    amplitude; omega and a are random walks.
+
+    F = [[1, dt, 0], [0, 1, 0], [0, 0, 1]],
+    Q = [[q1 dt^3/3, q1 dt^2/2, 0], [q1 dt^2/2, q1 dt, 0], [0, 0, q2 dt]].
+    The two-state S6 variant [theta, omega] is ``ConstantVelocity(dim=1, q=q1)``.
+    """
+
+    q1: float = 0.2
+    q2: float = 0.1
+    linear: bool = field(default=True, init=False)
+    dim_x: int = field(default=3, init=False)
+
+    def _F(self, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        F = np.broadcast_to(np.eye(3), dt.shape + (3, 3)).copy()
+        F[..., 0, 1] = dt
+        return F
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        return _apply(self._F(dt), x)
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        return self._F(dt)
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        Q = np.zeros(dt.shape + (3, 3))
+        Q[..., :2, :2] = ConstantVelocity(1, self.q1).noise(x, dt)
+        Q[..., 2, 2] = self.q2 * dt
+        return Q
