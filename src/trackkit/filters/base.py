@@ -8,6 +8,7 @@ positive-semi-definiteness check. Shapes and finiteness are checked on every cal
 
 from __future__ import annotations
 
+import math
 import weakref
 from typing import Any
 
@@ -49,13 +50,13 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
             f"{where}.mean has shape {x.shape}; the model's state has {n} components, "
             f"so expected (..., {n})"
         )
-    if not np.isfinite(np.sum(x)):
+    if not math.isfinite(x.sum()):
         raise ValueError(f"{where}.mean has non-finite entries; expected finite values")
     if produced(P):
         if P.shape[-2:] != (x.shape[-1],) * 2:
             raise ValueError(f"{where}.cov has shape {P.shape}; expected (..., {x.shape[-1]}, "
                              f"{x.shape[-1]})")
-        if not np.isfinite(np.sum(P)):
+        if not math.isfinite(P.sum()):
             raise ValueError(f"{where}.cov has non-finite entries; expected finite values")
     else:
         P = check_covariance(P, f"{where}.cov", n=x.shape[-1])
@@ -74,10 +75,9 @@ def check_measurement(z: ArrayLike, m: int, where: str) -> Array:
 
 def missing_rows(z: Array) -> Array | None:
     """Boolean mask of rows with any nan in z, or None when nothing is missing."""
-    nan = np.isnan(z)
-    if not nan.any():
+    if not math.isnan(z.sum()):
         return None
-    return nan.any(-1)
+    return np.isnan(z).any(-1)
 
 
 def output(x: Array, P: Array) -> Gaussian:

@@ -35,7 +35,7 @@ def _apply(F: Array, x: Array) -> Array:
     """``F x`` for ``F`` of shape ``(n, n)`` or ``(..., n, n)`` and ``x`` of shape ``(..., n)``."""
     if F.ndim == 2:
         return x @ F.T
-    return (F @ x[..., None])[..., 0]
+    return np.einsum("...ij,...j->...i", F, x)
 
 
 def _per_axis(value: ArrayLike, dim: int, name: str) -> Array:
@@ -63,6 +63,26 @@ def _blocks(B: Array, per_axis: Array) -> Array:
 
 def _dt(dt: ArrayLike) -> Array:
     return np.asarray(dt, dtype=float)
+
+
+def _memo(model: object, kind: str, dt: ArrayLike, build) -> Array:
+    """``build(dt)``, remembered per model for scalar steps (most runs use one or two dt).
+
+    Cached matrices are read-only so that no caller can change a model by accident.
+    """
+    if not isinstance(dt, float | int) and np.ndim(dt) != 0:
+        return build(dt)
+    cache = model.__dict__.setdefault("_cache", {})
+    key = (kind, float(dt))
+    value = cache.get(key)
+    if value is None:
+        value = build(dt)
+        for a in value if isinstance(value, tuple) else (value,):
+            a.flags.writeable = False
+        if len(cache) > 512:
+            cache.clear()
+        cache[key] = value
+    return value
 
 
 class MotionModel:
@@ -128,7 +148,7 @@ class ContinuousLinear(MotionModel):
         return np.shape(self.A)[0]
 
     def matrices(self, dt: ArrayLike) -> tuple[Array, Array]:
-        return discretize(self.A, self.L, self.Qc, dt)
+        return _memo(self, "FQ", dt, lambda t: discretize(self.A, self.L, self.Qc, t))
 
     def f(self, x: Array, dt: ArrayLike) -> Array:
         return _apply(self.matrices(dt)[0], x)
@@ -162,21 +182,24 @@ class ConstantVelocity(MotionModel):
         return 2 * self.dim
 
     def _F(self, dt: ArrayLike) -> Array:
+        return _memo(self, "F", dt, self._build_F)
+
+    def _build_F(self, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         one, zero = np.ones_like(dt), np.zeros_like(dt)
         B = np.stack([np.stack([one, dt], -1), np.stack([zero, one], -1)], -2)
         return _blocks(B, np.ones(self.dim))
 
     def f(self, x: Array, dt: ArrayLike) -> Array:
-        if np.ndim(dt) == 0:
-            d = self.dim
-            return np.concatenate([x[..., :d] + dt * x[..., d:], x[..., d:]], axis=-1)
         return _apply(self._F(dt), x)
 
     def jacobian(self, x: Array, dt: ArrayLike) -> Array:
         return self._F(dt)
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
+        return _memo(self, "Q", dt, self._build_Q)
+
+    def _build_Q(self, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         B = np.stack(
             [np.stack([dt**3 / 3, dt**2 / 2], -1), np.stack([dt**2 / 2, dt], -1)], -2
@@ -206,6 +229,9 @@ class ConstantAcceleration(MotionModel):
         return 3 * self.dim
 
     def _F(self, dt: ArrayLike) -> Array:
+        return _memo(self, "F", dt, self._build_F)
+
+    def _build_F(self, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         one, zero = np.ones_like(dt), np.zeros_like(dt)
         B = np.stack(
@@ -225,6 +251,9 @@ class ConstantAcceleration(MotionModel):
         return self._F(dt)
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
+        return _memo(self, "Q", dt, self._build_Q)
+
+    def _build_Q(self, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         B = np.stack(
             [
@@ -271,10 +300,10 @@ class Singer(MotionModel):
         return _apply(self.jacobian(x, dt), x)
 
     def jacobian(self, x: Array, dt: ArrayLike) -> Array:
-        return _blocks(self._axis(dt)[0], np.ones(self.dim))
+        return _memo(self, "F", dt, lambda t: _blocks(self._axis(t)[0], np.ones(self.dim)))
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
-        return _blocks(self._axis(dt)[1], self.sigma**2)
+        return _memo(self, "Q", dt, lambda t: _blocks(self._axis(t)[1], self.sigma**2))
 
 
 def _turn_terms(w: Array, dt: Array) -> tuple[Array, Array, Array, Array, Array, Array]:
@@ -322,10 +351,10 @@ class KnownTurnRate(MotionModel):
         return _apply(self.jacobian(x, dt), x)
 
     def jacobian(self, x: Array, dt: ArrayLike) -> Array:
-        return _turn_F(np.asarray(float(self.omega)), _dt(dt))
+        return _memo(self, "F", dt, lambda t: _turn_F(np.asarray(float(self.omega)), _dt(t)))
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
-        return ConstantVelocity(2, self.q).noise(x, dt)
+        return _memo(self, "Q", dt, lambda t: ConstantVelocity(2, self.q).noise(x, t))
 
 
 @dataclass(frozen=True, eq=False)
@@ -389,6 +418,9 @@ class RandomSine(MotionModel):
     dim_x: int = field(default=3, init=False)
 
     def _F(self, dt: ArrayLike) -> Array:
+        return _memo(self, "F", dt, self._build_F)
+
+    def _build_F(self, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         F = np.broadcast_to(np.eye(3), dt.shape + (3, 3)).copy()
         F[..., 0, 1] = dt
@@ -401,8 +433,11 @@ class RandomSine(MotionModel):
         return self._F(dt)
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
+        return _memo(self, "Q", dt, self._build_Q)
+
+    def _build_Q(self, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         Q = np.zeros(dt.shape + (3, 3))
-        Q[..., :2, :2] = ConstantVelocity(1, self.q1).noise(x, dt)
+        Q[..., :2, :2] = ConstantVelocity(1, self.q1).noise(None, dt)
         Q[..., 2, 2] = self.q2 * dt
         return Q

@@ -107,7 +107,16 @@ class SensorModel:
     linear: bool = False
 
     @property
-    def noise(self) -> Array:  # pragma: no cover - interface
+    def noise(self) -> Array:
+        """R, built once per sensor (read-only)."""
+        R = self.__dict__.get("_R")
+        if R is None:
+            R = np.asarray(self._noise(), dtype=float)
+            R.flags.writeable = False
+            self.__dict__["_R"] = R
+        return R
+
+    def _noise(self) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
 
     def residual(self, z: Array, zhat: Array) -> Array:
@@ -140,15 +149,20 @@ class Position(SensorModel):
     def angular(self) -> tuple[bool, ...]:
         return (False,) * self.dim
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return np.diag(self.sigma**2)
 
     def h(self, x: Array) -> Array:
         return x[..., : self.dim]
 
     def jacobian(self, x: Array) -> Array:
-        return np.eye(self.dim, x.shape[-1])
+        n = x.shape[-1]
+        H = self.__dict__.get(f"_H{n}")
+        if H is None:
+            H = np.eye(self.dim, n)
+            H.flags.writeable = False
+            self.__dict__[f"_H{n}"] = H
+        return H
 
     def hessian(self, x: Array) -> Array:
         return np.zeros(x.shape[:-1] + (self.dim, x.shape[-1], x.shape[-1]))
@@ -173,8 +187,7 @@ class Bearing(SensorModel):
         object.__setattr__(self, "sigma", float(_positive(self.sigma, "sigma")))
         _check_convention(self.convention)
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return np.array([[self.sigma**2]])
 
     def _terms(self, x: Array) -> tuple[Array, Array, Array]:
@@ -189,7 +202,14 @@ class Bearing(SensorModel):
         return b[..., None]
 
     def jacobian(self, x: Array) -> Array:
-        return _pad(self._terms(x)[1][..., None, :], x.shape[-1])
+        d = x[..., :2] - self.origin
+        u, v = d[..., 0], d[..., 1]
+        r2 = u * u + v * v
+        sign = 1.0 if self.convention == "nautical" else -1.0
+        J = np.zeros(d.shape[:-1] + (1, x.shape[-1]))
+        J[..., 0, 0] = sign * v / r2
+        J[..., 0, 1] = -sign * u / r2
+        return J
 
     def hessian(self, x: Array) -> Array:
         return _pad2(self._terms(x)[2][..., None, :, :], x.shape[-1])
@@ -214,8 +234,7 @@ class RangeBearing(SensorModel):
         )
         _check_convention(self.convention)
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return np.diag([self.sigma_range**2, self.sigma_bearing**2])
 
     def h(self, x: Array) -> Array:
@@ -259,8 +278,7 @@ class AzimuthElevation(SensorModel):
         object.__setattr__(self, "sigma_el", float(_positive(self.sigma_el, "sigma_el")))
         _check_convention(self.convention)
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return np.diag([self.sigma_az**2, self.sigma_el**2])
 
     def h(self, x: Array) -> Array:
@@ -332,8 +350,7 @@ class BearingFrequency(SensorModel):
         object.__setattr__(self, "sigma_freq", float(_positive(self.sigma_freq, "sigma_freq")))
         object.__setattr__(self, "c", float(_positive(self.c, "c")))
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return np.diag([self.sigma_bearing**2, self.sigma_freq**2])
 
     def _check(self, x: Array) -> None:
@@ -426,8 +443,7 @@ class MultipathDelay(SensorModel):
         object.__setattr__(self, "sigma", _positive(self.sigma, "sigma", (2,)))
         object.__setattr__(self, "c", float(_positive(self.c, "c")))
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return np.diag(self.sigma**2)
 
     def _images(self, x: Array) -> tuple[Array, Array, Array]:
@@ -475,8 +491,7 @@ class Sine(SensorModel):
     def __post_init__(self) -> None:
         object.__setattr__(self, "sigma", float(_positive(self.sigma, "sigma")))
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return np.array([[self.sigma**2]])
 
     def _a(self, x: Array) -> Array:
@@ -528,8 +543,7 @@ class Stack(SensorModel):
     def linear(self) -> bool:  # type: ignore[override]
         return all(s.linear for s in self.sensors)
 
-    @property
-    def noise(self) -> Array:
+    def _noise(self) -> Array:
         return block_diag(*(s.noise for s in self.sensors))
 
     def h(self, x: Array) -> Array:
