@@ -18,7 +18,10 @@ def wrap(angle: ArrayLike) -> NDArray[np.float64]:
     ``wrap(a) = a - 2 pi ceil((a - pi) / (2 pi))``, so ``wrap(-pi) == pi``.
     """
     a = np.asarray(angle, dtype=float)
-    return a - 2.0 * np.pi * np.ceil((a - np.pi) / (2.0 * np.pi))
+    w = a - 2.0 * np.pi * np.ceil((a - np.pi) / (2.0 * np.pi))
+    # the product above rounds; put the few results that land just outside back inside
+    w = np.where(w > np.pi, w - 2.0 * np.pi, w)
+    return np.where(w <= -np.pi, w + 2.0 * np.pi, w)
 
 
 def circular_mean(
@@ -33,7 +36,10 @@ def circular_mean(
         s, c = np.sin(a).sum(axis=axis), np.cos(a).sum(axis=axis)
     else:
         w = np.asarray(weights, dtype=float)
-        w = np.moveaxis(w, -1, axis) if w.ndim == a.ndim else w
+        if w.ndim == 1 and a.ndim > 1:  # np.average semantics: weights along ``axis``
+            shape = [1] * a.ndim
+            shape[axis] = -1
+            w = w.reshape(shape)
         s, c = (w * np.sin(a)).sum(axis=axis), (w * np.cos(a)).sum(axis=axis)
     return wrap(np.arctan2(s, c))
 

@@ -127,8 +127,14 @@ def _solve_single(S: Array, B: Array, name: str) -> Array:
 
 
 def quadratic_form(S: Array, r: Array, name: str = "innovation covariance") -> Array:
-    """``r^T S^{-1} r`` over the last axis of ``r`` (shape ``(..., m)``), e.g. NIS or NEES."""
-    return (r * solve_psd(S, r[..., None], name)[..., 0]).sum(-1)
+    """``r^T S^{-1} r`` over the last axis of ``r`` (shape ``(..., m)``), e.g. NIS or NEES.
+
+    For m > 2 it is ``|L^{-1} r|^2`` with ``L L^T = S``: one triangular solve.
+    """
+    if S.shape[-1] <= 2:
+        return (r * solve_psd(S, r[..., None], name)[..., 0]).sum(-1)
+    y = np.linalg.solve(cholesky(S, name), r[..., None])[..., 0]
+    return (y * y).sum(-1)
 
 
 def check_covariance(P: Array, name: str, n: int | None = None, psd: bool = True) -> Array:

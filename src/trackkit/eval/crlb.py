@@ -228,6 +228,14 @@ class PCRLB:
         return self
 
 
+    def add_information(self, information: ArrayLike) -> PCRLB:
+        """Add a precomputed expected measurement information ``E[H^T R^{-1} H]`` (n, n),
+        e.g. summed over Monte Carlo blocks and divided by the number of runs."""
+        info = check_covariance(information, "measurement information", n=self.dim)
+        self._J = symmetrize(self._J + info)
+        return self
+
+
 def pcrlb(
     prior_cov: ArrayLike,
     motion: Any,

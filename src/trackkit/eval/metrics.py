@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -119,6 +120,11 @@ def _exact_value(acc: NDArray[np.int64]) -> Array:
 
 
 # ---------------------------------------------------------------------------------------------
+
+
+@lru_cache(maxsize=64)
+def _default_nees_threshold(n: int) -> float:
+    return 100.0 * float(chi2.ppf(1 - 1e-6, n))
 
 
 def chi2_bounds(
@@ -283,7 +289,10 @@ class MonteCarloMetrics:
 
         ``truth`` ``(..., n)`` true states, ``estimate`` a Gaussian with mean ``(..., n)`` and
         covariance ``(..., n, n)`` (or one ``(n, n)`` shared by all runs); the leading axes are
-        the runs. ``innovation`` (optional) is passed to ``add_innovation``.
+        the runs. ``innovation`` (optional) is passed to ``add_innovation``. A non-finite
+        estimate, or a covariance that is not positive definite, makes the run invalid (and
+        bad for the divergence rule) at this step: it is counted in ``invalid``, not
+        repaired, and left out of that step's sums.
         """
         x = np.asarray(truth, dtype=float)
         mean = np.asarray(estimate.mean, dtype=float)
@@ -328,7 +337,18 @@ class MonteCarloMetrics:
         idx = list(self.nees_indices) if self.nees_indices is not None else list(range(n))
         Ps = P[:, idx][:, :, idx]
         Ps = np.where(valid[:, None, None], Ps, np.eye(len(idx)))
-        nees = quadratic_form(Ps, e0[:, idx], "estimate covariance (for NEES)")
+        try:
+            nees = quadratic_form(Ps, e0[:, idx], "estimate covariance (for NEES)")
+        except ValueError:
+            # a filter that lost positive definiteness has failed on those runs: count them
+            # as invalid (and so bad for the divergence rule) instead of stopping the study
+            eig = np.linalg.eigvalsh(Ps)
+            pd = eig[:, 0] > 1e-12 * np.abs(eig[:, -1])  # condition number below 1e12
+            valid &= pd
+            Ps = np.where(pd[:, None, None], Ps, np.eye(len(idx)))
+            e0 = np.where(valid[:, None], e0, 0.0)
+            values = [np.where(valid, v, 0.0) for v in values]
+            nees = quadratic_form(Ps, e0[:, idx], "estimate covariance (for NEES)")
         values.append(nees)
         rows.append(len(self.groups))
         dofs.append(len(idx))
@@ -338,7 +358,7 @@ class MonteCarloMetrics:
         # divergence bookkeeping
         thr = self.nees_threshold
         if thr is None:
-            thr = 100.0 * float(chi2.ppf(1 - 1e-6, len(idx)))
+            thr = _default_nees_threshold(len(idx))
         bad = ~valid | (nees > thr)
         if self.distance is not None:
             bad |= sq_norms[self.distance_group] > self.distance**2

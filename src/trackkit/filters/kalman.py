@@ -19,7 +19,7 @@ from trackkit.filters.base import (
     missing_rows,
     output,
 )
-from trackkit.linalg import mm, mmT, solve_psd, symmetrize
+from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
 
 __all__ = ["KF", "EKF", "IEKF"]
 
@@ -66,7 +66,7 @@ def _condition(
     ``P+ = M - (M H^T) K^T + K R K^T = M - (M H^T - K R) K^T``,
     two rank-m corrections, cheap for the small m of tracking sensors.
     """
-    if P.ndim == 2 and H.ndim == 2:  # one problem: the textbook form, fewest calls
+    if x.ndim == 1 and P.ndim == 2 and H.ndim == 2:  # one problem: the textbook form
         PHt = P @ H.T
         S = symmetrize(H @ PHt + R)
         K = solve_psd(S, PHt.T).T
@@ -175,20 +175,36 @@ class EKF(_Linearised):
 
 
 class IEKF(_Linearised):
-    """Iterated EKF (Gauss-Newton on the measurement, Bell and Cathey 1993).
+    """Iterated EKF: Gauss-Newton on the MAP cost of the update (Bell and Cathey 1993).
 
-    From ``x_0 = x-``: ``H_i = J_h(x_i)``, ``K_i = P- H_i^T (H_i P- H_i^T + R)^{-1}`` and
-    ``x_{i+1} = x- + K_i (z - h(x_i) - H_i (x- - x_i))`` for ``iterations`` steps (1 is the
-    EKF); the covariance is the Joseph form with the last ``K_i, H_i``. The returned innovation
-    is the one at the prediction, ``z - h(x-)`` with its S, as used for gating and NIS.
+    From ``x_0 = x-``: ``H_i = J_h(x_i)``, ``K_i = P- H_i^T (H_i P- H_i^T + R)^{-1}`` and the
+    Gauss-Newton point ``x_gn = x- + K_i (z - h(x_i) - H_i (x- - x_i))``, for ``iterations``
+    steps (1 is the EKF). The covariance is the Joseph form with the last ``K_i, H_i``.
+
+    With ``line_search=True`` each step is ``x_{i+1} = x_i + a (x_gn - x_i)`` with
+    ``a`` halved (up to ``max_halvings`` times) until the MAP cost
+    ``c(x) = |x - x-|^2_{P-^{-1}} + |z - h(x)|^2_{R^{-1}}`` does not increase; a row whose
+    cost never decreases stays where it is. Plain Gauss-Newton (``line_search=False``) can
+    overshoot when h is strongly nonlinear over the prior's spread (Havlik and Straka 2015).
+    Either way the iteration converges to the MAP point of the update, and the covariance
+    linearised there can be overconfident when the measurement is weakly informative in
+    some direction (bearings-only range early in a track): the IEKF is not always better.
+
+    The returned innovation is the one at the prediction, ``z - h(x-)`` with its S, as used
+    for gating and NIS.
     """
 
     name = "IEKF"
 
-    def __init__(self, iterations: int = 5) -> None:
+    def __init__(self, iterations: int = 5, line_search: bool = False,
+                 max_halvings: int = 4) -> None:
         if not (isinstance(iterations, int | np.integer) and iterations >= 1):
             raise ValueError(f"IEKF iterations = {iterations!r}; expected an integer >= 1")
+        if not (isinstance(max_halvings, int | np.integer) and max_halvings >= 0):
+            raise ValueError(f"IEKF max_halvings = {max_halvings!r}; expected an integer >= 0")
         self.iterations = int(iterations)
+        self.line_search = bool(line_search)
+        self.max_halvings = int(max_halvings)
 
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
         x0, P, z = self._inputs(belief, z, sensor)
@@ -196,12 +212,34 @@ class IEKF(_Linearised):
         R = sensor.noise
         if miss is not None:
             z = np.where(miss[..., None], sensor.h(x0), z)
+
+        def cost(x: Array) -> Array:
+            return (quadratic_form(P, x - x0, "IEKF predicted covariance")
+                    + quadratic_form(R, sensor.residual(z, sensor.h(x)), "R"))
+
         xi = x0
+        c_i = cost(x0) if self.line_search else None
         for i in range(self.iterations):
             H = np.asarray(sensor.jacobian(xi))
             r = sensor.residual(z, sensor.h(xi)) - mm(H, (x0 - xi)[..., None])[..., 0]
-            xn, Pn, S = _condition(x0, P, r, H, R)
+            x_gn, Pn, S = _condition(x0, P, r, H, R)
             if i == 0:
                 innov = Innovation(r, S)
-            xi = xn
-        return keep_prior_where_missing(miss, (x0, P), output(xn, Pn), innov)
+            if not self.line_search:
+                xi = x_gn
+                continue
+            step, accepted = x_gn - xi, np.zeros(np.shape(c_i), bool)
+            x_new, c_new = xi, c_i
+            a = 1.0
+            for _ in range(self.max_halvings + 1):
+                x_try = xi + a * step
+                c_try = cost(x_try)
+                take = ~accepted & (c_try <= c_i)
+                x_new = np.where(take[..., None], x_try, x_new)
+                c_new = np.where(take, c_try, c_new)
+                accepted |= take
+                if accepted.all():
+                    break
+                a *= 0.5
+            xi, c_i = x_new, c_new
+        return keep_prior_where_missing(miss, (x0, P), output(xi, Pn), innov)

@@ -2,6 +2,7 @@
 
 from trackkit.models.discretize import discretize
 from trackkit.models.motion import (
+    Augmented,
     ConstantAcceleration,
     ConstantVelocity,
     ContinuousLinear,
@@ -35,6 +36,7 @@ __all__ = [
     "KnownTurnRate",
     "CoordinatedTurn",
     "RandomSine",
+    "Augmented",
     "SensorModel",
     "Position",
     "Bearing",

@@ -26,6 +26,7 @@ __all__ = [
     "KnownTurnRate",
     "CoordinatedTurn",
     "RandomSine",
+    "Augmented",
 ]
 
 Array = NDArray[np.float64]
@@ -292,9 +293,20 @@ class Singer(MotionModel):
         return 3 * self.dim
 
     def _axis(self, dt: ArrayLike) -> tuple[Array, Array]:
-        A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0 / self.tau]])
+        """One axis's F and Q (spectral density 2 sigma^2 / tau folded in per axis later).
+
+        Van Loan for a dt / tau < 1; Singer's closed form beyond, where Van Loan's
+        exp(+dt/tau) block loses precision and the closed form no longer cancels.
+        """
+        dt = _dt(dt)
+        a = 1.0 / self.tau
+        long = a * dt >= 1.0
+        A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -a]])
         L = np.array([[0.0], [0.0], [1.0]])
-        return discretize(A, L, [[2.0 / self.tau]], dt)
+        Fv, Qv = discretize(A, L, [[2.0 * a]], np.where(long, 0.0, dt))
+        Fc, Qc = _singer_closed_form(np.where(long, dt, self.tau), a)
+        sel = long[..., None, None]
+        return np.where(sel, Fc, Fv), np.where(sel, Qc, Qv)
 
     def f(self, x: Array, dt: ArrayLike) -> Array:
         return _apply(self.jacobian(x, dt), x)
@@ -304,6 +316,26 @@ class Singer(MotionModel):
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
         return _memo(self, "Q", dt, lambda t: _blocks(self._axis(t)[1], self.sigma**2))
+
+
+def _singer_closed_form(T: Array, a: float) -> tuple[Array, Array]:
+    """Singer (1970) F and Q per axis for unit stationary acceleration variance
+    (spectral density q = 2a), with a = 1/tau and step T."""
+    e1, e2, aT = np.exp(-a * T), np.exp(-2 * a * T), a * T
+    one, zero = np.ones_like(T), np.zeros_like(T)
+    F = np.stack([np.stack([one, T, (aT - 1 + e1) / a**2], -1),
+                  np.stack([zero, one, (1 - e1) / a], -1),
+                  np.stack([zero, zero, e1], -1)], -2)
+    q = 2 * a
+    q11 = (1 - e2 + 2 * aT + 2 * aT**3 / 3 - 2 * aT**2 - 4 * aT * e1) / (2 * a**5)
+    q12 = (e2 + 1 - 2 * e1 + 2 * aT * e1 - 2 * aT + aT**2) / (2 * a**4)
+    q13 = (1 - e2 - 2 * aT * e1) / (2 * a**3)
+    q22 = (4 * e1 - 3 - e2 + 2 * aT) / (2 * a**3)
+    q23 = (e2 + 1 - 2 * e1) / (2 * a**2)
+    q33 = (1 - e2) / (2 * a)
+    Q = q * np.stack([np.stack([q11, q12, q13], -1), np.stack([q12, q22, q23], -1),
+                      np.stack([q13, q23, q33], -1)], -2)
+    return F, Q
 
 
 def _turn_terms(w: Array, dt: Array) -> tuple[Array, Array, Array, Array, Array, Array]:
@@ -441,3 +473,59 @@ class RandomSine(MotionModel):
         Q[..., :2, :2] = ConstantVelocity(1, self.q1).noise(None, dt)
         Q[..., 2, 2] = self.q2 * dt
         return Q
+
+
+@dataclass(frozen=True, eq=False)
+class Augmented(MotionModel):
+    """A kinematic model with ``extras`` nearly constant components appended to the state,
+    e.g. the radiated frequency f0 of Doppler-bearing tracking: ``[kinematics, f0]``.
+
+    F = blockdiag(F_base, I), Q = blockdiag(Q_base, q_extra dt I) (a random walk with
+    spectral density ``q_extra``; 0 keeps them constant).
+    """
+
+    base: MotionModel
+    extras: int = 1
+    q_extra: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.extras, int) and self.extras >= 1):
+            raise ValueError(f"extras = {self.extras!r}; expected an integer >= 1")
+        if not (np.isfinite(self.q_extra) and self.q_extra >= 0):
+            raise ValueError(f"q_extra = {self.q_extra!r}; expected a finite value >= 0")
+
+    @property
+    def dim_x(self) -> int:
+        return self.base.dim_x + self.extras
+
+    @property
+    def linear(self) -> bool:  # type: ignore[override]
+        return bool(getattr(self.base, "linear", False))
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        nb = self.base.dim_x
+        head = self.base.f(x[..., :nb], dt)
+        tail = np.broadcast_to(x[..., nb:], head.shape[:-1] + (self.extras,))
+        return np.concatenate([head, tail], -1)
+
+    def _blockdiag(self, A: Array, B: Array) -> Array:
+        nb, n = A.shape[-1], self.dim_x
+        shape = np.broadcast_shapes(A.shape[:-2], B.shape[:-2]) + (n, n)
+        out = np.zeros(shape)
+        out[..., :nb, :nb] = A
+        out[..., nb:, nb:] = B
+        return out
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        J = np.asarray(self.base.jacobian(x[..., : self.base.dim_x], dt))
+        if J.ndim == 2:
+            return _memo(self, "F", dt, lambda t: self._blockdiag(J, np.eye(self.extras)))
+        return self._blockdiag(J, np.eye(self.extras))
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        Q = np.asarray(self.base.noise(x if x is None else x[..., : self.base.dim_x], dt))
+        if Q.ndim == 2:
+            return _memo(self, "Q", dt, lambda t: self._blockdiag(
+                Q, self.q_extra * float(t) * np.eye(self.extras)))
+        dt = _dt(dt)
+        return self._blockdiag(Q, self.q_extra * dt[..., None, None] * np.eye(self.extras))

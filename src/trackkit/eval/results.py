@@ -1,0 +1,93 @@
+"""What a Monte Carlo comparison produces: the data contract between evaluate and report.
+
+Everything here is plain arrays and floats in SI units, so that the report stage (tables,
+plots, JSON, Parquet, HTML) never reaches back into filters or scenarios.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+__all__ = ["FilterResult", "Example", "MonteCarloResult"]
+
+
+@dataclass
+class FilterResult:
+    """One filter's Monte Carlo statistics (per-step arrays have length ``steps``)."""
+
+    name: str
+    rmse: dict[str, Array]  # group -> RMSE per step (SI units; radians for angle groups)
+    rmse_mean: dict[str, float]  # group -> RMSE averaged over the steps from ``start``
+    nees: Array  # average NEES per step
+    nis: Array  # average NIS per step (nan where no measurement)
+    nees_bounds: tuple[Array, Array]  # two-sided 95% chi-square bounds of the average NEES
+    nis_bounds: tuple[Array, Array]
+    anees: float  # average NEES over the steps from ``start``
+    anis: float
+    nees_in_bounds: float  # fraction of steps from ``start`` inside the NEES bounds
+    nis_in_bounds: float
+    diverged: int  # runs diverged (rule: trackkit.eval.metrics docstring)
+    seconds_per_step: float  # wall time per run-step (filter only, not simulation)
+
+
+@dataclass
+class Example:
+    """One run, for the geometry plot: truth, observer track and each filter's estimates."""
+
+    times: Array  # (steps,)
+    truth: Array  # (steps, n)
+    observer: Array  # (steps, d) observer position (d = 2 or 3); first observer if several
+    estimates: dict[str, tuple[Array, Array]]  # filter -> (means (steps, n), covs (steps, n, n))
+    measurements: Array | None = None  # (steps, m), nan where missing
+
+
+@dataclass
+class MonteCarloResult:
+    """A whole comparison on one scenario."""
+
+    scenario: str
+    description: str
+    runs: int
+    seed: int
+    steps: int
+    dt: float
+    times: Array  # (steps,) seconds from the scenario start
+    start: int  # first step index of the time averages ("after convergence")
+    groups: dict[str, str]  # group -> unit label for reports ("m", "m/s", "rad", "Hz")
+    filters: dict[str, FilterResult]
+    pcrlb: dict[str, Array]  # group -> RMSE lower bound per step (same units as rmse)
+    pcrlb_mean: dict[str, float]  # group -> bound averaged over the same steps as rmse_mean
+    example: Example | None = None
+    notes: list[str] = field(default_factory=list)  # assumptions and skipped items to report
+
+    def efficiency(self, name: str, group: str) -> float:
+        """RMSE / PCRLB (time averaged): 1 is efficient, larger is further from the bound."""
+        bound = self.pcrlb_mean.get(group, float("nan"))
+        return self.filters[name].rmse_mean[group] / bound if bound > 0 else float("nan")
+
+    def to_json_dict(self) -> dict:
+        """The ``results.json`` document."""
+        return {
+            "scenario": self.scenario,
+            "runs": self.runs,
+            "seed": self.seed,
+            "steps": self.steps,
+            "dt": self.dt,
+            "filters": {
+                name: {
+                    "rmse": {g: float(v) for g, v in f.rmse_mean.items()},
+                    "anees": float(f.anees),
+                    "anis": float(f.anis),
+                    "nees_in_bounds": float(f.nees_in_bounds),
+                    "diverged": int(f.diverged),
+                    "seconds_per_step": float(f.seconds_per_step),
+                }
+                for name, f in self.filters.items()
+            },
+            "pcrlb": {g: float(v) for g, v in self.pcrlb_mean.items()},
+        }
