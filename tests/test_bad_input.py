@@ -138,11 +138,17 @@ def test_mean_cov_batch_shape_mismatch(name, op):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_shared_covariance_broadcasts(name):
-    # broadcasting one covariance over a batch of means is legitimate, not a mismatch
+    # one covariance shared by a batch of means is a valid belief (tk.check_gaussian accepts
+    # batch shapes that broadcast), so every filter must handle it like per-row copies
     mean, _ = _good((5,))
+    mean[:, 0] = np.arange(5.0)
     _, cov = _good(())
+    tk.check_gaussian(mean, cov)
     b = _call(name, "predict", mean, cov)
-    assert b.mean.shape == (5, 4) and b.cov.shape[-2:] == (4, 4)
+    ref = _call(name, "predict", mean, np.broadcast_to(cov, (5, 4, 4)).copy())
+    np.testing.assert_allclose(b.mean, ref.mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.broadcast_to(b.cov, (5, 4, 4)), ref.cov, rtol=1e-12,
+                               atol=1e-12)
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -47,8 +47,7 @@ def _simulate(motion, sensor, x0, P0, dts, rng):
     Lr = np.linalg.cholesky(sensor.noise)
     for dt in dts:
         Q = np.broadcast_to(motion.noise(x, dt), (B, n, n))
-        w = np.einsum("bij,bj->bi", np.linalg.cholesky(Q + 1e-300 * np.eye(n)),
-                      rng.standard_normal((B, n)))
+        w = np.einsum("bij,bj->bi", np.linalg.cholesky(Q), rng.standard_normal((B, n)))
         x = motion.f(x, dt) + w
         z = sensor.h(x) + rng.standard_normal((B, sensor.dim_z)) @ Lr.T
         xs.append(x)
@@ -373,8 +372,8 @@ def test_rts_smoothing_reduces_error_monte_carlo():
     mse_f = np.mean((hist.mean - X) ** 2)
     mse_s = np.mean((sm.mean - X) ** 2)
     # RTS uses the future measurements: over 500 runs x 40 steps the smoothed MSE is clearly
-    # smaller (the expected ratio here is about 0.5); margin: at least 25 % lower
-    assert mse_s < 0.75 * mse_f, (mse_s, mse_f)
+    # smaller (the ratio with this seed is 0.31); stated margin: at least 50 % lower
+    assert mse_s < 0.5 * mse_f, (mse_s, mse_f)
     # the last smoothed step is the last filtered step; smoothed covariances are no larger
     np.testing.assert_array_equal(sm.mean[-1], hist.mean[-1])
     np.testing.assert_array_equal(sm.cov[-1], hist.cov[-1])

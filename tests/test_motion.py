@@ -494,6 +494,22 @@ def test_noise_symmetric_psd(name, dt):
     assert np.all(np.isfinite(Q))
 
 
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_returned_matrices_cannot_change_the_model(name):
+    # F and Q may be cached per dt; a caller writing into a returned matrix must neither
+    # succeed silently nor change what the model returns next time
+    model = MODELS[name]
+    x = np.linspace(-1, 1, model.dim_x)
+    for get in (model.jacobian, model.noise):
+        first = np.array(get(x, 0.5), copy=True)
+        M = get(x, 0.5)
+        try:
+            M[..., 0, 0] += 1.0
+        except ValueError:
+            pass  # read-only: fine
+        np.testing.assert_array_equal(get(x, 0.5), first)
+
+
 def test_models_are_frozen():
     cv = ConstantVelocity(dim=2, q=1.0)
     with pytest.raises(AttributeError):

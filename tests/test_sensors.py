@@ -135,7 +135,9 @@ def test_sensor_jacobian_matches_finite_differences(num, name, data):
     sensor, x = _build(name, *_hyp(data))
     J = _jac(sensor, x)
     Jfd = num.jac(sensor.h, x, diff=sensor.residual, floor=_scale(x))
-    num.close(J, Jfd, rtol=1e-6, atol=1e-300, per_row=True,
+    # besides rtol per row: the differences' own rounding, ~ eps |h_i| / step (x 50)
+    atol = 1e-8 * np.abs(sensor.h(x))[:, None] / _scale(x) + 1e-300
+    num.close(J, Jfd, rtol=1e-6, atol=atol, per_row=True,
               what=f"{name} jacobian at x={x.tolist()}")
 
 
@@ -147,7 +149,9 @@ def test_sensor_hessian_matches_finite_differences(num, name, data):
     n = x.shape[-1]
     assert H.shape == (sensor.dim_z, n, n)
     Hfd = num.hess(lambda p: _jac(sensor, p), x, floor=_scale(x))
-    num.close(H, Hfd, rtol=1e-5, atol=1e-300, per_row=True,
+    # besides rtol per row: the differences' own rounding, ~ eps |J_i| / step (x 50)
+    atol = 1e-8 * np.abs(_jac(sensor, x)).max(-1)[:, None, None] / _scale(x) + 1e-300
+    num.close(H, Hfd, rtol=1e-5, atol=atol, per_row=True,
               what=f"{name} hessian at x={x.tolist()}")
     np.testing.assert_allclose(H, np.swapaxes(H, -1, -2), rtol=1e-12, atol=1e-300)
 

@@ -63,13 +63,23 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
     return x, P
 
 
-def check_measurement(z: ArrayLike, m: int, where: str) -> Array:
+def check_measurement(z: ArrayLike, m: int, where: str,
+                      batch: tuple[int, ...] = ()) -> Array:
+    """z as a float array of shape ``(..., m)`` whose batch axes broadcast with ``batch``."""
     z = np.asarray(z, dtype=float)
     if z.ndim < 1 or z.shape[-1] != m:
         raise ValueError(
             f"{where}: z has shape {z.shape}; the sensor measures {m} components, so "
             f"expected (..., {m}) (nan marks a missing measurement)"
         )
+    if z.shape[:-1] != batch:
+        try:
+            np.broadcast_shapes(z.shape[:-1], batch)
+        except ValueError:
+            raise ValueError(
+                f"{where}: z has shape {z.shape} but the belief's batch shape is {batch}; "
+                f"expected z of shape {batch + (m,)} (or broadcastable to it)"
+            ) from None
     return z
 
 

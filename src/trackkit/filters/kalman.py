@@ -113,7 +113,7 @@ class _Linearised(Filter):
 
     def _inputs(self, belief, z, sensor):
         x, P = check_belief(belief, None, f"{self.name}.update belief")
-        z = check_measurement(z, sensor.dim_z, f"{self.name}.update")
+        z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
         return x, P, z
 
 

@@ -107,7 +107,7 @@ class _SigmaPointFilter(Filter):
         """Sigma points regenerated from the prediction; ``S = sum Wc dZ dZ^T + R``,
         ``C = sum Wc dX dZ^T``, ``K = C S^{-1}``, ``x+ = x- + K r``, ``P+ = P- - K S K^T``."""
         x, P = check_belief(belief, None, f"{self.name}.update belief")
-        z = check_measurement(z, sensor.dim_z, f"{self.name}.update")
+        z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
         rule = self._rule(x.shape[-1])
         X = rule.points(x, P, f"{self.name}.update belief.cov")
         Z = sensor.h(X)

@@ -164,6 +164,8 @@ class Plan:
 
 def _prior(p: PriorSpec) -> tuple[Array | None, Array]:
     mean = None if p.mean is None else np.asarray(p.mean, dtype=float)
+    if p.cov is not None:
+        return mean, np.asarray(p.cov, dtype=float)
     return mean, np.diag(np.asarray(p.std, dtype=float) ** 2)
 
 

@@ -169,20 +169,58 @@ class Observer(_Strict):
 
 
 class PriorSpec(_Strict):
-    """Filter prior. ``std`` (SI, state order) gives P0 = diag(std^2). Without ``mean`` the
-    prior mean of each run is the truth plus a draw from N(0, P0) (a consistent prior);
-    with ``mean``, every run starts from that mean."""
+    """Filter prior: ``std`` (SI, state order) gives P0 = diag(std^2), or ``cov`` gives P0 in
+    full (symmetric positive definite). Without ``mean`` the prior mean of each run is the
+    truth plus a draw from N(0, P0) (a consistent prior); with ``mean``, every run starts
+    from that mean."""
 
-    std: list[PositiveFloat]
+    std: list[PositiveFloat] | None = None
+    cov: list[list[Finite]] | None = None
     mean: list[Finite] | None = None
+
+    @model_validator(mode="after")
+    def _one_cov(self) -> PriorSpec:
+        if (self.std is None) == (self.cov is None):
+            raise ValueError("give exactly one of std (standard deviations) or cov (matrix)")
+        if self.cov is not None:
+            import numpy as np
+
+            P = np.asarray(self.cov, dtype=float)
+            if P.ndim != 2 or P.shape[0] != P.shape[1]:
+                raise ValueError(f"cov has shape {P.shape}; expected a square matrix")
+            if not np.allclose(P, P.T, rtol=1e-12, atol=0):
+                raise ValueError("cov is not symmetric")
+            eig = np.linalg.eigvalsh(P)
+            if eig[0] <= 0:
+                raise ValueError(f"cov is not positive definite (smallest eigenvalue "
+                                 f"{eig[0]:.3g}); expected a positive definite matrix")
+        return self
+
+    @property
+    def size(self) -> int:
+        return len(self.std) if self.std is not None else len(self.cov)
 
 
 class FilterSpec(_Strict):
     name: str = Field(min_length=1)
     type: Literal["KF", "EKF", "EKF2", "IEKF", "UKF", "CKF"]
-    options: dict[str, float | int | None] = Field(default_factory=dict)
+    options: dict[str, float | int | bool | None] = Field(default_factory=dict)
     motion: MotionSpec | None = None  # default: the target's motion model
     prior: PriorSpec | None = None  # default: the scenario's prior
+
+    @model_validator(mode="after")
+    def _known_options(self) -> FilterSpec:
+        import inspect
+
+        from trackkit import filters
+
+        cls = getattr(filters, "EKF" if self.type == "EKF2" else self.type)
+        allowed = [p for p in inspect.signature(cls).parameters if p != "self"]
+        unknown = sorted(set(self.options) - set(allowed))
+        if unknown:
+            raise ValueError(f"filter {self.name!r} ({self.type}) has no option "
+                             f"{', '.join(unknown)}; allowed: {allowed or 'none'}")
+        return self
 
 
 class RunSpec(_Strict):
@@ -221,8 +259,9 @@ class Scenario(_Strict):
         for where, prior in [("prior", self.prior)] + [
             (f"filters[{i}].prior", f.prior) for i, f in enumerate(self.filters) if f.prior
         ]:
-            if len(prior.std) != n:
-                raise ValueError(f"{where}.std has {len(prior.std)} values; expected {n} "
+            if prior.size != n:
+                what = "std" if prior.std is not None else "cov"
+                raise ValueError(f"{where}.{what} has {prior.size} rows; expected {n} "
                                  "(the state length)")
             if prior.mean is not None and len(prior.mean) != n:
                 raise ValueError(f"{where}.mean has {len(prior.mean)} values; expected {n}")

@@ -1,0 +1,149 @@
+"""The Monte Carlo engine: bound, consistency, determinism across executors, bad input."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import trackkit.scenario as S
+from trackkit.eval.crlb import pcrlb, rmse_bound
+from trackkit.eval.montecarlo import plan_of, run_scenario, simulate_block
+
+
+@pytest.fixture(scope="module")
+def linear():
+    return run_scenario(S.load("cv-position"))
+
+
+def test_linear_pcrlb_equals_kf_covariance(linear):
+    # The KF covariance does not depend on the data, so run 0's covariance is the KF's.
+    P = linear.example.estimates["KF"][1]
+    kf_pos = np.sqrt(P[:, 0, 0] + P[:, 1, 1])
+    kf_vel = np.sqrt(P[:, 2, 2] + P[:, 3, 3])
+    np.testing.assert_allclose(linear.pcrlb["position"], kf_pos, rtol=1e-9)
+    np.testing.assert_allclose(linear.pcrlb["velocity"], kf_vel, rtol=1e-9)
+
+
+def test_linear_kf_rmse_matches_bound_within_monte_carlo_error(linear):
+    # Per step, runs * MSE / bound^2 is chi-square with runs * d degrees of freedom for an
+    # efficient filter: relative sd of MSE/bound^2 is sqrt(2 / (runs d)). 4.5 sd per step over
+    # 200 steps keeps the family-wise false alarm below 0.2% (Bonferroni).
+    kf = linear.filters["KF"]
+    for g, d in (("position", 2), ("velocity", 2)):
+        ratio = kf.rmse[g] ** 2 / linear.pcrlb[g] ** 2
+        sd = np.sqrt(2 / (linear.runs * d))
+        assert np.all(np.abs(ratio - 1) < 4.5 * sd), (g, np.abs(ratio - 1).max() / sd)
+    # the other filters are the same estimator on a linear problem
+    for name in ("EKF", "UKF"):
+        np.testing.assert_allclose(linear.filters[name].rmse["position"], kf.rmse["position"],
+                                   rtol=1e-6)
+
+
+def test_linear_kf_nees_inside_bounds_about_95_percent(linear):
+    # 95% two-sided chi-square bounds per step; steps share runs, so the fraction is
+    # correlated over time: accept 0.85-1.0 (a filter with Q 20x too small scores ~0.01).
+    kf = linear.filters["KF"]
+    assert 0.85 <= kf.nees_in_bounds <= 1.0
+    assert abs(kf.anees - 4.0) < 0.2
+    assert abs(kf.anis - 2.0) < 0.1
+    assert kf.diverged == 0
+
+
+def _small(name: str, runs: int, block: int):
+    d = S.load(name).model_dump()
+    d["run"].update(runs=runs, block=block)
+    return S.parse(d)
+
+
+def _numbers(result):
+    doc = result.to_json_dict()
+    for f in doc["filters"].values():
+        f.pop("seconds_per_step")  # wall time: the one number that may differ
+    per_step = {name: (f.nees, f.nis, *f.rmse.values()) for name, f in result.filters.items()}
+    return doc, per_step, result.pcrlb
+
+
+def _same(a, b):
+    assert a[0] == b[0]
+    for name in a[1]:
+        for x, y in zip(a[1][name], b[1][name], strict=True):
+            np.testing.assert_array_equal(x, y)
+    for g in a[2]:
+        np.testing.assert_array_equal(a[2][g], b[2][g])
+
+
+def test_same_numbers_for_any_chunking():
+    s = _small("bo-cv", runs=30, block=10)
+    one = _numbers(run_scenario(s))
+    _same(one, _numbers(run_scenario(s, chunk=30)))
+    _same(one, _numbers(run_scenario(s, chunk=20)))
+
+
+@pytest.mark.slow
+def test_same_numbers_on_a_local_dask_cluster():
+    s = _small("bo-cv", runs=30, block=10)
+    seen = []
+    dask = run_scenario(s, workers=2, chunk=10, progress=lambda d, t: seen.append((d, t)))
+    _same(_numbers(run_scenario(s)), _numbers(dask))
+    assert seen[-1] == (30, 30)
+
+
+def test_runs_are_independent_of_their_block_neighbours():
+    # run r draws from child r of SeedSequence(seed): its truth does not depend on the block
+    s = _small("bo-cv", runs=20, block=10)
+    plan = plan_of(s)
+    a = simulate_block(plan, 10, 20)
+    b = simulate_block(plan, 5, 20)
+    np.testing.assert_array_equal(a.truth, b.truth[:, 5:])
+    np.testing.assert_array_equal(a.z, b.z[:, 5:])
+
+
+def test_engine_bound_matches_direct_pcrlb_on_the_same_truths():
+    # bearings-only with no process noise: every run has the same truth, and the engine's
+    # block-summed information must reproduce the direct recursion
+    d = S.load("bo-cv").model_dump()
+    d["run"].update(runs=12, block=5)
+    d["target"]["motion"]["q"] = 0.0
+    s = S.parse(d)
+    result = run_scenario(s)
+    plan = plan_of(s)
+    truths = np.concatenate([simulate_block(plan, r, min(r + 5, 12)).truth
+                             for r in range(0, 12, 5)], axis=1)
+    B = pcrlb(plan.prior_cov, plan.truth_motion, plan.sensors, truths, plan.dt)
+    np.testing.assert_allclose(result.pcrlb["position"], rmse_bound(B, [0, 1]), rtol=1e-9)
+    np.testing.assert_allclose(result.pcrlb["velocity"], rmse_bound(B, [2, 3]), rtol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (lambda d: d["target"]["motion"].update(model="Foo"), ["target.motion.model", "Foo"]),
+        (lambda d: d["prior"].update(std=[1.0, 2.0, 3.0]), ["prior.std", "3", "4"]),
+        (lambda d: d["observers"][0]["sensor"].update(sigma_deg=-1.0),
+         ["observers.0.sensor.sigma_deg", "-1", "greater than 0"]),
+        (lambda d: d["prior"].update(std=None, cov=np.diag([1.0, 1, -1, 1]).tolist()),
+         ["prior", "positive definite"]),
+        (lambda d: d["filters"][0].update(options={"alpha": 1.0}),
+         ["filters.0", "alpha", "allowed"]),
+        (lambda d: d["target"].update(speed=3), ["target.speed", "unknown field"]),
+        (lambda d: d["time"].update(step_s=7.0), ["duration_s", "whole number"]),
+    ],
+)
+def test_bad_scenarios_name_the_field(change, words):
+    d = copy.deepcopy(S.load("bo-cv").model_dump())
+    change(d)
+    with pytest.raises(S.ScenarioError) as err:
+        S.parse(d, "bad.toml")
+    msg = str(err.value)
+    assert msg.startswith("bad.toml")
+    for w in words:
+        assert w in msg, (w, msg)
+
+
+def test_unknown_scenario_and_bad_runs():
+    with pytest.raises(S.ScenarioError, match="no bundled scenario named 'nope'"):
+        S.load("nope")
+    with pytest.raises(ValueError, match="runs = 0"):
+        run_scenario(S.load("cv-position"), runs=0)
