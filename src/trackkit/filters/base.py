@@ -52,6 +52,20 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
         )
     if not math.isfinite(x.sum()):
         raise ValueError(f"{where}.mean has non-finite entries; expected finite values")
+    Pshape = np.shape(P)
+    if len(Pshape) >= 2 and x.shape[:-1] != Pshape[:-2]:
+        try:
+            np.broadcast_shapes(x.shape[:-1], Pshape[:-2])
+        except ValueError:
+            raise ValueError(
+                f"{where}: mean has batch shape {x.shape[:-1]} and cov {Pshape[:-2]}; "
+                "expected batch shapes that broadcast (equal, or a shared (n, n) covariance)"
+            ) from None
+        if len(Pshape) - 2 > x.ndim - 1:
+            raise ValueError(
+                f"{where}: cov has batch shape {Pshape[:-2]} but mean only {x.shape[:-1]}; "
+                "expected one mean per covariance"
+            )
     if produced(P):
         if P.shape[-2:] != (x.shape[-1],) * 2:
             raise ValueError(f"{where}.cov has shape {P.shape}; expected (..., {x.shape[-1]}, "

@@ -46,8 +46,13 @@ class SigmaPoints:
     def points(self, x: Array, P: Array, name: str) -> Array:
         """Sigma points of N(x, P) with the point axis first: ``(k, ..., n)``."""
         L = cholesky(P, name)
+        batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2])
+        n = x.shape[-1]
         cols = self.c * np.moveaxis(L, -1, 0)  # (n, ..., n): column i of L as row i
-        xs = np.broadcast_to(x, cols.shape[1:])
+        pad = (1,) * (len(batch) - (P.ndim - 2))  # a covariance shared by a batch of means
+        cols = np.broadcast_to(cols.reshape((n,) + pad + P.shape[:-2] + (n,)),
+                               (n,) + batch + (n,))
+        xs = np.broadcast_to(x, batch + (n,))
         parts = [xs[None]] if self.centre else []
         return np.concatenate(parts + [xs + cols, xs - cols], axis=0)
 

@@ -117,6 +117,8 @@ class LinearMotion(MotionModel):
         Q = np.asarray(self.Q, dtype=float)
         if F.ndim != 2 or F.shape[0] != F.shape[1] or Q.shape != F.shape:
             raise ValueError(f"F has shape {F.shape} and Q {Q.shape}; expected both (n, n)")
+        F, Q = F.copy(), Q.copy()
+        F.flags.writeable = Q.flags.writeable = False  # returned as they are: keep them safe
         object.__setattr__(self, "F", F)
         object.__setattr__(self, "Q", Q)
 
@@ -379,6 +381,11 @@ class KnownTurnRate(MotionModel):
     linear: bool = field(default=True, init=False)
     dim_x: int = field(default=4, init=False)
 
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.omega):
+            raise ValueError(f"omega = {self.omega!r}; expected a finite turn rate (rad/s)")
+        object.__setattr__(self, "q", _per_axis(self.q, 2, "q"))
+
     def f(self, x: Array, dt: ArrayLike) -> Array:
         return _apply(self.jacobian(x, dt), x)
 
@@ -402,6 +409,11 @@ class CoordinatedTurn(MotionModel):
     q: ArrayLike = 1.0
     q_omega: float = 1e-4
     dim_x: int = field(default=5, init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "q", _per_axis(self.q, 2, "q"))
+        if not (np.isfinite(self.q_omega) and self.q_omega >= 0):
+            raise ValueError(f"q_omega = {self.q_omega!r}; expected a finite value >= 0")
 
     def f(self, x: Array, dt: ArrayLike) -> Array:
         dt = _dt(dt)
@@ -448,6 +460,12 @@ class RandomSine(MotionModel):
     q2: float = 0.1
     linear: bool = field(default=True, init=False)
     dim_x: int = field(default=3, init=False)
+
+    def __post_init__(self) -> None:
+        for name in ("q1", "q2"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} = {v!r}; expected a finite value >= 0")
 
     def _F(self, dt: ArrayLike) -> Array:
         return _memo(self, "F", dt, self._build_F)
