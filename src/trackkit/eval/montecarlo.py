@@ -284,6 +284,11 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
             seconds_per_step=sum(p.seconds[name] for p in parts) / (runs * T),
         )
     notes = list(s.notes)
+    if {"speed", "course"} & set(groups):
+        notes.append("The speed and course bounds propagate the velocity bound to first order "
+                     "(G B G^T with G the mean gradient over runs). While the velocity "
+                     "uncertainty is large compared with the speed this is not a true lower "
+                     "bound, and filters can fall below it early in a track.")
     if s.target.legs:
         notes.append("The PCRLB uses the target's stated motion model and process noise; the "
                      "scripted manoeuvres are not in that model, so during them the bound is "

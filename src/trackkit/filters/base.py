@@ -20,17 +20,21 @@ from trackkit.linalg import check_covariance, symmetrize
 
 Array = NDArray[np.float64]
 
-_produced: weakref.WeakValueDictionary[int, np.ndarray] = weakref.WeakValueDictionary()
+# id -> weak reference; a stale entry (its array gone, its id reused) fails the identity test
+_produced: dict[int, weakref.ref] = {}
 
 
 def register(P: Array) -> Array:
     """Mark ``P`` as produced (and so already checked) by a trackkit filter."""
-    _produced[id(P)] = P
+    if len(_produced) > 4096:
+        _produced.clear()  # forgetting only costs a full check of a later input
+    _produced[id(P)] = weakref.ref(P)
     return P
 
 
 def produced(P: Any) -> bool:
-    return _produced.get(id(P)) is P
+    ref = _produced.get(id(P))
+    return ref is not None and ref() is P
 
 
 def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
@@ -104,9 +108,10 @@ def missing_rows(z: Array) -> Array | None:
     return np.isnan(z).any(-1)
 
 
-def output(x: Array, P: Array) -> Gaussian:
-    """Package a filter result: symmetric covariance, registered as produced."""
-    return Gaussian(x, register(symmetrize(P)))
+def output(x: Array, P: Array, symmetric: bool = False) -> Gaussian:
+    """Package a filter result: symmetric covariance (``symmetric``: already exactly so),
+    registered as produced."""
+    return Gaussian(x, register(P if symmetric else symmetrize(P)))
 
 
 def keep_prior_where_missing(

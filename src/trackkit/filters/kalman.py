@@ -26,22 +26,46 @@ __all__ = ["KF", "EKF", "IEKF"]
 Array = NDArray[np.float64]
 
 
+def _upper(n: int) -> tuple[Array, Array]:
+    """Indices of the upper triangle of an n x n matrix (row-major) and, for every entry of
+    the full matrix, the position of its upper-triangle twin."""
+    iu = np.triu_indices(n)
+    pos = np.empty((n, n), dtype=np.intp)
+    pos[iu] = np.arange(iu[0].size)
+    pos[iu[1], iu[0]] = pos[iu]
+    return iu[0] * n + iu[1], pos.ravel()
+
+
+_UPPER = {n: _upper(n) for n in range(1, 7)}
+_EYE: dict[int, Array] = {}
+
+
+def _eye(n: int) -> Array:
+    eye = _EYE.get(n)
+    if eye is None:
+        eye = _EYE[n] = np.eye(n)
+        eye.flags.writeable = False
+    return eye
+
+
 def sandwich(A: Array, P: Array) -> Array:
     """``A P A^T`` for symmetric P ``(..., n, n)`` and A ``(k, n)`` or ``(..., k, n)``.
 
     For an unbatched A and a stack of P, the product is one matrix multiply on the flattened
     covariances, ``vec(A P A^T) = (A kron A) vec(P)`` (row-major vec), instead of thousands
-    of tiny ones; for larger n, where the Kronecker matrix grows as n^4, the batch is folded
-    into the rows of two plain products (``P A^T``, then ``(A P) A^T``).
+    of tiny ones. Only the upper triangle is computed and then mirrored, so the result is
+    exactly symmetric. For larger n, where the Kronecker matrix grows as n^4, the batch is
+    folded into the rows of two plain products (``P A^T``, then ``(A P) A^T``).
     """
     if A.ndim == 2 and P.ndim == 2:
         return A @ P @ A.T
     if A.ndim == 2:
         n, k = P.shape[-1], A.shape[0]
         P = np.ascontiguousarray(P)
-        if n <= 6:
-            flat = P.reshape(-1, n * n) @ np.kron(A, A).T
-            return flat.reshape(P.shape[:-2] + (k, k))
+        if n <= 6 and k == n:
+            rows, twin = _UPPER[n]
+            upper = P.reshape(-1, n * n) @ np.kron(A, A)[rows].T
+            return upper[:, twin].reshape(P.shape)
         PAt = (P.reshape(-1, n) @ A.T).reshape(P.shape[:-1] + (k,))
         return (np.ascontiguousarray(PAt.mT).reshape(-1, n) @ A.T).reshape(
             P.shape[:-2] + (k, k)
@@ -51,8 +75,11 @@ def sandwich(A: Array, P: Array) -> Array:
 
 def _predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
     """``x- = f(x, dt)``, ``P- = F P F^T + Q`` with F the Jacobian of f at x."""
-    F = motion.jacobian(x, dt)
-    return output(motion.f(x, dt), sandwich(np.asarray(F), P) + motion.noise(x, dt))
+    F = np.asarray(motion.jacobian(x, dt))
+    Q = np.asarray(motion.noise(x, dt))
+    Pp = sandwich(F, P) + Q
+    exact = F.ndim == 2 and P.ndim > 2 and F.shape[0] <= 6 and Q.ndim == 2 and (Q == Q.T).all()
+    return output(motion.f(x, dt), Pp, symmetric=exact)
 
 
 def _condition(
@@ -61,24 +88,30 @@ def _condition(
     """Kalman update for residual r: returns ``(x+, P+, S)``.
 
     Joseph form ``P+ = (I - K H) P (I - K H)^T + K R K^T``, valid for any gain. For a batch
-    it is evaluated without forming ``I - K H`` (n x n per row): with
-    ``M = (I - K H) P = P - K (P H^T)^T`` (P symmetric),
-    ``P+ = M - (M H^T) K^T + K R K^T = M - (M H^T - K R) K^T``,
-    two rank-m corrections, cheap for the small m of tracking sensors.
+    it is evaluated without forming ``I - K H`` (n x n per row): with ``A = P H^T``,
+    ``M = (I - K H) P = P - K A^T`` (P symmetric) and
+    ``P+ = M - (M H^T) K^T + K R K^T = M - W K^T``, ``W = M H^T - K R = A - K S``,
+    so ``P+ = P - K A^T - W K^T``: rank-m corrections, cheap for the small m of tracking
+    sensors. (W vanishes for the optimal gain; it carries the Joseph form's
+    second-order insensitivity to gain errors.)
     """
     if x.ndim == 1 and P.ndim == 2 and H.ndim == 2:  # one problem: the textbook form
         PHt = P @ H.T
-        S = symmetrize(H @ PHt + R)
+        S = H @ PHt + R
+        if S.shape[0] > 1:
+            S = symmetrize(S)
         K = solve_psd(S, PHt.T).T
-        A = np.eye(P.shape[0]) - K @ H
+        A = _eye(P.shape[0]) - K @ H
         return x + K @ r, A @ P @ A.T + K @ R @ K.T, S
-    PHt = mmT(P, H)
-    S = symmetrize(mm(H, PHt) + R)
-    K = solve_psd(S, PHt.mT).mT
+    A = mmT(P, H)  # P H^T
+    S = mm(H, A) + R
+    if S.shape[-1] > 1:
+        S = symmetrize(S)
+    K = solve_psd(S, A.mT).mT
     x_new = x + mm(K, r[..., None])[..., 0]
-    M = P - mmT(K, PHt)
-    W = mmT(M, H) - mm(K, R)
-    return x_new, M - mmT(W, K), S
+    # M H^T - K R = A - K S for any K, so W costs only (n x m) work
+    W = A - mm(K, S)
+    return x_new, P - mmT(K, A) - mmT(W, K), S
 
 
 def _second_order_terms(Hs: Array, P: Array) -> tuple[Array, Array]:

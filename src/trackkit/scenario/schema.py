@@ -228,7 +228,7 @@ class RunSpec(_Strict):
     seed: Annotated[int, Field(ge=0)] = 0
     #: runs per simulation block: the unit of work that makes results independent of
     #: how runs are split over executors
-    block: Annotated[int, Field(ge=1)] = 50
+    block: Annotated[int, Field(ge=1)] = 250
 
 
 class ReportSpec(_Strict):
