@@ -35,7 +35,7 @@ Array = NDArray[np.float64]
 __all__ = ["run_scenario", "run_block", "simulate_block", "combine", "BlockResult"]
 
 UNITS = {"position": "m", "velocity": "m/s", "speed": "m/s", "course": "rad", "x": "m",
-         "y": "m", "z": "m", "frequency": "Hz"}
+         "y": "m", "z": "m", "frequency": "Hz", "bearing": "rad"}
 
 
 @lru_cache(maxsize=8)
@@ -67,12 +67,26 @@ def _course_error(dim: int):
     return err
 
 
+class BearingError:
+    """Error of the bearing from the first observer to the target, wrapped (rad). The
+    observer's position at the current step is set by the engine before each use."""
+
+    def __init__(self) -> None:
+        self.origin = np.zeros(2)
+
+    def __call__(self, truth: Array, mean: Array) -> Array:
+        dt_, de = truth[..., :2] - self.origin, mean[..., :2] - self.origin
+        bt = np.arctan2(dt_[..., 0], dt_[..., 1])
+        be = np.arctan2(de[..., 0], de[..., 1])
+        return wrap(bt - be)[..., None]
+
+
 def groups_for(plan: Plan) -> dict:
     d = plan.dim
     table = {
         "position": list(range(d)), "velocity": list(range(d, 2 * d)),
         "x": [0], "y": [1], "z": [2], "frequency": [2 * d],
-        "speed": _speed_error(d), "course": _course_error(d),
+        "speed": _speed_error(d), "course": _course_error(d), "bearing": BearingError(),
     }
     out = {}
     for g in plan.scenario.report.groups:
@@ -82,9 +96,14 @@ def groups_for(plan: Plan) -> dict:
     return out
 
 
-def _derived_gradient(group: str, dim: int, n: int, x: Array) -> Array:
-    """Gradient of speed or course at true states ``x`` (runs, n) -> (runs, n)."""
+def _derived_gradient(group: str, dim: int, n: int, x: Array, origin: Array) -> Array:
+    """Gradient of speed, course or bearing (from ``origin``) at true states ``x`` (runs, n)."""
     g = np.zeros(x.shape)
+    if group == "bearing":
+        u, v = x[..., 0] - origin[0], x[..., 1] - origin[1]
+        r2 = u * u + v * v
+        g[..., 0], g[..., 1] = v / r2, -u / r2
+        return g
     vx, vy = x[..., dim], x[..., dim + 1]
     v2 = np.maximum(vx * vx + vy * vy, 1e-300)
     if group == "speed":
@@ -189,7 +208,7 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
         L0 = np.linalg.cholesky(P0)
         m0 = (data.truth[0] + data.prior_offset @ L0.T) if mean0 is None else (
             np.broadcast_to(mean0, (r1 - r0, n)).copy())
-        b = Gaussian(m0, np.broadcast_to(P0, (r1 - r0, n, n)).copy())
+        b = f.init(Gaussian(m0, np.broadcast_to(P0, (r1 - r0, n, n)).copy()))
         elapsed = 0.0
         if keep:
             hm, hP = np.empty((T, n)), np.empty((T, n, n))
@@ -199,6 +218,8 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
             b, innov = f.update(b, data.z[k], plan.sensors[k])
             elapsed += time.perf_counter() - t0
             g = f.estimate(b)
+            if "bearing" in groups:
+                groups["bearing"].origin = plan.observer_states[0, k + 1, :2]
             acc.add(k, data.truth[k + 1], g, innov)
             if keep:
                 hm[k], hP[k] = g.mean[0], g.cov[0]
@@ -212,9 +233,10 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
         H = np.broadcast_to(sensor.jacobian(data.truth[k + 1]), (r1 - r0, sensor.dim_z, n))
         RinvH = np.linalg.solve(sensor.noise, H)
         info[k] = plan.p_detect * np.einsum("bmi,bmj->ij", H, RinvH)
-    grads = {g: np.stack([_derived_gradient(g, d, n, data.truth[k + 1]).sum(0)
+    grads = {g: np.stack([_derived_gradient(g, d, n, data.truth[k + 1],
+                                            plan.observer_states[0, k + 1, :2]).sum(0)
                           for k in range(T)])
-             for g in groups if g in ("speed", "course")}
+             for g in groups if g in ("speed", "course", "bearing")}
     if keep:
         example = Example(times=plan.times[1:], truth=data.truth[1:, 0],
                           observer=plan.observer_states[0, 1:, :d], estimates=est_hist,
@@ -284,10 +306,10 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
             seconds_per_step=sum(p.seconds[name] for p in parts) / (runs * T),
         )
     notes = list(s.notes)
-    if {"speed", "course"} & set(groups):
-        notes.append("The speed and course bounds propagate the velocity bound to first order "
-                     "(G B G^T with G the mean gradient over runs). While the velocity "
-                     "uncertainty is large compared with the speed this is not a true lower "
+    if {"speed", "course", "bearing"} & set(groups):
+        notes.append("The speed, course and bearing bounds propagate the state bound to first "
+                     "order (G B G^T with G the mean gradient over runs). While the uncertainty "
+                     "is large compared with the speed or range this is not a true lower "
                      "bound, and filters can fall below it early in a track.")
     if s.target.legs:
         notes.append("The PCRLB uses the target's stated motion model and process noise; the "

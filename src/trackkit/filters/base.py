@@ -132,11 +132,15 @@ def keep_prior_where_missing(
 class Filter:
     """Base of the stateless filter strategies.
 
+    ``init(gaussian) -> belief`` (a filter with memory builds its belief type here),
     ``predict(belief, motion, dt) -> belief`` and ``update(belief, z, sensor) ->
     (belief, Innovation)``; ``estimate(belief) -> Gaussian``.
     """
 
     name: str = "Filter"
+
+    def init(self, prior: Gaussian) -> Gaussian:
+        return prior
 
     def estimate(self, belief: Gaussian) -> Gaussian:
         return belief

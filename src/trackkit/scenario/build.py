@@ -39,7 +39,7 @@ def build_motion(spec: MotionSpec, dim: int, extras: int = 0):
         if dim != 2:
             raise ValueError(f"CoordinatedTurn is 2-D; the scenario has dim = {dim}")
         base = models.CoordinatedTurn(q=spec.q, q_omega=spec.q_omega)
-    return models.Augmented(base, extras) if extras else base
+    return models.Augmented(base, extras, spec.q_extra) if extras else base
 
 
 def build_filter(spec: FilterSpec):

@@ -110,6 +110,8 @@ class MotionSpec(_Strict):
     model: Literal["ConstantVelocity", "ConstantAcceleration", "Singer", "CoordinatedTurn"]
     q: NonNegFloat = 0.0
     q_omega: NonNegFloat = 1e-6
+    #: random-walk density of the constant extras (e.g. f0), for filters' models
+    q_extra: NonNegFloat = 0.0
     tau: PositiveFloat = 20.0
     sigma: NonNegFloat = 1.0
 
@@ -233,7 +235,8 @@ class RunSpec(_Strict):
 
 class ReportSpec(_Strict):
     groups: list[Literal["position", "velocity", "speed", "course", "x", "y", "z",
-                         "frequency"]] = Field(default_factory=lambda: ["position", "velocity"])
+                         "frequency", "bearing"]] = Field(
+        default_factory=lambda: ["position", "velocity"])
     average_from_s: NonNegFloat = 0.0
 
 
