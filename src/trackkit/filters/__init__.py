@@ -1,9 +1,24 @@
 """Filters: stateless strategies with ``predict(belief, motion, dt)`` and
 ``update(belief, z, sensor) -> (belief, innovation)``."""
 
+from trackkit.filters.adaptive import AEKF, AMCEKF, MCEKF, AdaptiveBelief, SageHusaBelief
 from trackkit.filters.kalman import EKF, IEKF, KF
 from trackkit.filters.run import run_filter
 from trackkit.filters.sigma import CKF, UKF, SigmaPoints
 from trackkit.filters.smoothers import smooth
 
-__all__ = ["KF", "EKF", "IEKF", "UKF", "CKF", "SigmaPoints", "smooth", "run_filter"]
+__all__ = [
+    "KF",
+    "EKF",
+    "IEKF",
+    "UKF",
+    "CKF",
+    "MCEKF",
+    "AMCEKF",
+    "AEKF",
+    "AdaptiveBelief",
+    "SageHusaBelief",
+    "SigmaPoints",
+    "smooth",
+    "run_filter",
+]

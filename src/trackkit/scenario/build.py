@@ -45,14 +45,13 @@ def build_motion(spec: MotionSpec, dim: int, extras: int = 0):
 def build_filter(spec: FilterSpec):
     """The filter named by ``spec.type`` with ``spec.options`` (names as the constructors')."""
     cls = {"KF": tkf.KF, "EKF": tkf.EKF, "IEKF": tkf.IEKF, "UKF": tkf.UKF, "CKF": tkf.CKF,
-           "EKF2": tkf.EKF}[spec.type]
-    options = dict(spec.options)
+           "EKF2": tkf.EKF, "MCEKF": tkf.MCEKF, "AMCEKF": tkf.AMCEKF, "AEKF": tkf.AEKF}[spec.type]
+    options = {k: tuple(v) if isinstance(v, list) else v for k, v in spec.options.items()}
     if spec.type == "EKF2":
         options.setdefault("order", 2)
-    if "iterations" in options and options["iterations"] is not None:
-        options["iterations"] = int(options["iterations"])
-    if "order" in options:
-        options["order"] = int(options["order"])
+    for name in ("iterations", "order", "window", "max_halvings"):
+        if options.get(name) is not None:
+            options[name] = int(options[name])
     try:
         return cls(**options)
     except TypeError:

@@ -205,8 +205,9 @@ class PriorSpec(_Strict):
 
 class FilterSpec(_Strict):
     name: str = Field(min_length=1)
-    type: Literal["KF", "EKF", "EKF2", "IEKF", "UKF", "CKF"]
-    options: dict[str, float | int | bool | None] = Field(default_factory=dict)
+    type: Literal["KF", "EKF", "EKF2", "IEKF", "UKF", "CKF", "MCEKF", "AMCEKF", "AEKF"]
+    options: dict[str, float | int | bool | str | list[float] | None] = Field(
+        default_factory=dict)
     motion: MotionSpec | None = None  # default: the target's motion model
     prior: PriorSpec | None = None  # default: the scenario's prior
 

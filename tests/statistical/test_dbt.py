@@ -1,0 +1,67 @@
+"""Seed 002 paper (b): the Doppler-bearing comparison at the paper's 100 runs.
+
+The three bundled scenarios are run once (fixed seeds, 100 runs, 2000 steps each); the tests
+check the paper's claims that our runs support, and record the one that does not.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+import trackkit.scenario as S
+from trackkit.eval.montecarlo import run_scenario
+
+SCENARIOS = ["dbt-approaching", "dbt-receding", "dbt-observer-manoeuvre"]
+FILTERS = ["EKF", "UKF", "AEKF", "MCEKF", "AMCEKF"]
+
+
+@pytest.fixture(scope="module")
+def results():
+    return {name: run_scenario(S.load(name)) for name in SCENARIOS}
+
+
+pytestmark = pytest.mark.slow
+
+
+def _pos(result, f):
+    return result.filters[f].rmse_mean["position"]
+
+
+def test_results_have_the_papers_filters_and_groups(results):
+    for r in results.values():
+        assert r.runs == 100 and r.steps == 2000
+        assert list(r.filters) == FILTERS
+        assert set(r.pcrlb) == {"position", "velocity", "speed", "course", "frequency",
+                                "bearing"}
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_proposed_filter_beats_the_ekf_on_position(results, name):
+    # the paper's qualitative claim: the proposed filter has the lowest position error. All
+    # filters see the same truths and measurements, so the comparison is paired; the margins
+    # we see (5-12% below the EKF) are the ones recorded in docs/dbt-comparison.md
+    r = results[name]
+    assert all(_pos(r, "AMCEKF") < _pos(r, f) for f in FILTERS if f != "AMCEKF")
+
+
+@pytest.mark.xfail(strict=True, reason="the paper's margins (AMCEKF/EKF = 0.58, 0.47, 0.66) "
+                   "do not reproduce: we get 0.88-0.95 (docs/dbt-comparison.md)")
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_proposed_filter_ratio_below_0_8(results, name):
+    r = results[name]
+    assert _pos(r, "AMCEKF") / _pos(r, "EKF") < 0.8
+
+
+def test_receding_is_the_hardest_scenario_for_every_filter(results):
+    for f in FILTERS:
+        rec = _pos(results["dbt-receding"], f)
+        others = [_pos(results[n], f) for n in SCENARIOS if n != "dbt-receding"]
+        assert rec > max(others), (f, rec, others)
+
+
+def test_no_filter_diverges_and_all_stay_above_the_bound(results):
+    for r in results.values():
+        for f in FILTERS:
+            assert r.filters[f].diverged == 0
+            # an estimator cannot beat the PCRLB (position is a linear group: a true bound)
+            assert _pos(r, f) > r.pcrlb_mean["position"]
