@@ -2,6 +2,7 @@
 ``update(belief, z, sensor) -> (belief, innovation)``."""
 
 from trackkit.filters.adaptive import AEKF, AMCEKF, MCEKF, AdaptiveBelief, SageHusaBelief
+from trackkit.filters.initialise import dbt_prior_cov, ga_initial_position, ga_prior
 from trackkit.filters.kalman import EKF, IEKF, KF
 from trackkit.filters.run import run_filter
 from trackkit.filters.sigma import CKF, UKF, SigmaPoints
@@ -21,4 +22,7 @@ __all__ = [
     "SigmaPoints",
     "smooth",
     "run_filter",
+    "ga_initial_position",
+    "ga_prior",
+    "dbt_prior_cov",
 ]

@@ -26,7 +26,11 @@ one batch of shape (runs, population) per generation.
   300, 420 m at 600 and 160 m at 800 (scenario 2: 300 m at 600). The paper's "< 1000 m" then
   needs K of about 600 to 800 (a batch initialiser over the first 10 to 13 minutes). K is the
   length of the measurements passed in; ``block`` (e.g. 25) averages blocks of measurements
-  first (``compress``) so that long windows stay cheap.
+  first (``compress``) so that long windows stay cheap. Measured (GA 50 x 200, block 25,
+  100 runs): scenario 1 with K = 800 gives a median error of 154 m, 95th percentile 382 m,
+  max 477 m; with K = 600, 94% of runs within 1000 m; scenario 2 with K = 800, max 567 m.
+  With K = 20 no run is within 1000 m (the NIS then also favours short ranges, where the
+  predicted bearing variance is largest).
 - *P0 of the auxiliary filter* (``dbt_prior_cov()``): 200 m in position, 10 m/s in velocity,
   5 Hz in the tone. The position spread is small against the km-scale range ambiguity so
   that J(p) scores the candidate p itself (with 1000 m the filter moves away from p and
@@ -88,6 +92,8 @@ def aux_cost(p: Array, measurements: Array, sensors: Sequence[Any], motion, dt: 
     x = _prior_mean(p, v0, f0)
     P = np.broadcast_to(cov, (runs, n) + cov.shape).copy()
     b = Gaussian(x, P)
+    if hasattr(f, "init"):  # filters with memory start their own belief type
+        b = f.init(b)
     steps = np.broadcast_to(np.asarray(dt, dtype=float), (len(sensors),))
     J = np.zeros((runs, n))
     for k, sensor in enumerate(sensors):

@@ -162,11 +162,9 @@ class GA(Optimizer):
             g = u_gam[..., None]
             c1 = g * p1 + (1 - g) * p2
             c2 = (1 - g) * p1 + g * p2
-        else:  # single point: exchange the genes j >= cut, cut in 1..d-1
+        else:  # single point: exchange the genes j >= cut, cut in 1..d-1 (d = 1: none)
             cut_at = 1 + np.minimum((u_gam * (d - 1)).astype(np.intp), max(d - 2, 0))
             tail = np.arange(d) >= cut_at[..., None]
-            if d == 1:
-                tail = np.zeros_like(tail)
             c1 = np.where(tail, p2, p1)
             c2 = np.where(tail, p1, p2)
         cross = (u_flag < self.crossover)[..., None]
