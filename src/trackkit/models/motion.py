@@ -10,6 +10,8 @@ positions, then velocities, then accelerations, then extras.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from math import factorial
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -164,109 +166,78 @@ class ContinuousLinear(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class ConstantVelocity(MotionModel):
+class _NearlyConstant(MotionModel):
+    """The white-noise derivative family: the k-th derivative of position is white noise of
+    spectral density q, state [p..., v..., (a...)] with k blocks per axis.
+
+    Per axis, exactly: F_ij = dt^(j-i) / (j-i)! for j >= i, and
+    Q_ij = q dt^(2k-1-i-j) / ((k-1-i)! (k-1-j)! (2k-1-i-j)).
+    """
+
+    dim: int = 2
+    q: ArrayLike = 1.0
+    linear: bool = field(default=True, init=False)
+    _order: ClassVar[int] = 2
+
+    def __post_init__(self) -> None:
+        if self.dim not in (1, 2, 3):
+            raise ValueError(f"dim = {self.dim!r}; expected 1, 2 or 3")
+        object.__setattr__(self, "q", _per_axis(self.q, self.dim, "q"))
+
+    @property
+    def dim_x(self) -> int:
+        return self._order * self.dim
+
+    def _F(self, dt: ArrayLike) -> Array:
+        return _memo(self, "F", dt, self._build_F)
+
+    def _build_F(self, dt: ArrayLike) -> Array:
+        dt, k = _dt(dt), self._order
+        B = np.zeros(dt.shape + (k, k))
+        for i in range(k):
+            for j in range(i, k):
+                B[..., i, j] = dt ** (j - i) / factorial(j - i)
+        return _blocks(B, np.ones(self.dim))
+
+    def f(self, x: Array, dt: ArrayLike) -> Array:
+        return _apply(self._F(dt), x)
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        return self._F(dt)
+
+    def noise(self, x: Array, dt: ArrayLike) -> Array:
+        return _memo(self, "Q", dt, self._build_Q)
+
+    def _build_Q(self, dt: ArrayLike) -> Array:
+        dt, k = _dt(dt), self._order
+        B = np.zeros(dt.shape + (k, k))
+        for i in range(k):
+            for j in range(k):
+                p = 2 * k - 1 - i - j
+                B[..., i, j] = dt**p / (factorial(k - 1 - i) * factorial(k - 1 - j) * p)
+        return _blocks(B, self.q)
+
+
+@dataclass(frozen=True, eq=False)
+class ConstantVelocity(_NearlyConstant):
     """Nearly constant velocity (continuous white-noise acceleration), state [p..., v...].
 
     Per axis with spectral density q:  F = [[1, dt], [0, 1]],
     Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]]. ``q`` is a scalar or one value per axis.
     """
 
-    dim: int = 2
-    q: ArrayLike = 1.0
-    linear: bool = field(default=True, init=False)
-
-    def __post_init__(self) -> None:
-        if self.dim not in (1, 2, 3):
-            raise ValueError(f"dim = {self.dim!r}; expected 1, 2 or 3")
-        object.__setattr__(self, "q", _per_axis(self.q, self.dim, "q"))
-
-    @property
-    def dim_x(self) -> int:
-        return 2 * self.dim
-
-    def _F(self, dt: ArrayLike) -> Array:
-        return _memo(self, "F", dt, self._build_F)
-
-    def _build_F(self, dt: ArrayLike) -> Array:
-        dt = _dt(dt)
-        one, zero = np.ones_like(dt), np.zeros_like(dt)
-        B = np.stack([np.stack([one, dt], -1), np.stack([zero, one], -1)], -2)
-        return _blocks(B, np.ones(self.dim))
-
-    def f(self, x: Array, dt: ArrayLike) -> Array:
-        return _apply(self._F(dt), x)
-
-    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
-        return self._F(dt)
-
-    def noise(self, x: Array, dt: ArrayLike) -> Array:
-        return _memo(self, "Q", dt, self._build_Q)
-
-    def _build_Q(self, dt: ArrayLike) -> Array:
-        dt = _dt(dt)
-        B = np.stack(
-            [np.stack([dt**3 / 3, dt**2 / 2], -1), np.stack([dt**2 / 2, dt], -1)], -2
-        )
-        return _blocks(B, self.q)
+    _order: ClassVar[int] = 2
 
 
 @dataclass(frozen=True, eq=False)
-class ConstantAcceleration(MotionModel):
+class ConstantAcceleration(_NearlyConstant):
     """Nearly constant acceleration (continuous white-noise jerk), state [p..., v..., a...].
 
     Per axis: F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]],
     Q = q [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]].
     """
 
-    dim: int = 2
-    q: ArrayLike = 1.0
-    linear: bool = field(default=True, init=False)
-
-    def __post_init__(self) -> None:
-        if self.dim not in (1, 2, 3):
-            raise ValueError(f"dim = {self.dim!r}; expected 1, 2 or 3")
-        object.__setattr__(self, "q", _per_axis(self.q, self.dim, "q"))
-
-    @property
-    def dim_x(self) -> int:
-        return 3 * self.dim
-
-    def _F(self, dt: ArrayLike) -> Array:
-        return _memo(self, "F", dt, self._build_F)
-
-    def _build_F(self, dt: ArrayLike) -> Array:
-        dt = _dt(dt)
-        one, zero = np.ones_like(dt), np.zeros_like(dt)
-        B = np.stack(
-            [
-                np.stack([one, dt, dt**2 / 2], -1),
-                np.stack([zero, one, dt], -1),
-                np.stack([zero, zero, one], -1),
-            ],
-            -2,
-        )
-        return _blocks(B, np.ones(self.dim))
-
-    def f(self, x: Array, dt: ArrayLike) -> Array:
-        return _apply(self._F(dt), x)
-
-    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
-        return self._F(dt)
-
-    def noise(self, x: Array, dt: ArrayLike) -> Array:
-        return _memo(self, "Q", dt, self._build_Q)
-
-    def _build_Q(self, dt: ArrayLike) -> Array:
-        dt = _dt(dt)
-        B = np.stack(
-            [
-                np.stack([dt**5 / 20, dt**4 / 8, dt**3 / 6], -1),
-                np.stack([dt**4 / 8, dt**3 / 3, dt**2 / 2], -1),
-                np.stack([dt**3 / 6, dt**2 / 2, dt], -1),
-            ],
-            -2,
-        )
-        return _blocks(B, self.q)
+    _order: ClassVar[int] = 3
 
 
 @dataclass(frozen=True, eq=False)
