@@ -53,10 +53,6 @@ Form = Literal["auto", "information", "covariance"]
 _FORMS = ("auto", "information", "covariance")
 
 
-def _T(A: Array) -> Array:
-    return np.swapaxes(A, -1, -2)
-
-
 def _inverse(P: Array, name: str) -> Array:
     """``P^{-1}`` for symmetric positive-definite ``P`` (batched), symmetrised."""
     eye = np.broadcast_to(np.eye(P.shape[-1]), P.shape)
@@ -72,7 +68,7 @@ def _predict_covariance(J: Array, F: Array, Q: Array, runs_axis: bool) -> Array:
     """``(E[F J^{-1} F^T + Q])^{-1}``; with ``runs_axis`` the mean is over the leading runs
     axis of F and Q ``(runs, ..., n, n)``, otherwise F and Q are shared by all runs."""
     P = _inverse(J, "PCRLB information matrix J_k")
-    P_pred = symmetrize(F @ P @ _T(F) + Q)
+    P_pred = symmetrize(F @ P @ F.mT + Q)
     if runs_axis:
         P_pred = P_pred.mean(axis=0)
     return _inverse(P_pred, "PCRLB predicted bound F J^-1 F^T + Q")
@@ -85,12 +81,12 @@ def _predict_information(J: Array, F: Array, Q: Array) -> Array:
     the leading runs axis of F and Q ``(runs, ..., n, n)``; Q must be positive definite.
     """
     Qinv = _inverse(Q, "process noise Q (information-form PCRLB needs Q positive definite)")
-    FtQinv = _T(F) @ Qinv
+    FtQinv = F.mT @ Qinv
     D11 = (FtQinv @ F).mean(axis=0)
     D12 = -FtQinv.mean(axis=0)
     D22q = Qinv.mean(axis=0)
     X = solve_psd(symmetrize(J + D11), D12, "PCRLB matrix J_k + D11")
-    return symmetrize(D22q - _T(D12) @ X)
+    return symmetrize(D22q - D12.mT @ X)
 
 
 def _broadcast_model(A: Any, batch: tuple[int, ...], n: int, name: str) -> Array:
@@ -220,7 +216,7 @@ class PCRLB:
         H = np.broadcast_to(H, batch + (m, n))
         R = np.asarray(sensor.noise, dtype=float)
         RinvH = solve_psd(R, H, "measurement noise R")
-        info = _T(H) @ RinvH
+        info = H.mT @ RinvH
         w = np.broadcast_to(np.asarray(weight, dtype=float), batch)
         if np.any(w < 0) or not np.all(np.isfinite(w)):
             raise ValueError("weight has negative or non-finite entries; expected values >= 0")

@@ -30,7 +30,14 @@ from trackkit.filters.base import (
     missing_rows,
     output,
 )
-from trackkit.filters.kalman import _condition, _dim_x, _Linearised, _predict, sandwich
+from trackkit.filters.kalman import (
+    _condition,
+    _dim_x,
+    _Linearised,
+    _predict,
+    kalman_gain,
+    sandwich,
+)
 from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
 
 __all__ = [
@@ -129,20 +136,6 @@ def _jacobian(sensor, x: Array, second_order: bool) -> Array:
     return second_order_jacobian(sensor, x) if second_order else np.asarray(sensor.jacobian(x))
 
 
-def _gain(P: Array, H: Array, R: Array) -> tuple[Array, Array]:
-    """``S = H P H^T + R`` and ``K = P H^T S^{-1}`` (the arithmetic of ``kalman._condition``)."""
-    if P.ndim == 2 and H.ndim == 2 and R.ndim == 2:
-        A = P @ H.T
-        S = H @ A + R
-    else:
-        A = mmT(P, H)
-        S = mm(H, A) + R
-    if S.shape[-1] > 1:
-        S = symmetrize(S)
-    K = solve_psd(S, A.mT).mT
-    return K, S
-
-
 def _mc_update(x: Array, P: Array, r: Array, H: Array, R: Array, sensor,
                second_order: bool) -> tuple[Array, Array, Array, Array, Array]:
     """MC-EKF update (eqs. 10-11, with eq. 12-13's H when ``second_order``).
@@ -151,7 +144,7 @@ def _mc_update(x: Array, P: Array, r: Array, H: Array, R: Array, sensor,
     ``H+ = J_h(x+)``, ``K+ = P- H+^T (H+ P- H+^T + R)^{-1}`` and the Joseph form
     ``P+ = (I - K+ H+) P- (I - K+ H+)^T + K+ R K+^T``. Returns ``(x+, P+, S, K, delta)``.
     """
-    K, S = _gain(P, H, R)
+    _, S, K = kalman_gain(P, H, R)
     delta = K @ r if (r.ndim == 1 and K.ndim == 2) else mm(K, r[..., None])[..., 0]
     x_new = x + delta
     H_plus = _jacobian(sensor, x_new, second_order)

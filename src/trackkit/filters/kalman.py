@@ -82,6 +82,15 @@ def _predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
     return output(motion.f(x, dt), Pp, symmetric=exact)
 
 
+def kalman_gain(P: Array, H: Array, R: Array) -> tuple[Array, Array, Array]:
+    """``A = P H^T``, ``S = H P H^T + R`` (symmetrised) and ``K = A S^{-1}``."""
+    A = mmT(P, H)
+    S = mm(H, A) + R
+    if S.shape[-1] > 1:
+        S = symmetrize(S)
+    return A, S, solve_psd(S, A.mT).mT
+
+
 def _condition(
     x: Array, P: Array, r: Array, H: Array, R: Array
 ) -> tuple[Array, Array, Array]:
@@ -95,19 +104,10 @@ def _condition(
     sensors. (W vanishes for the optimal gain; it carries the Joseph form's
     second-order insensitivity to gain errors.)
     """
+    A, S, K = kalman_gain(P, H, R)
     if x.ndim == 1 and P.ndim == 2 and H.ndim == 2:  # one problem: the textbook form
-        PHt = P @ H.T
-        S = H @ PHt + R
-        if S.shape[0] > 1:
-            S = symmetrize(S)
-        K = solve_psd(S, PHt.T).T
-        A = _eye(P.shape[0]) - K @ H
-        return x + K @ r, A @ P @ A.T + K @ R @ K.T, S
-    A = mmT(P, H)  # P H^T
-    S = mm(H, A) + R
-    if S.shape[-1] > 1:
-        S = symmetrize(S)
-    K = solve_psd(S, A.mT).mT
+        IKH = _eye(P.shape[0]) - K @ H
+        return x + K @ r, IKH @ P @ IKH.T + K @ R @ K.T, S
     x_new = x + mm(K, r[..., None])[..., 0]
     # M H^T - K R = A - K S for any K, so W costs only (n x m) work
     W = A - mm(K, S)
