@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
 from trackkit.eval.crlb import PCRLB, rmse_bound
+from trackkit.eval.matching import MatchingMetrics, measurement_noise_rms, noise_in_use
 from trackkit.eval.metrics import MonteCarloMetrics
 from trackkit.eval.results import Example, FilterResult, MonteCarloResult
 from trackkit.scenario.build import Plan, compile_scenario
@@ -35,7 +36,8 @@ Array = NDArray[np.float64]
 __all__ = ["run_scenario", "run_block", "simulate_block", "combine", "BlockResult"]
 
 UNITS = {"position": "m", "velocity": "m/s", "speed": "m/s", "course": "rad", "x": "m",
-         "y": "m", "z": "m", "frequency": "Hz", "bearing": "rad"}
+         "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s", "x1": "-", "x2": "-",
+         "x3": "-", "frequency": "Hz", "bearing": "rad"}
 
 
 @lru_cache(maxsize=8)
@@ -85,12 +87,15 @@ def groups_for(plan: Plan) -> dict:
     d = plan.dim
     table = {
         "position": list(range(d)), "velocity": list(range(d, 2 * d)),
-        "x": [0], "y": [1], "z": [2], "frequency": [2 * d],
+        "x": [0], "y": [1], "z": [2], "vx": [d], "vy": [d + 1], "vz": [2 * d - 1],
+        "x1": [0], "x2": [1], "x3": [2], "frequency": [2 * d],
         "speed": _speed_error(d), "course": _course_error(d), "bearing": BearingError(),
     }
     out = {}
     for g in plan.scenario.report.groups:
-        if g == "z" and d == 2 or g == "frequency" and plan.n <= 2 * d:
+        lacks = (g in ("z", "vz") and d == 2 or g == "frequency" and plan.n <= 2 * d
+                 or g.startswith("x") and g[1:].isdigit() and int(g[1:]) > plan.n)
+        if lacks:
             raise ValueError(f"report.groups has {g!r}, which this scenario's state lacks")
         out[g] = table[g]
     return out
@@ -146,8 +151,12 @@ def simulate_block(plan: Plan, r0: int, r1: int) -> BlockData:
     for k in range(T):
         dt = plan.times[k + 1] - plan.times[k]
         L = _noise_factor(np.asarray(plan.truth_motion.noise(truth[k], dt)))
-        nxt = truth[k].copy()
-        nxt[:, :kin] = platform_step(truth[k][:, :kin], plan.times[k], dt, plan.target_legs, d)
+        if s.linear_system:
+            nxt = plan.truth_motion.f(truth[k], dt)
+        else:
+            nxt = truth[k].copy()
+            nxt[:, :kin] = platform_step(truth[k][:, :kin], plan.times[k], dt,
+                                         plan.target_legs, d)
         truth[k + 1] = nxt + w[k] @ L.T
     z = np.empty((T, B, m))
     for k in range(T):
@@ -185,6 +194,8 @@ class BlockResult:
     info: Array  # (T, n, n) sum over runs of p_d H^T R^-1 H at the truths
     grads: dict[str, Array]  # derived group -> (T, n) sum over runs of the gradient
     example: Example | None = None
+    matching: dict[str, dict[str, Array]] | None = None  # filter -> per-run J2, J3, J4
+    j1: Array | None = None  # (runs, m) per-run raw noise RMS
 
 
 def run_block(scenario: Scenario, block: int) -> BlockResult:
@@ -202,9 +213,13 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
     example = None
     keep = r0 == 0
     est_hist: dict[str, tuple[Array, Array]] = {}
-    for name, f, motion, (mean0, P0) in zip(plan.filter_names, plan.filters,
-                                            plan.filter_motions, plan.priors, strict=True):
+    matching = {} if s.report.matching else None
+    logs = {}
+    m = plan.sensors[0].dim_z
+    for i, (name, f, motion, (mean0, P0)) in enumerate(zip(
+            plan.filter_names, plan.filters, plan.filter_motions, plan.priors, strict=True)):
         acc = MonteCarloMetrics(groups=groups)
+        match = None if matching is None else MatchingMetrics(r1 - r0, n, m, T, log=keep)
         L0 = np.linalg.cholesky(P0)
         m0 = (data.truth[0] + data.prior_offset @ L0.T) if mean0 is None else (
             np.broadcast_to(mean0, (r1 - r0, n)).copy())
@@ -213,17 +228,25 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
         if keep:
             hm, hP = np.empty((T, n)), np.empty((T, n, n))
         for k in range(T):
+            sensor = plan.filter_sensor(i, k)
             t0 = time.perf_counter()
             b = f.predict(b, motion, plan.times[k + 1] - plan.times[k])
-            b, innov = f.update(b, data.z[k], plan.sensors[k])
+            R_used = None if match is None else noise_in_use(b, sensor.noise)
+            b, innov = f.update(b, data.z[k], sensor)
             elapsed += time.perf_counter() - t0
             g = f.estimate(b)
             if "bearing" in groups:
                 groups["bearing"].origin = plan.observer_states[0, k + 1, :2]
             acc.add(k, data.truth[k + 1], g, innov)
+            if match is not None:
+                match.add(k, data.truth[k + 1], g.mean, innov, R_used, plan.sensors[k])
             if keep:
                 hm[k], hP[k] = g.mean[0], g.cov[0]
         metrics[name], seconds[name] = acc, elapsed
+        if match is not None:
+            matching[name] = match.per_run(s.report.dom_alpha)
+            if keep:
+                logs[name] = match.logs
         if keep:
             est_hist[name] = (hm, hP)
     # PCRLB ingredients: measurement information and derived-group gradients, summed over runs
@@ -240,8 +263,12 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
     if keep:
         example = Example(times=plan.times[1:], truth=data.truth[1:, 0],
                           observer=plan.observer_states[0, 1:, :d], estimates=est_hist,
-                          measurements=data.z[:, 0])
-    return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example)
+                          measurements=data.z[:, 0], logs=logs)
+    j1 = None
+    if matching is not None:
+        z_true = np.stack([plan.sensors[k].h(data.truth[k + 1]) for k in range(T)])
+        j1 = measurement_noise_rms(data.z, z_true, plan.sensors[0])
+    return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example, matching, j1)
 
 
 def run_blocks(scenario: Scenario, blocks: list[int]) -> list[BlockResult]:
@@ -304,6 +331,9 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
             nees_in_bounds=summ["nees_inside"], nis_in_bounds=summ["nis_inside"],
             diverged=int(summ["diverged"]),
             seconds_per_step=sum(p.seconds[name] for p in parts) / (runs * T),
+            matching={} if parts[0].matching is None else {
+                k: np.concatenate([p.matching[name][k] for p in parts])
+                for k in parts[0].matching[name]},
         )
     notes = list(s.notes)
     if {"speed", "course", "bearing"} & set(groups):
@@ -320,6 +350,8 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
         dt=plan.dt, times=plan.times[1:], start=start,
         groups={g: UNITS[g] for g in groups}, filters=filters, pcrlb=pcrlb,
         pcrlb_mean=pcrlb_mean, example=parts[0].example, notes=notes,
+        j1=None if parts[0].j1 is None else np.concatenate([p.j1 for p in parts]),
+        dom_alpha=s.report.dom_alpha,
     )
 
 
@@ -351,6 +383,7 @@ def run_scenario(
     every executor and chunking (timings aside).
     """
     from trackkit.eval.executors import execute
+    from trackkit.eval.tuning import tune_scenario
 
     if runs is not None and runs < 1:
         raise ValueError(f"runs = {runs}; expected at least 1")
@@ -358,6 +391,7 @@ def run_scenario(
         raise ValueError(f"seed = {seed}; expected a non-negative integer")
     s = with_run(scenario, runs, seed)
     plan_of(s)  # compile (and so validate models) before any work is sent out
+    s, tuning = tune_scenario(s)  # fuzzy systems are tuned once, before the runs
     nblocks = -(-s.run.runs // s.run.block)
     per_task = max(1, -(-(chunk or s.run.block) // s.run.block))
     if chunk is None and (workers or scheduler):
@@ -367,4 +401,6 @@ def run_scenario(
              for t in tasks]
     parts = execute(run_blocks, s, tasks, sizes, workers=workers, scheduler=scheduler,
                     progress=progress)
-    return combine(s, [p for chunk_parts in parts for p in chunk_parts])
+    result = combine(s, [p for chunk_parts in parts for p in chunk_parts])
+    result.tuning = tuning
+    return result

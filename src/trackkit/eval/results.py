@@ -33,6 +33,9 @@ class FilterResult:
     nis_in_bounds: float
     diverged: int  # runs diverged (rule: trackkit.eval.metrics docstring)
     seconds_per_step: float  # wall time per run-step (filter only, not simulation)
+    #: seed 000's per-run metrics (trackkit.eval.matching): "J2" (runs, m), "J3" (runs, n),
+    #: "J4" (runs,)
+    matching: dict[str, Array] = field(default_factory=dict)
 
 
 @dataclass
@@ -44,6 +47,9 @@ class Example:
     observer: Array  # (steps, d) observer position (d = 2 or 3); first observer if several
     estimates: dict[str, tuple[Array, Array]]  # filter -> (means (steps, n), covs (steps, n, n))
     measurements: Array | None = None  # (steps, m), nan where missing
+    #: filter -> {"R", "S", "C", "DOM"}: diagonals per step (steps, m) of the innovation
+    #: covariance matching (trackkit.eval.matching)
+    logs: dict[str, dict[str, Array]] = field(default_factory=dict)
 
 
 @dataclass
@@ -64,6 +70,10 @@ class MonteCarloResult:
     pcrlb_mean: dict[str, float]  # group -> bound averaged over the same steps as rmse_mean
     example: Example | None = None
     notes: list[str] = field(default_factory=list)  # assumptions and skipped items to report
+    j1: Array | None = None  # (runs, m) raw measurement noise RMS of each run (J1)
+    dom_alpha: float = 1000.0  # the alpha of J4
+    #: filter -> tuning summary of its fuzzy system (trackkit.eval.tuning.TuningResult)
+    tuning: dict[str, object] = field(default_factory=dict)
 
     def efficiency(self, name: str, group: str) -> float:
         """RMSE / PCRLB (time averaged): 1 is efficient, larger is further from the bound."""
@@ -90,4 +100,20 @@ class MonteCarloResult:
                 for name, f in self.filters.items()
             },
             "pcrlb": {g: float(v) for g, v in self.pcrlb_mean.items()},
+            **self._matching_json(),
         }
+
+    def _matching_json(self) -> dict:
+        """J1-J4 (mean over runs and run 0) and the tuning summaries, when present."""
+        out: dict = {}
+        if self.j1 is not None:
+            out["J1"] = {"mean": self.j1.mean(0).tolist(), "run0": self.j1[0].tolist()}
+        js = {name: {k: {"mean": np.mean(v, 0).tolist(), "run0": np.asarray(v[0]).tolist()}
+                     for k, v in f.matching.items()}
+              for name, f in self.filters.items() if f.matching}
+        if js:
+            out["J"] = js
+            out["dom_alpha"] = self.dom_alpha
+        if self.tuning:
+            out["tuning"] = {name: t.summary() for name, t in self.tuning.items()}
+        return out

@@ -2,6 +2,7 @@
 ``update(belief, z, sensor) -> (belief, innovation)``."""
 
 from trackkit.filters.adaptive import AEKF, AMCEKF, MCEKF, AdaptiveBelief, SageHusaBelief
+from trackkit.filters.fuzzy import FuzzyAdaptive, FuzzyBelief
 from trackkit.filters.initialise import dbt_prior_cov, ga_initial_position, ga_prior
 from trackkit.filters.kalman import EKF, IEKF, KF
 from trackkit.filters.run import run_filter
@@ -19,6 +20,8 @@ __all__ = [
     "AEKF",
     "AdaptiveBelief",
     "SageHusaBelief",
+    "FuzzyAdaptive",
+    "FuzzyBelief",
     "SigmaPoints",
     "smooth",
     "run_filter",

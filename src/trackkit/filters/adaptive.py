@@ -48,6 +48,7 @@ __all__ = [
     "SageHusaBelief",
     "second_order_jacobian",
     "window_covariance",
+    "push_innovation",
     "r_factor",
     "q_factor",
     "sage_husa_weight",
@@ -160,7 +161,40 @@ def window_covariance(residuals: Array, count: ArrayLike) -> Array:
     """
     N = residuals.shape[-2]
     k = np.maximum(np.minimum(np.asarray(count), N), 1)
-    return np.einsum("...ia,...ib->...ab", residuals, residuals) / k[..., None, None]
+    # entry by entry over the upper triangle (m is small): each a contiguous reduction over
+    # the window, much faster than einsum or a broadcast outer product on the batch
+    m = residuals.shape[-1]
+    cols = np.moveaxis(residuals, -1, 0)  # (m, ..., N)
+    C = np.empty(residuals.shape[:-2] + (m, m))
+    for a in range(m):
+        for b in range(a, m):
+            C[..., a, b] = C[..., b, a] = (cols[a] * cols[b]).sum(-1)
+    return C / k[..., None, None]
+
+
+def push_innovation(residuals: Array, count: ArrayLike, r: Array, keep: Array, window: int,
+                    batch: tuple[int, ...], where: str) -> tuple[Array, NDArray[np.int64]]:
+    """Put innovation ``r (..., m)`` into slot ``count mod N`` of the ring buffer
+    ``residuals (..., N, m)`` for the rows in ``keep`` and count it; the buffer and count are
+    broadcast to the output ``batch`` (z may carry more batch axes than the belief). An empty
+    buffer (``(..., N, 0)``, before the first update) is created with m components."""
+    m = r.shape[-1]
+    buf = residuals
+    if buf.shape[-1] == 0:
+        buf = np.zeros(batch + (window, m))
+    elif buf.shape[-1] != m:
+        raise ValueError(
+            f"{where}: the innovation window holds {buf.shape[-1]}-component residuals but "
+            f"the sensor measures {m}; expected one sensor per belief"
+        )
+    buf = np.array(np.broadcast_to(buf, batch + buf.shape[-2:]))  # a new array: no aliasing
+    count = np.broadcast_to(count, batch)
+    keep = np.broadcast_to(keep, batch)
+    flat = buf.reshape(-1, window, m)
+    rows = np.flatnonzero(keep)
+    slots = (count.reshape(-1) % window)[rows]
+    flat[rows, slots] = np.broadcast_to(r, batch + (m,)).reshape(-1, m)[rows]
+    return buf, np.asarray(count + keep, np.int64)
 
 
 def r_factor(residuals: Array, count: ArrayLike, S: Array) -> Array:
@@ -441,7 +475,6 @@ class AMCEKF(Filter):
         b = self.init(belief)
         x, P = check_belief(b, None, f"{self.name}.update belief")
         z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
-        m = sensor.dim_z
         miss = missing_rows(z)
         H = _jacobian(sensor, x, self.second_order)
         R = b.r_scale[..., None, None] * sensor.noise  # R(t)
@@ -453,25 +486,10 @@ class AMCEKF(Filter):
         batch = post.mean.shape[:-1]
         keep = _keep_mask(miss, batch)
 
-        # memory, broadcast to the output batch (z may carry more batch axes than the belief)
-        buf = b.residuals
-        if buf.shape[-1] == 0:
-            buf = np.zeros(batch + (self.window, m))
-        elif buf.shape[-1] != m:
-            raise ValueError(
-                f"{self.name}.update: the innovation window holds {buf.shape[-1]}-component "
-                f"residuals but the sensor measures {m}; expected one sensor per belief"
-            )
-        buf = np.broadcast_to(buf, batch + buf.shape[-2:])
-        count = np.broadcast_to(b.count, batch)
+        buf, count = push_innovation(b.residuals, b.count, r, keep, self.window, batch,
+                                     f"{self.name}.update")
         r_scale = np.broadcast_to(b.r_scale, batch)
         q_scale = np.broadcast_to(b.q_scale, batch)
-
-        # ring buffer: the innovation goes into slot count mod N
-        r_row = np.broadcast_to(r, batch + (m,))
-        slot = np.arange(self.window) == (count % self.window)[..., None]
-        buf = np.where((slot & keep[..., None])[..., None], r_row[..., None, :], buf)
-        count = count + keep
 
         if self.adapt_r:  # (15)-(19)
             alpha = r_factor(buf, count, S)

@@ -13,6 +13,7 @@ from trackkit.models.motion import (
     RandomSine,
     Singer,
 )
+from trackkit.models.noise import with_noise
 from trackkit.models.sensors import (
     AzimuthElevation,
     Bearing,
@@ -46,4 +47,5 @@ __all__ = [
     "MultipathDelay",
     "Sine",
     "Stack",
+    "with_noise",
 ]

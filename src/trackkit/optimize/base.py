@@ -1,4 +1,4 @@
-"""The common interface of trackkit's population optimisers (GA now; PSO and ICA follow).
+"""The common interface of trackkit's population optimisers (GA, PSO and ICA).
 
 Every optimiser minimises B independent problems at once::
 
@@ -49,9 +49,10 @@ class OptimizeResult(NamedTuple):
     """Result of a batched minimisation of B problems in d variables.
 
     ``best_x`` ``(B, d)`` and ``best_f`` ``(B,)``: the best candidate found and its cost.
-    ``history`` ``(generations + 1, B)``: the best cost in the population after each
-    generation (row 0: the initial population); with elitism it is non-increasing and its
-    last row equals ``best_f``. ``evaluations``: cost evaluations per problem.
+    ``history`` ``(iterations + 1, B)``: the best cost after each generation or iteration
+    (row 0: the initial population): the GA's best in the population (non-increasing with
+    elitism), PSO's and ICA's best found so far; its last row equals ``best_f``.
+    ``evaluations``: cost evaluations per problem.
     """
 
     best_x: Array

@@ -13,6 +13,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 KNOT = 1852.0 / 3600.0  # m/s
+KMH = 1000.0 / 3600.0  # m/s
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -88,14 +89,20 @@ class Leg(_Strict):
     speed_kn: NonNegFloat | None = None
     turn_rate_deg_s: Finite | None = None
     acceleration_mps2: Finite | None = None
+    #: a new velocity by components from ``start_s`` (a piecewise velocity schedule; 3-D)
+    velocity_mps: list[Finite] | None = None
 
     @model_validator(mode="after")
     def _one_kind(self) -> Leg:
         change = self.course_deg is not None or self.speed_kn is not None
-        kinds = [change, self.turn_rate_deg_s is not None, self.acceleration_mps2 is not None]
+        kinds = [change, self.turn_rate_deg_s is not None, self.acceleration_mps2 is not None,
+                 self.velocity_mps is not None]
         if sum(kinds) != 1:
             raise ValueError("a leg is exactly one of: course_deg/speed_kn change, "
-                             "turn_rate_deg_s, acceleration_mps2")
+                             "turn_rate_deg_s, acceleration_mps2, velocity_mps")
+        if self.velocity_mps is not None and len(self.velocity_mps) not in (2, 3):
+            raise ValueError(f"velocity_mps has {len(self.velocity_mps)} components; "
+                             "expected 2 or 3 (the scenario's dim)")
         if (self.turn_rate_deg_s is not None or self.acceleration_mps2 is not None) and (
             self.end_s is None or self.end_s <= self.start_s
         ):
@@ -107,13 +114,37 @@ class Leg(_Strict):
 class MotionSpec(_Strict):
     """A motion model by name with its parameters (SI)."""
 
-    model: Literal["ConstantVelocity", "ConstantAcceleration", "Singer", "CoordinatedTurn"]
+    model: Literal["ConstantVelocity", "ConstantAcceleration", "Singer", "CoordinatedTurn",
+                   "Linear"]
     q: NonNegFloat = 0.0
+    #: Q given per step as a diagonal (SI, state order) instead of from the spectral
+    #: density q: the additive "Q = q I" of seed 000 (ConstantVelocity and Linear)
+    q_diag: list[NonNegFloat] | None = None
+    #: the transition matrix of a ``Linear`` model (any state, e.g. seed 000's chapter 3)
+    F: list[list[Finite]] | None = None
     q_omega: NonNegFloat = 1e-6
     #: random-walk density of the constant extras (e.g. f0), for filters' models
     q_extra: NonNegFloat = 0.0
     tau: PositiveFloat = 20.0
     sigma: NonNegFloat = 1.0
+
+    @model_validator(mode="after")
+    def _linear(self) -> MotionSpec:
+        if self.model == "Linear":
+            if self.F is None or self.q_diag is None:
+                raise ValueError("motion model Linear needs F (a square matrix) and q_diag")
+            n = len(self.F)
+            if any(len(row) != n for row in self.F):
+                raise ValueError(f"F has rows of lengths {[len(r) for r in self.F]}; "
+                                 "expected a square matrix")
+            if len(self.q_diag) != n:
+                raise ValueError(f"q_diag has {len(self.q_diag)} values; expected {n} "
+                                 "(the size of F)")
+        elif self.F is not None:
+            raise ValueError(f"F is only for motion model Linear, not {self.model}")
+        elif self.q_diag is not None and self.model != "ConstantVelocity":
+            raise ValueError(f"q_diag is for ConstantVelocity and Linear, not {self.model}")
+        return self
 
 
 class Target(_Strict):
@@ -136,6 +167,9 @@ class SensorSpec(_Strict):
     sigma_m: PositiveFloat | None = None
     sigma_hz: PositiveFloat | None = None
     sigma_s: PositiveFloat | None = None
+    #: the noise covariance's diagonal per channel in SI units squared (m^2, rad^2, s^2);
+    #: for Position it also sets the dimension (H = [I 0], e.g. seed 000's chapter 3)
+    r_diag_si: list[PositiveFloat] | None = None
     snr_db: Finite | None = None
     convention: Literal["nautical", "math"] = "nautical"
     c_mps: PositiveFloat = 1500.0
@@ -154,10 +188,11 @@ class SensorSpec(_Strict):
             "BearingFrequency": ["sigma_deg", "sigma_hz"],
             "MultipathDelay": ["sigma_s"],
         }[self.model]
-        if self.snr_db is None:
+        if self.snr_db is None and self.r_diag_si is None:
             missing = [f for f in need if getattr(self, f) is None]
             if missing:
-                raise ValueError(f"sensor {self.model} needs {', '.join(missing)} (or snr_db)")
+                raise ValueError(f"sensor {self.model} needs {', '.join(missing)} (or snr_db "
+                                 "or r_diag_si)")
         if self.model == "MultipathDelay" and (self.h_surface_m is None
                                                or self.h_bottom_m is None):
             raise ValueError("sensor MultipathDelay needs h_surface_m and h_bottom_m")
@@ -203,13 +238,37 @@ class PriorSpec(_Strict):
         return len(self.std) if self.std is not None else len(self.cov)
 
 
+class TuneSpec(_Strict):
+    """Off-line tuning of a fuzzy-adaptive filter's membership functions (seed 000, 3-2):
+    ``runs`` independent optimiser runs on the DOM cost of ``realisations`` simulated runs of
+    the scenario (or of the bundled scenario ``on``) drawn from ``seed``, which is kept apart
+    from the Monte Carlo seed so the filter is never scored on the data it was tuned on; the
+    best run's parameters are used."""
+
+    optimizer: Literal["GA", "PSO", "ICA"] = "ICA"
+    population: Annotated[int, Field(ge=2)] = 50
+    iterations: Annotated[int, Field(ge=1)] = 30
+    runs: Annotated[int, Field(ge=1)] = 15
+    seed: Annotated[int, Field(ge=0)] = 1
+    realisations: Annotated[int, Field(ge=1)] = 1
+    on: str | None = None
+
+
+FUZZY_TYPES = {"OFKF": "KF", "OFEKF": "EKF", "OFUKF": "UKF"}
+
+
 class FilterSpec(_Strict):
     name: str = Field(min_length=1)
-    type: Literal["KF", "EKF", "EKF2", "IEKF", "UKF", "CKF", "MCEKF", "AMCEKF", "AEKF"]
+    type: Literal["KF", "EKF", "EKF2", "IEKF", "UKF", "CKF", "MCEKF", "AMCEKF", "AEKF",
+                  "OFKF", "OFEKF", "OFUKF"]
     options: dict[str, float | int | bool | str | list[float] | None] = Field(
         default_factory=dict)
     motion: MotionSpec | None = None  # default: the target's motion model
     prior: PriorSpec | None = None  # default: the scenario's prior
+    #: the R the filter believes (diagonal, SI units squared) instead of the true R
+    r0_diag_si: list[PositiveFloat] | None = None
+    #: tune the fuzzy system (OF* filters without a ``params`` option)
+    tune: TuneSpec | None = None
 
     @model_validator(mode="after")
     def _known_options(self) -> FilterSpec:
@@ -217,8 +276,16 @@ class FilterSpec(_Strict):
 
         from trackkit import filters
 
-        cls = getattr(filters, "EKF" if self.type == "EKF2" else self.type)
-        allowed = [p for p in inspect.signature(cls).parameters if p != "self"]
+        fuzzy = self.type in FUZZY_TYPES
+        if fuzzy and (self.tune is None) == ("params" not in self.options):
+            raise ValueError(f"filter {self.name!r} ({self.type}) needs exactly one of tune "
+                             "(tune the fuzzy system) or options.params (15 values)")
+        if self.tune is not None and not fuzzy:
+            raise ValueError(f"filter {self.name!r} ({self.type}): tune is only for the "
+                             f"fuzzy-adaptive filters {sorted(FUZZY_TYPES)}")
+        cls = filters.FuzzyAdaptive if fuzzy else getattr(
+            filters, "EKF" if self.type == "EKF2" else self.type)
+        allowed = [p for p in inspect.signature(cls).parameters if p not in ("self", "base")]
         unknown = sorted(set(self.options) - set(allowed))
         if unknown:
             raise ValueError(f"filter {self.name!r} ({self.type}) has no option "
@@ -235,10 +302,14 @@ class RunSpec(_Strict):
 
 
 class ReportSpec(_Strict):
-    groups: list[Literal["position", "velocity", "speed", "course", "x", "y", "z",
-                         "frequency", "bearing"]] = Field(
+    groups: list[Literal["position", "velocity", "speed", "course", "x", "y", "z", "vx",
+                         "vy", "vz", "x1", "x2", "x3", "frequency", "bearing"]] = Field(
         default_factory=lambda: ["position", "velocity"])
     average_from_s: NonNegFloat = 0.0
+    #: report seed 000's J1-J4 and the per-step R, S, C, DOM of run 0 (trackkit.eval.matching)
+    matching: bool = False
+    #: the alpha of J4 = alpha sum_i RMS(DOM(i,i)) (seed 000: 1000 in chapter 3, 5000 after)
+    dom_alpha: PositiveFloat = 1000.0
 
 
 class Scenario(_Strict):
@@ -277,8 +348,29 @@ class Scenario(_Strict):
                              f"before the end of the scenario ({self.time.duration_s} s)")
         if self.dim == 2 and (self.target.initial.z_m is not None):
             raise ValueError("target.initial.z_m is set but dim = 2")
+        if self.linear_system and (self.target.state is None or self.target.legs):
+            raise ValueError("a target with motion model Linear needs target.state and "
+                             "takes no legs")
+        for i, f in enumerate(self.filters):
+            if f.motion is not None and f.motion.model == "Linear" and (
+                    len(f.motion.F) != n):
+                raise ValueError(f"filters[{i}].motion.F is {len(f.motion.F)} x "
+                                 f"{len(f.motion.F)}; expected {n} x {n}")
+        for i, o in enumerate(self.observers):
+            for j, leg in enumerate(o.legs):
+                if leg.velocity_mps is not None and len(leg.velocity_mps) != self.dim:
+                    raise ValueError(f"observers[{i}].legs[{j}].velocity_mps has "
+                                     f"{len(leg.velocity_mps)} components; expected "
+                                     f"{self.dim} (dim)")
         return self
 
     @property
+    def linear_system(self) -> bool:
+        """The target follows a ``Linear`` model (a state that is not [pos, vel])."""
+        return self.target.motion.model == "Linear"
+
+    @property
     def state_dim(self) -> int:
+        if self.linear_system:
+            return len(self.target.motion.F)
         return 2 * self.dim + len(self.target.extras)

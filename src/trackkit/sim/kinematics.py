@@ -2,8 +2,9 @@
 
 A platform state is ``[p..., v...]`` (dim 2 or 3). Between steps it moves in a straight line,
 or on a circular arc while a turn leg is active (the exact constant-turn transition), or with
-a tangential acceleration; a course/speed leg sets the horizontal velocity at the start of the
-step interval that contains its start time. Process noise, when given, is added after each step.
+a tangential acceleration; a course/speed leg sets the horizontal velocity, and a velocity
+leg the whole velocity, at the start of the step interval that contains its start time.
+Process noise, when given, is added after each step.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ __all__ = ["LegPlan", "propagate"]
 
 @dataclass(frozen=True)
 class LegPlan:
-    """A leg in SI: ``kind`` is "set", "turn" or "accel". Turn rate is nautical (clockwise
-    positive, rad/s); a "set" leg carries the new course (rad) and/or speed (m/s)."""
+    """A leg in SI: ``kind`` is "set", "velocity", "turn" or "accel". Turn rate is nautical
+    (clockwise positive, rad/s); a "set" leg carries the new course (rad) and/or speed (m/s),
+    a "velocity" leg the new velocity components (m/s, all ``dim`` of them)."""
 
     kind: str
     start: float
@@ -33,6 +35,7 @@ class LegPlan:
     speed: float | None = None
     rate: float = 0.0
     accel: float = 0.0
+    velocity: tuple[float, ...] | None = None
 
 
 def _set_velocity(v: Array, course: float | None, speed: float | None) -> Array:
@@ -52,6 +55,8 @@ def step(x: Array, t: float, dt: float, legs: Sequence[LegPlan], dim: int) -> Ar
     for leg in legs:
         if leg.kind == "set" and t <= leg.start < t + dt:
             v = _set_velocity(v, leg.course, leg.speed)
+        elif leg.kind == "velocity" and t <= leg.start < t + dt:
+            v = np.broadcast_to(np.asarray(leg.velocity, dtype=float), v.shape)
     rate = sum(leg.rate for leg in legs if leg.kind == "turn" and leg.start <= t < leg.end)
     accel = sum(leg.accel for leg in legs if leg.kind == "accel" and leg.start <= t < leg.end)
     out = np.empty_like(x)

@@ -1,0 +1,159 @@
+"""Off-line tuning of the fuzzy-adaptive filters' membership functions (seed 000, 3-2, 3-4-4).
+
+The thesis's design procedure: simulate the problem, run the filter with a candidate fuzzy
+system, score it by the degree of matching alone,
+
+    cost = alpha sum_i sqrt((1/K) sum_k DOM_k(i,i)^2)        (alpha = ``report.dom_alpha``)
+
+(no true state needed, so real data would do), minimise with GA, PSO or ICA, and freeze the
+best system. Here a whole optimiser population (of all independent optimiser runs at once) is
+one batch of the filter: the candidates are rows, each with its own parameter vector.
+
+The tuning data are ``realisations`` runs of the scenario (or of the bundled scenario named by
+``tune.on``: the thesis reuses its fixed-sensor system for moving sensors) drawn from
+``tune.seed``, apart from the Monte Carlo runs that score the tuned filter.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from trackkit.belief import Gaussian
+from trackkit.filters.fuzzy import PARAM_BOUNDS, FuzzyAdaptive
+from trackkit.optimize import GA, ICA, PSO
+from trackkit.optimize.base import Optimizer, repeat
+from trackkit.scenario.build import Plan
+from trackkit.scenario.schema import FilterSpec, Scenario, TuneSpec
+
+Array = NDArray[np.float64]
+
+__all__ = ["TuningResult", "dom_costs", "tune_filter", "tune_scenario"]
+
+
+@dataclass
+class TuningResult:
+    """One tuned filter: the optimiser's best, mean and worst final cost over its
+    independent runs (the thesis's Table 3-2), each run's convergence ``history``
+    ``(iterations + 1, runs)`` and the chosen ``params`` (the best run's)."""
+
+    optimizer: str
+    runs: int
+    population: int
+    iterations: int
+    best: float
+    mean: float
+    worst: float
+    history: Array
+    params: Array
+    costs: Array  # (runs,) final cost of each run
+    seconds: float
+
+    def summary(self) -> dict[str, Any]:
+        return {"optimizer": self.optimizer, "runs": self.runs,
+                "population": self.population, "iterations": self.iterations,
+                "best": self.best, "mean": self.mean, "worst": self.worst,
+                "params": self.params.tolist(), "seconds": self.seconds}
+
+
+def _optimizer(spec: TuneSpec) -> Optimizer:
+    if spec.optimizer == "GA":
+        return GA(population=spec.population, generations=spec.iterations)
+    cls = PSO if spec.optimizer == "PSO" else ICA
+    return cls(population=spec.population, iterations=spec.iterations)
+
+
+def dom_costs(template: FuzzyAdaptive, params: Array, plan: Plan, index: int, z: Array,
+              x0: Array, alpha: float) -> Array:
+    """The DOM cost of each candidate ``params (P, 15)`` on each realisation: ``(P, K)``.
+
+    ``z (T, K, m)`` the realisations' measurements, ``x0 (K, n)`` their prior means; filter
+    ``index`` of ``plan`` gives the motion model, R0 and P0. Rows are candidate-major
+    (candidate p, realisation k at row ``p K + k``).
+    """
+    P, K = params.shape[0], z.shape[1]
+    n = x0.shape[-1]
+    f = FuzzyAdaptive(template.base, np.repeat(params, K, axis=0), template.adapt,
+                      template.window, template.normalise, template.floor, template.warmup,
+                      template.q_inputs)
+    motion = plan.filter_motions[index]
+    P0 = plan.priors[index][1]
+    b = f.init(Gaussian(np.tile(x0, (P, 1)), np.broadcast_to(P0, (P * K, n, n)).copy()))
+    dom_sq = np.zeros((P * K, z.shape[-1]))
+    for k in range(plan.steps):
+        b = f.predict(b, motion, plan.times[k + 1] - plan.times[k])
+        b, _ = f.update(b, np.tile(z[k], (P, 1)), plan.filter_sensor(index, k))
+        d = np.diagonal(b.dom, axis1=-2, axis2=-1)
+        dom_sq += np.where(np.isnan(d), 0.0, d * d)
+    cost = alpha * np.sqrt(dom_sq / plan.steps).sum(-1)
+    return np.where(np.isfinite(cost), cost, np.inf).reshape(P, K)
+
+
+def tune_filter(scenario: Scenario, index: int) -> TuningResult:
+    """Tune filter ``index`` of the scenario (an OF* filter with a ``tune`` block)."""
+    import time
+
+    from trackkit.eval.montecarlo import plan_of, simulate_block, with_run
+    from trackkit.scenario import load
+
+    spec: FilterSpec = scenario.filters[index]
+    if spec.tune is None:
+        raise ValueError(f"filter {spec.name!r} has no tune block")
+    t = spec.tune
+    source = scenario if t.on is None else load(t.on)
+    plan_data = plan_of(with_run(source, t.realisations, t.seed))
+    plan = plan_of(scenario)
+    if plan_data.steps != plan.steps or plan_data.sensors[0].dim_z != plan.sensors[0].dim_z:
+        raise ValueError(f"filter {spec.name!r}: tune.on = {t.on!r} has {plan_data.steps} "
+                         f"steps of {plan_data.sensors[0].dim_z} measurements; the scenario "
+                         f"has {plan.steps} of {plan.sensors[0].dim_z}")
+    data = simulate_block(plan_data, 0, t.realisations)
+    mean0, P0 = plan.priors[index]
+    x0 = (data.truth[0] + data.prior_offset @ np.linalg.cholesky(P0).T) if mean0 is None \
+        else np.broadcast_to(mean0, (t.realisations, plan.n)).copy()
+    # the filter sees the data's sensors (their poses) with its own R0
+    view = _with_sensors(plan, plan_data)
+    template = plan.filters[index]
+    alpha = scenario.report.dom_alpha
+
+    def cost(X: Array) -> Array:
+        B, N, d = X.shape
+        return dom_costs(template, X.reshape(B * N, d), view, index, data.z, x0,
+                         alpha).mean(-1).reshape(B, N)
+
+    seeds = np.random.SeedSequence(t.seed).spawn(t.runs)
+    t0 = time.perf_counter()
+    stats = repeat(_optimizer(t), cost, PARAM_BOUNDS, seeds)
+    res = stats["results"]
+    return TuningResult(optimizer=t.optimizer, runs=t.runs, population=t.population,
+                        iterations=t.iterations, best=stats["best"], mean=stats["mean"],
+                        worst=stats["worst"], history=res.history, params=stats["best_x"],
+                        costs=res.best_f, seconds=time.perf_counter() - t0)
+
+
+def _with_sensors(plan: Plan, data_plan: Plan) -> Plan:
+    """``plan`` with the per-step sensors (poses and true R) of ``data_plan``."""
+    from dataclasses import replace
+
+    return replace(plan, sensors=data_plan.sensors, times=data_plan.times)
+
+
+def tune_scenario(scenario: Scenario) -> tuple[Scenario, dict[str, TuningResult]]:
+    """Tune every filter with a ``tune`` block; return the scenario with the tuned
+    parameters written into those filters' ``options.params`` (and their ``tune`` blocks
+    removed), and the tuning results by filter name."""
+    results = {}
+    data = scenario.model_dump()
+    for i, spec in enumerate(scenario.filters):
+        if spec.tune is None:
+            continue
+        res = tune_filter(scenario, i)
+        results[spec.name] = res
+        data["filters"][i]["options"]["params"] = [float(v) for v in res.params]
+        data["filters"][i]["tune"] = None
+    if not results:
+        return scenario, results
+    return Scenario.model_validate(data), results
