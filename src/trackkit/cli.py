@@ -212,10 +212,12 @@ def run(
 
 
 def _print_summary(result: Any, paths: dict[str, Path]) -> None:
-    from trackkit.report.tables import rich_table
+    from trackkit.report.tables import matching_rich_tables, rich_table
 
     console = Console()
     console.print(rich_table(result, width=console.width))
+    for table in matching_rich_tables(result):  # seed 000's J1-J4 and tuning, when present
+        console.print(table)
     for note in getattr(result, "notes", []) or []:
         console.print(Text(f"note: {note}", style="yellow"))
     html = paths.get("html")

@@ -9,14 +9,16 @@ system, score it by the degree of matching alone,
 best system. Here a whole optimiser population (of all independent optimiser runs at once) is
 one batch of the filter: the candidates are rows, each with its own parameter vector.
 
-The tuning data are ``realisations`` runs of the scenario (or of the bundled scenario named by
-``tune.on``: the thesis reuses its fixed-sensor system for moving sensors) drawn from
-``tune.seed``, apart from the Monte Carlo runs that score the tuned filter.
+The tuning data are ``realisations`` runs of the scenario drawn from ``tune.seed``, apart
+from the Monte Carlo runs that score the tuned filter. ``tune.on`` names a bundled scenario
+whose same-named filter's tuning is reused (the thesis reuses its fixed-sensor system for
+moving sensors).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -27,7 +29,7 @@ from trackkit.filters.fuzzy import PARAM_BOUNDS, FuzzyAdaptive
 from trackkit.optimize import GA, ICA, PSO
 from trackkit.optimize.base import Optimizer, repeat
 from trackkit.scenario.build import Plan
-from trackkit.scenario.schema import FilterSpec, Scenario, TuneSpec
+from trackkit.scenario.schema import FilterSpec, RunSpec, Scenario, TuneSpec
 
 Array = NDArray[np.float64]
 
@@ -76,9 +78,7 @@ def dom_costs(template: FuzzyAdaptive, params: Array, plan: Plan, index: int, z:
     """
     P, K = params.shape[0], z.shape[1]
     n = x0.shape[-1]
-    f = FuzzyAdaptive(template.base, np.repeat(params, K, axis=0), template.adapt,
-                      template.window, template.normalise, template.floor, template.warmup,
-                      template.q_inputs)
+    f = template.with_params(np.repeat(params, K, axis=0))
     motion = plan.filter_motions[index]
     P0 = plan.priors[index][1]
     b = f.init(Gaussian(np.tile(x0, (P, 1)), np.broadcast_to(P0, (P * K, n, n)).copy()))
@@ -93,35 +93,58 @@ def dom_costs(template: FuzzyAdaptive, params: Array, plan: Plan, index: int, z:
 
 
 def tune_filter(scenario: Scenario, index: int) -> TuningResult:
-    """Tune filter ``index`` of the scenario (an OF* filter with a ``tune`` block)."""
-    import time
+    """Tune filter ``index`` of the scenario (an OF* filter with a ``tune`` block).
 
-    from trackkit.eval.montecarlo import plan_of, simulate_block, with_run
-    from trackkit.scenario import load
-
+    With ``tune.on`` the result is that of the same-named filter of the bundled scenario
+    ``on`` (tuned there, once per process): the thesis reuses the fuzzy system tuned with
+    fixed sensors for its moving-sensor runs.
+    """
     spec: FilterSpec = scenario.filters[index]
     if spec.tune is None:
         raise ValueError(f"filter {spec.name!r} has no tune block")
-    t = spec.tune
-    source = scenario if t.on is None else load(t.on)
-    plan_data = plan_of(with_run(source, t.realisations, t.seed))
+    if spec.tune.on is not None:
+        from trackkit.scenario import load
+
+        source = load(spec.tune.on)
+        names = [f.name for f in source.filters]
+        if spec.name not in names or source.filters[names.index(spec.name)].tune is None:
+            raise ValueError(f"filter {spec.name!r}: tune.on = {spec.tune.on!r} has no filter "
+                             f"of that name with a tune block (its filters: {names})")
+        if source.filters[names.index(spec.name)].tune.on is not None:
+            raise ValueError(f"filter {spec.name!r}: tune.on = {spec.tune.on!r} refers on "
+                             "again; expected a scenario that tunes the filter itself")
+        return _tuned(_key(source), names.index(spec.name))
+    return _tuned(_key(scenario), index)
+
+
+def _key(scenario: Scenario) -> str:
+    """The scenario as the tuning sees it: the Monte Carlo run settings play no part, so a
+    scenario tunes once per process whatever its runs and seed."""
+    data = scenario.model_dump()
+    data["run"] = RunSpec().model_dump()
+    return Scenario.model_validate(data).model_dump_json()
+
+
+@lru_cache(maxsize=16)
+def _tuned(scenario_json: str, index: int) -> TuningResult:
+    import time
+
+    from trackkit.eval.montecarlo import plan_of, simulate_block, with_run
+
+    scenario = Scenario.model_validate_json(scenario_json)
+    t = scenario.filters[index].tune
     plan = plan_of(scenario)
-    if plan_data.steps != plan.steps or plan_data.sensors[0].dim_z != plan.sensors[0].dim_z:
-        raise ValueError(f"filter {spec.name!r}: tune.on = {t.on!r} has {plan_data.steps} "
-                         f"steps of {plan_data.sensors[0].dim_z} measurements; the scenario "
-                         f"has {plan.steps} of {plan.sensors[0].dim_z}")
-    data = simulate_block(plan_data, 0, t.realisations)
+    data = simulate_block(plan_of(with_run(scenario, t.realisations, t.seed)), 0,
+                          t.realisations)
     mean0, P0 = plan.priors[index]
     x0 = (data.truth[0] + data.prior_offset @ np.linalg.cholesky(P0).T) if mean0 is None \
         else np.broadcast_to(mean0, (t.realisations, plan.n)).copy()
-    # the filter sees the data's sensors (their poses) with its own R0
-    view = _with_sensors(plan, plan_data)
     template = plan.filters[index]
     alpha = scenario.report.dom_alpha
 
     def cost(X: Array) -> Array:
         B, N, d = X.shape
-        return dom_costs(template, X.reshape(B * N, d), view, index, data.z, x0,
+        return dom_costs(template, X.reshape(B * N, d), plan, index, data.z, x0,
                          alpha).mean(-1).reshape(B, N)
 
     seeds = np.random.SeedSequence(t.seed).spawn(t.runs)
@@ -132,13 +155,6 @@ def tune_filter(scenario: Scenario, index: int) -> TuningResult:
                         iterations=t.iterations, best=stats["best"], mean=stats["mean"],
                         worst=stats["worst"], history=res.history, params=stats["best_x"],
                         costs=res.best_f, seconds=time.perf_counter() - t0)
-
-
-def _with_sensors(plan: Plan, data_plan: Plan) -> Plan:
-    """``plan`` with the per-step sensors (poses and true R) of ``data_plan``."""
-    from dataclasses import replace
-
-    return replace(plan, sensors=data_plan.sensors, times=data_plan.times)
 
 
 def tune_scenario(scenario: Scenario) -> tuple[Scenario, dict[str, TuningResult]]:

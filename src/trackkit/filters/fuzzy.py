@@ -31,14 +31,22 @@ third input from a 2 x 2 DOM).
 
 Choices the thesis leaves open (seed 000 section 6), documented:
 
-- ``normalise=True`` (default): the fuzzy system works in units of the initial noise,
-  ``AdjR(i) = R0(i,i) FIS(DOM(i,i) / R0(i,i))`` (for Q: input over ``sqrt(R0(i,i) R0(l,l))``,
-  squared for off-diagonal pairs, output times ``Q0(j,j)``), with R0 = ``sensor.noise`` and
-  Q0 = ``motion.noise`` as given to the filter. So one shared fuzzy system serves channels of
-  different units (seconds^2 and rad^2) and one set of bounds serves every problem.
-  ``normalise=False`` is the literal additive law on raw DOM.
-- ``floor`` (not in the thesis): ``R(i,i) >= floor R0(i,i)`` and ``Q(j,j) >= floor Q0(j,j)``,
-  which keeps them positive (default 1e-3).
+- ``normalise`` sets the units the fuzzy system works in (the thesis tunes raw DOM and
+  adjustments for one problem at a time):
+
+  - ``"current"`` (default): ``AdjR(i) = R_k(i,i) FIS(DOM_k(i,i) / S_k(i,i))``. The input is
+    the relative mismatch ``1 - C/S`` (at most 1) and the adjustment a fraction of the
+    current R, so the law is scale-free: one shared system serves channels of different
+    units (seconds^2 and rad^2), one set of bounds serves every problem, and R can travel
+    over orders of magnitude (the thesis's chapter-4 R0 is 100 times the true noise) without
+    overshooting. For Q: input ``DOM(i,l)/S(i,l)`` with S's diagonal (squared for an
+    off-diagonal pair: ``DOM(i,l)^2 / (S(i,i) S(l,l))``), output times ``Q_k(j,j)``.
+  - ``"initial"``: the same with the initial R0 (and Q0) in place of S_k and R_k (Q_k).
+  - ``"none"``: the literal additive law on raw DOM.
+
+- ``floor`` and ``ceiling`` (not in the thesis): ``floor R0(i,i) <= R(i,i) <= ceiling
+  R0(i,i)`` and likewise for Q with Q0 (defaults 1e-3 and 1e6), which keep them positive and
+  finite whatever a candidate system does during tuning.
 - ``warmup="wait"`` (default): no adaptation until the window is full (with C = 0 the DOM
   equals S and would only ever push R down); ``"adapt"`` adapts from the first step.
 - Off-diagonal entries of R and Q keep their initial values.
@@ -187,8 +195,8 @@ class FuzzyAdaptive(Filter):
     """
 
     def __init__(self, base: Filter | None = None, params: ArrayLike = DEFAULT_PARAMS,
-                 adapt: str = "R", window: int = 25, normalise: bool = True,
-                 floor: float = 1e-3, warmup: str = "wait",
+                 adapt: str = "R", window: int = 25, normalise: str = "current",
+                 floor: float = 1e-3, ceiling: float = 1e6, warmup: str = "wait",
                  q_inputs: tuple[tuple[int, int], ...] | None = None) -> None:
         base = EKF() if base is None else base
         if not hasattr(base, "update") or isinstance(base, FuzzyAdaptive):
@@ -205,6 +213,9 @@ class FuzzyAdaptive(Filter):
             raise ValueError(f"FuzzyAdaptive window = {window!r}; expected an integer >= 1")
         if not (np.isfinite(floor) and 0 < floor):
             raise ValueError(f"FuzzyAdaptive floor = {floor!r}; expected a value > 0")
+        if not (np.isfinite(ceiling) and ceiling > floor):
+            raise ValueError(f"FuzzyAdaptive ceiling = {ceiling!r}; expected a finite value "
+                             f"> floor = {floor}")
         if warmup not in ("wait", "adapt"):
             raise ValueError(f"FuzzyAdaptive warmup = {warmup!r}; expected 'wait' or 'adapt'")
         p.flags.writeable = False
@@ -212,12 +223,21 @@ class FuzzyAdaptive(Filter):
         self.params = p
         self.adapt = adapt
         self.window = int(window)
-        self.normalise = bool(normalise)
+        if normalise not in ("current", "initial", "none"):
+            raise ValueError(f"FuzzyAdaptive normalise = {normalise!r}; expected 'current', "
+                             "'initial' or 'none'")
+        self.normalise = normalise
         self.floor = float(floor)
+        self.ceiling = float(ceiling)
         self.warmup = warmup
         self.q_inputs = None if q_inputs is None else tuple(
             (int(i), int(j)) for i, j in q_inputs)
         self.name = "OF" + getattr(base, "name", type(base).__name__)
+
+    def with_params(self, params: ArrayLike) -> FuzzyAdaptive:
+        """The same filter with other fuzzy parameters (e.g. a population, ``(P, 15)``)."""
+        return FuzzyAdaptive(self.base, params, self.adapt, self.window, self.normalise,
+                             self.floor, self.ceiling, self.warmup, self.q_inputs)
 
     # --- belief ------------------------------------------------------------------------
 
@@ -272,19 +292,21 @@ class FuzzyAdaptive(Filter):
         R_out = np.broadcast_to(R, batch + (m, m))
         Q_out = b.Q
         if self.adapt == "R":
-            ref = _diag(R0) if self.normalise else np.ones(m)
-            d = _diag(R_out) + ref * fis(params, _diag(dom) / ref)
-            d = np.maximum(d, self.floor * _diag(R0))
+            ref_in, ref_out = {
+                "current": (_diag(S), _diag(R_out)), "initial": (_diag(R0), _diag(R0)),
+                "none": (1.0, 1.0)}[self.normalise]
+            d = _diag(R_out) + ref_out * fis(params, _diag(dom) / ref_in)
+            d = np.clip(d, self.floor * _diag(R0), self.ceiling * _diag(R0))
             R_out = np.where(active[..., None, None], _with_diag(R_out, d), R_out)
         elif Q_out.shape[-1]:
-            Q_out = self._adapt_q(Q_out, b.Q0, dom, R0, active, batch)
+            Q_out = self._adapt_q(Q_out, b.Q0, dom, S, R0, active, batch)
         out = FuzzyBelief(post.mean, post.cov, np.asarray(R_out, dtype=float), Q_out, b.Q0,
                           buf, count, np.asarray(S, dtype=float), C)
         return out, innov
 
-    def _adapt_q(self, Q: Array, Q0: Array, dom: Array, R0: Array, active: Array,
+    def _adapt_q(self, Q: Array, Q0: Array, dom: Array, S: Array, R0: Array, active: Array,
                  batch: tuple[int, ...]) -> Array:
-        """``Q(j,j) += Q0(j,j) FIS(d_j)`` with d_j from the pairs of ``q_inputs``."""
+        """``Q(j,j) += ref_j FIS(d_j / s_j)`` with d_j from the pairs of ``q_inputs``."""
         n, m = Q.shape[-1], dom.shape[-1]
         pairs = self.q_inputs or tuple((j, j) for j in range(n))
         if len(pairs) != n or any(not (0 <= i < m and 0 <= k < m) for i, k in pairs):
@@ -295,14 +317,14 @@ class FuzzyAdaptive(Filter):
         d = dom[..., ii, kk]
         off = ii != kk
         d = np.where(off, d * d, d)  # eq 3-21: DOM(i,l)^2 for an off-diagonal pair
-        if self.normalise:
-            r0 = _diag(R0)
-            ref_in = np.sqrt(r0[ii] * r0[kk])
-            ref_in = np.where(off, ref_in * ref_in, ref_in)
-            ref_out = Q0
-        else:
-            ref_in, ref_out = np.ones(n), np.ones(n)
         Q = np.broadcast_to(Q, batch + (n, n))
+        if self.normalise == "none":
+            ref_in, ref_out = 1.0, 1.0
+        else:
+            scale = _diag(S) if self.normalise == "current" else _diag(R0)
+            ref_in = np.sqrt(scale[..., ii] * scale[..., kk])
+            ref_in = np.where(off, ref_in * ref_in, ref_in)
+            ref_out = _diag(Q) if self.normalise == "current" else Q0
         new = _diag(Q) + ref_out * fis(self.params[..., None, :], d / ref_in)
-        new = np.maximum(new, self.floor * Q0)
+        new = np.clip(new, self.floor * Q0, self.ceiling * Q0)
         return np.where(active[..., None, None], _with_diag(Q, new), Q)

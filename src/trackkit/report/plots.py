@@ -1,4 +1,7 @@
-"""Report figures, one PNG each: geometry, RMSE against time with the PCRLB, NEES with bounds.
+"""Report figures, one PNG each: geometry, RMSE against time with the PCRLB, NEES with bounds;
+and, for seed 000's scenarios when the result has the data, the covariance matching of run 0
+(R, S, C and DOM per channel), the tuned fuzzy systems' membership functions and the
+optimisers' convergence.
 
 Figures are ``matplotlib.figure.Figure`` objects rendered by the Agg canvas: no display, no
 pyplot state and no global backend switch (safe in worker threads, CI and notebooks).
@@ -12,17 +15,21 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
-from matplotlib.ticker import LogFormatter
+from matplotlib.ticker import LogFormatter, MaxNLocator
 
 from trackkit.eval.results import MonteCarloResult
-from trackkit.report.tables import display_unit
+from trackkit.filters.fuzzy import INPUT_SETS, OUTPUT_SETS, fis
+from trackkit.report.tables import channel_labels, display_unit
 
 __all__ = [
     "geometry_figure", "rmse_figure", "nees_figure", "plot_geometry", "plot_rmse", "plot_nees",
-    "make_plots", "PLOT_FILES",
+    "matching_figure", "membership_figure", "convergence_figure", "plot_matching",
+    "plot_membership", "plot_convergence", "make_plots", "PLOT_FILES",
 ]
 
-PLOT_FILES = {"geometry": "geometry.png", "rmse": "rmse.png", "nees": "nees.png"}
+PLOT_FILES = {"geometry": "geometry.png", "rmse": "rmse.png", "nees": "nees.png",
+              "matching": "matching.png", "membership": "membership.png",
+              "convergence": "convergence.png"}
 _DPI = 110
 
 
@@ -222,8 +229,190 @@ def plot_nees(result: MonteCarloResult, path: str | Path) -> Path:
     return _save(nees_figure(result), path)
 
 
+# --- seed 000: covariance matching, fuzzy membership functions, optimiser convergence ---------
+
+
+def _color(result: MonteCarloResult, name: str) -> str:
+    """A filter's colour, the same as in the RMSE and NEES figures."""
+    names = list(result.filters)
+    return f"C{names.index(name) if name in names else len(names)}"
+
+
+_MATCHING_PANELS = (("R", "R(i,i) in use"), ("S", "S(i,i) innovation covariance"),
+                    ("C", "C(i,i) windowed innovation cov."), ("DOM", "DOM(i,i) = S - C"))
+
+
+def matching_figure(result: MonteCarloResult) -> Figure | None:
+    """The covariance matching of run 0: one row per measurement channel, columns R, S, C
+    (sharing one y axis per row, log when wide) and DOM (linear, it changes sign; zero
+    dotted), one line per filter. None when the result carries no matching logs."""
+    ex = result.example
+    logs = {} if ex is None else {k: v for k, v in ex.logs.items() if v}
+    if not logs:
+        return None
+    t = np.asarray(ex.times)
+    m = np.shape(next(iter(logs.values()))["R"])[-1]
+    fig = Figure(figsize=(14, 2.3 * m + 1.2), layout="constrained")
+    axes = fig.subplots(m, 4, sharex=True, squeeze=False)
+    for i, channel in enumerate(channel_labels(m)):
+        row = axes[i]
+        for ax in row[1:3]:
+            ax.sharey(row[0])
+        series = []
+        for j, (key, title) in enumerate(_MATCHING_PANELS):
+            ax = row[j]
+            for name, log in logs.items():
+                if key in log:
+                    y = np.asarray(log[key], dtype=float)[:, i]
+                    ax.plot(t, y, color=_color(result, name), lw=1.0, label=name)
+                    if key != "DOM":
+                        series.append(y)
+            if i == 0:
+                ax.set_title(title, fontsize="medium")
+            ax.grid(True, which="both", alpha=0.3)
+        row[3].axhline(0.0, color="black", lw=0.8, ls=":")
+        _log_if_wide(row[0], series)
+        row[0].set_ylabel(f"{channel} [SI units squared]")
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=max(1, len(labels)),
+               fontsize="small", frameon=False)
+    fig.suptitle(f"{result.scenario}: covariance matching in run 0 (diagonals per "
+                 "measurement channel)", fontsize="medium")
+    return fig
+
+
+def plot_matching(result: MonteCarloResult, path: str | Path) -> Path | None:
+    """Write :func:`matching_figure` as a PNG; None (nothing written) without logs."""
+    fig = matching_figure(result)
+    return None if fig is None else _save(fig, path)
+
+
+def _levels(x: np.ndarray, span: float, near: float = 0.07, depth: int = 3) -> np.ndarray:
+    """Label levels 0, 1, 2, ... for points ``x`` so that neighbours closer than ``near``
+    of the axis ``span`` get different heights (labels that would overlap are staggered)."""
+    x = np.asarray(x, dtype=float)
+    out = np.zeros(x.size, dtype=int)
+    order = np.argsort(x, kind="stable")
+    for a, b in zip(order[:-1], order[1:], strict=True):
+        if x[b] - x[a] < near * span:
+            out[b] = (out[a] + 1) % depth
+    return out
+
+
+def membership_figure(result: MonteCarloResult, points: int = 600) -> Figure | None:
+    """The tuned fuzzy system of each tuned filter (one row each): the Gaussian input sets
+    NM..PM over the normalised DOM, the output centres IL..DL as stems (singletons of the
+    centre-average defuzzifier) and the input-output curve y(x) with the rule points
+    (c_l, ybar_l). None when nothing was tuned."""
+    if not result.tuning:
+        return None
+    rows = len(result.tuning)
+    fig = Figure(figsize=(14, 3.1 * rows + 0.6), layout="constrained")
+    axes = fig.subplots(rows, 3, squeeze=False)
+    for (name, t), (a_in, a_out, a_xy) in zip(result.tuning.items(), axes, strict=True):
+        p = np.asarray(t.params, dtype=float)
+        c, w, ybar = p[0:5], p[5:10], p[10:15]
+        x = np.linspace(float(np.min(c - 2.5 * w)), float(np.max(c + 2.5 * w)), points)
+        up = _levels(c, x[-1] - x[0])
+        for ell, label in enumerate(INPUT_SETS):
+            mu = np.exp(-(((x - c[ell]) / w[ell]) ** 2))
+            a_in.plot(x, mu, color=f"C{ell}", lw=1.4, label=label)
+            a_in.annotate(label, (c[ell], 1.0), xytext=(0, 3 + 11 * up[ell]),
+                          textcoords="offset points", ha="center", va="bottom",
+                          fontsize="small", color=f"C{ell}")
+        a_in.set_ylim(0, 1.3)
+        a_in.set_xlabel("DOM(i,i), normalised")
+        a_in.set_ylabel("membership")
+        a_in.set_title(f"{name} ({t.optimizer}): input sets", fontsize="medium")
+
+        up = _levels(ybar, max(float(np.ptp(ybar)), 1e-12))
+        for ell, label in enumerate(OUTPUT_SETS):
+            a_out.vlines(ybar[ell], 0, 1, color=f"C{ell}", lw=1.6)
+            a_out.plot(ybar[ell], 1, "o", color=f"C{ell}", ms=5)
+            a_out.annotate(label, (ybar[ell], 1.0), xytext=(0, 4 + 11 * up[ell]),
+                           textcoords="offset points", ha="center", va="bottom",
+                           fontsize="small", color=f"C{ell}")
+        a_out.axvline(0.0, color="0.5", lw=0.8, ls=":")
+        a_out.set_ylim(0, 1.35)
+        a_out.set_xlabel("adjustment (output centre), normalised")
+        a_out.set_title(f"{name}: output centres", fontsize="medium")
+
+        a_xy.plot(x, fis(p, x), color="black", lw=1.4, label="y(x)")
+        for ell, (src, dst) in enumerate(zip(INPUT_SETS, OUTPUT_SETS, strict=True)):
+            a_xy.plot(c[ell], ybar[ell], "o", color=f"C{ell}", ms=5, label=f"{src} -> {dst}")
+        a_xy.axhline(0.0, color="0.5", lw=0.8, ls=":")
+        a_xy.legend(loc="best", fontsize="x-small", title="rule (c, ybar)",
+                    title_fontsize="x-small")
+        a_xy.set_xlabel("DOM(i,i), normalised")
+        a_xy.set_ylabel("adjustment y(x)")
+        a_xy.set_title(f"{name}: input-output curve", fontsize="medium")
+        for ax in (a_in, a_out, a_xy):
+            ax.grid(True, alpha=0.3)
+    fig.suptitle(f"{result.scenario}: tuned fuzzy systems (rules NM->IL, NS->I, ZE->M, PS->D, "
+                 "PM->DL)", fontsize="medium")
+    return fig
+
+
+def plot_membership(result: MonteCarloResult, path: str | Path) -> Path | None:
+    """Write :func:`membership_figure` as a PNG; None (nothing written) without tuning."""
+    fig = membership_figure(result)
+    return None if fig is None else _save(fig, path)
+
+
+def _band(history: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Median, min and max over runs (axis 1) of the finite values; nan where none."""
+    h = np.asarray(history, dtype=float)
+    h = np.where(np.isfinite(h), h, np.nan).reshape(h.shape[0], -1)
+    med, lo, hi = (np.full(h.shape[0], np.nan) for _ in range(3))
+    ok = np.isfinite(h).any(axis=1)
+    if ok.any():
+        med[ok] = np.nanmedian(h[ok], axis=1)
+        lo[ok] = np.nanmin(h[ok], axis=1)
+        hi[ok] = np.nanmax(h[ok], axis=1)
+    return med, lo, hi
+
+
+def convergence_figure(result: MonteCarloResult) -> Figure | None:
+    """Best-so-far DOM cost against iteration of each tuned filter's optimiser: the median
+    over the independent runs, the min-max band shaded (log scale when wide). None when
+    nothing was tuned."""
+    if not result.tuning:
+        return None
+    fig = Figure(figsize=(8, 4.6), layout="constrained")
+    ax = fig.add_subplot()
+    series = []
+    for name, t in result.tuning.items():
+        med, lo, hi = _band(t.history)
+        it = np.arange(len(med))
+        color = _color(result, name)
+        ax.plot(it, med, color=color, lw=1.5, label=f"{name} ({t.optimizer}, {t.runs} runs, "
+                f"population {t.population})")
+        ax.fill_between(it, lo, hi, color=color, alpha=0.2, lw=0)
+        series += [lo, hi]
+    _log_if_wide(ax, series)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("iteration")
+    ax.set_ylabel(f"best-so-far cost (alpha {result.dom_alpha:g})")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="upper right", fontsize="small", title="median, min-max band",
+              title_fontsize="small")
+    fig.suptitle(f"{result.scenario}: optimiser convergence (cost alpha sum_i RMS DOM(i,i))",
+                 fontsize="medium")
+    return fig
+
+
+def plot_convergence(result: MonteCarloResult, path: str | Path) -> Path | None:
+    """Write :func:`convergence_figure` as a PNG; None (nothing written) without tuning."""
+    fig = convergence_figure(result)
+    return None if fig is None else _save(fig, path)
+
+
 def make_plots(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Path]:
-    """Write every figure into ``out_dir``; returns ``{figure: path}`` for those written."""
+    """Write every figure into ``out_dir``; returns ``{figure: path}`` for those written
+    (geometry only with an example run; matching, membership and convergence only when the
+    result has those data)."""
     out = Path(out_dir)
     written: dict[str, Path] = {}
     geometry = plot_geometry(result, out / PLOT_FILES["geometry"])
@@ -231,4 +420,9 @@ def make_plots(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Path]
         written["geometry"] = geometry
     written["rmse"] = plot_rmse(result, out / PLOT_FILES["rmse"])
     written["nees"] = plot_nees(result, out / PLOT_FILES["nees"])
+    for name, plot in (("matching", plot_matching), ("membership", plot_membership),
+                       ("convergence", plot_convergence)):
+        path = plot(result, out / PLOT_FILES[name])
+        if path is not None:
+            written[name] = path
     return written

@@ -4,21 +4,33 @@ Columns: time-averaged RMSE per error group, efficiency RMSE/PCRLB per group, AN
 fraction of steps with the average NEES inside its 95% bounds, diverged runs, and filter time
 per run-step. Values are SI inside; the only unit conversion (radians to degrees for angle
 groups) happens here, in :func:`display_unit`, and the plots use the same function.
+
+When the scenario asks for seed 000's metrics (``report.matching``), two more tables shaped
+like the thesis's Tables 3-1, 3-3, 4-1 and 5-1..5-3 (rows J1-Z^i, J2-Z^i, J3-X^j, J4; one
+column per filter): the Monte Carlo mean of the per-run values and run 0 alone (the thesis's
+tables are single fixed-seed runs). When fuzzy systems were tuned, a table shaped like
+Table 3-2 (optimizer, BEST, MEAN, WORST final cost). See :func:`matching_summaries`.
 """
 
 from __future__ import annotations
 
 import html
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+import numpy as np
 from rich import box
 from rich.table import Table
 from rich.text import Text
 
 from trackkit.eval.results import MonteCarloResult
 
-__all__ = ["display_unit", "Summary", "summary", "rich_table", "html_table"]
+__all__ = [
+    "display_unit", "Summary", "summary", "rich_table", "html_table", "short",
+    "channel_labels", "state_labels", "matching_values", "matching_summary", "tuning_summary",
+    "matching_summaries", "summary_rich_table", "summary_html_table", "matching_rich_tables",
+    "matching_html_tables",
+]
 
 _DEG = 180.0 / math.pi
 _CONVERT = {"rad": ("deg", _DEG), "rad/s": ("deg/s", _DEG), "rad/s^2": ("deg/s^2", _DEG)}
@@ -55,6 +67,9 @@ class Summary:
     headers: list[str]
     rows: list[list[str]]
     caption: str
+    title: str = ""
+    #: indices of the rows that end a section (a rule is drawn below them)
+    sections: list[int] = field(default_factory=list)
 
 
 def summary(result: MonteCarloResult) -> Summary:
@@ -133,3 +148,199 @@ def html_table(result: MonteCarloResult) -> str:
         body.append(f"<tr{cls}>{cells}</tr>")
     return (f'<table class="summary">\n<caption>{esc(s.caption)}</caption>\n'
             f"<thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody>\n</table>")
+
+
+# --- seed 000: the thesis metrics J1-J4 and the tuning of the fuzzy systems -------------------
+
+#: state components named like the error groups, for the 3-D [x, y, z, vx, vy, vz] state
+_STATE_3D = (("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"))
+_WHICH = ("mean", "run0")
+
+
+def short(value: float) -> str:
+    """Four significant digits, positional (MATLAB's ``format short`` look of the thesis's
+    tables): 0.3091, 2.976, 42.22, 12950; scientific only below 1e-4 or from 1e6; "n/a" when
+    not finite."""
+    v = float(value)
+    if not math.isfinite(v):
+        return "n/a"
+    if v == 0:
+        return "0"
+    rounded = f"{v:.3e}"  # 4 significant digits; the exponent after rounding
+    exponent = int(rounded.split("e")[1])
+    if not -4 <= exponent < 6:
+        return rounded
+    return f"{float(rounded):.{max(0, 3 - exponent)}f}"
+
+
+def channel_labels(m: int) -> list[str]:
+    """Measurement channel names Z1..Zm (the thesis's Z^i)."""
+    return [f"Z{i + 1}" for i in range(m)]
+
+
+def _three_d(result: MonteCarloResult) -> bool:
+    """Whether the scenario is 3-D: a 3-D observer track or a z/vz error group."""
+    ex = result.example
+    observer = None if ex is None else np.asarray(ex.observer)
+    return (observer is not None and observer.ndim == 2 and observer.shape[1] == 3) or bool(
+        {"z", "vz"} & set(result.groups))
+
+
+def state_labels(result: MonteCarloResult, n: int) -> list[tuple[str, str | None]]:
+    """(name, SI unit or None) of each of the n state components: the error-group names x, y,
+    z, vx, vy, vz for a 3-D constant-velocity state [x, y, z, vx, vy, vz], else X1..Xn (with
+    the unit of an error group ``x<j>`` when the scenario reports one)."""
+    if n == 6 and _three_d(result):
+        return list(_STATE_3D)
+    out = []
+    for j in range(n):
+        unit = result.groups.get(f"x{j + 1}")
+        out.append((f"X{j + 1}", unit if unit not in (None, "", "-") else None))
+    return out
+
+
+def _matching_filters(result: MonteCarloResult) -> list[str]:
+    return [name for name, f in result.filters.items() if f.matching]
+
+
+def matching_values(result: MonteCarloResult, which: str = "mean"
+                    ) -> tuple[list[str], list[str], np.ndarray] | None:
+    """The J1-J4 table as numbers: ``(row labels, filter names, values (rows, filters))`` in
+    SI units, ``which`` = "mean" (over the Monte Carlo runs) or "run0" (the first run); None
+    when the result has no matching data. Rows: J1-Z<i> (the raw measurement noise, the same
+    for every filter), J2-Z<i>, J3-<state component> (the thesis's J1 of chapters 4-5), J4."""
+    if which not in _WHICH:
+        raise ValueError(f"which = {which!r}; expected one of {_WHICH}")
+    names = _matching_filters(result)
+    if not names and result.j1 is None:
+        return None
+
+    def pick(a) -> np.ndarray:
+        a = np.asarray(a, dtype=float)
+        return a.mean(0) if which == "mean" else a[0]
+
+    first = result.filters[names[0]].matching if names else {}
+    m = (np.shape(result.j1)[-1] if result.j1 is not None
+         else np.shape(first.get("J2", np.empty((0, 0))))[-1])
+    n = np.shape(first.get("J3", np.empty((0, 0))))[-1]
+    channels = channel_labels(m)
+    labels: list[str] = []
+    columns: list[list[float]] = [[] for _ in names]
+    if result.j1 is not None:
+        j1 = pick(result.j1)
+        labels += [f"J1-{c}" for c in channels]
+        for col in columns:
+            col += j1.tolist()
+    for key, tags in (("J2", channels),
+                      ("J3", [name if unit is None else f"{name} [{display_unit(unit)[0]}]"
+                              for name, unit in state_labels(result, n)])):
+        if key not in first:
+            continue
+        labels += [f"{key}-{t}" for t in tags]
+        for col, name in zip(columns, names, strict=True):
+            values = result.filters[name].matching.get(key)
+            if key == "J3" and values is not None:  # display units (factor 1 for m, m/s)
+                factors = [display_unit(u)[1] if u else 1.0 for _, u in state_labels(result, n)]
+                col += (pick(values) * np.asarray(factors)).tolist()
+            else:
+                col += (pick(values).tolist() if values is not None else [math.nan] * len(tags))
+    if "J4" in first:
+        labels.append(f"J4 (alpha {result.dom_alpha:g})")
+        for col, name in zip(columns, names, strict=True):
+            values = result.filters[name].matching.get("J4")
+            col.append(float(pick(values)) if values is not None else math.nan)
+    values = np.array(columns, dtype=float).T if names else np.empty((len(labels), 0))
+    return labels, names, values
+
+
+def matching_summary(result: MonteCarloResult, which: str = "mean") -> Summary | None:
+    """The J1-J4 table (see :func:`matching_values`) as display strings, 4 significant
+    digits; None without matching data."""
+    got = matching_values(result, which)
+    if got is None:
+        return None
+    labels, names, values = got
+    if names:
+        rows = [[label, *map(short, row)] for label, row in zip(labels, values, strict=True)]
+        headers = ["criterion", *names]
+    else:  # J1 alone (no filter has the matching metrics)
+        j1 = np.asarray(result.j1, dtype=float)
+        rows = [[label, short(v)] for label, v in
+                zip(labels, j1.mean(0) if which == "mean" else j1[0], strict=True)]
+        headers = ["criterion", "all filters"]
+    sections, last = [], None
+    for i, label in enumerate(labels):
+        key = label.split("-")[0].split(" ")[0]
+        if last is not None and key != last:
+            sections.append(i - 1)
+        last = key
+    if which == "mean":
+        title = f"Seed 000 metrics: Monte Carlo mean over {result.runs} runs"
+        how = f"mean of the per-run values over {result.runs} runs"
+    else:
+        title = "Seed 000 metrics: run 0 (one fixed-seed run, as in the thesis)"
+        how = f"run 0 alone (the first run of seed {result.seed})"
+    caption = (f"{result.scenario}: {how}; SI units. J1: raw noise RMS; J2: noise-free minus "
+               "estimated measurement RMS; J3: state RMSE (the thesis's J1 in chapters 4-5); "
+               "J4: alpha sum_i RMS DOM(i,i).")
+    return Summary(headers, rows, caption, title=title, sections=sections)
+
+
+def tuning_summary(result: MonteCarloResult) -> Summary | None:
+    """One row per tuned filter, shaped like the thesis's Table 3-2: optimizer, independent
+    runs, population x iterations, BEST / MEAN / WORST final cost over the runs, wall time;
+    None when nothing was tuned."""
+    if not result.tuning:
+        return None
+    headers = ["filter", "optimizer", "runs", "population\nx iterations", "BEST", "MEAN",
+               "WORST", "seconds"]
+    rows = [[name, str(t.optimizer), str(t.runs), f"{t.population} x {t.iterations}",
+             short(t.best), short(t.mean), short(t.worst), _num(float(t.seconds), 3)]
+            for name, t in result.tuning.items()]
+    caption = (f"{result.scenario}: final cost alpha sum_i RMS DOM(i,i) (alpha "
+               f"{result.dom_alpha:g}) over each optimiser's independent runs; the filter "
+               "uses the best run's fuzzy system.")
+    return Summary(headers, rows, caption, title="Tuning of the fuzzy systems (off-line)")
+
+
+def matching_summaries(result: MonteCarloResult) -> list[Summary]:
+    """The seed-000 tables present in ``result``: J1-J4 mean and run 0 (with matching
+    data), then the tuning table (when tuned). Empty for other scenarios."""
+    out = [matching_summary(result, "mean"), matching_summary(result, "run0"),
+           tuning_summary(result)]
+    return [s for s in out if s is not None]
+
+
+def summary_rich_table(s: Summary) -> Table:
+    """A :class:`Summary` as a ``rich`` table (first column left, the rest right)."""
+    table = Table(title=s.title or None, caption=s.caption, header_style="bold",
+                  box=box.SIMPLE_HEAD)
+    for i, h in enumerate(s.headers):
+        table.add_column(Text(h), justify="left" if i == 0 else "right")
+    for i, row in enumerate(s.rows):
+        table.add_row(*map(Text, row), end_section=i in s.sections)
+    return table
+
+
+def summary_html_table(s: Summary) -> str:
+    """A :class:`Summary` as an HTML ``<table class="summary">`` (escaped; the title is not
+    included: the page puts it in a heading)."""
+    esc = html.escape
+    head = "".join(f"<th>{esc(h).replace(chr(10), '<br>')}</th>" for h in s.headers)
+    body = []
+    for i, row in enumerate(s.rows):
+        cls = ' class="section-end"' if i in s.sections else ""
+        cells = f"<th>{esc(row[0])}</th>" + "".join(f"<td>{esc(c)}</td>" for c in row[1:])
+        body.append(f"<tr{cls}>{cells}</tr>")
+    return (f'<table class="summary">\n<caption>{esc(s.caption)}</caption>\n'
+            f"<thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody>\n</table>")
+
+
+def matching_rich_tables(result: MonteCarloResult) -> list[Table]:
+    """:func:`matching_summaries` as ``rich`` tables (printed after :func:`rich_table`)."""
+    return [summary_rich_table(s) for s in matching_summaries(result)]
+
+
+def matching_html_tables(result: MonteCarloResult) -> list[tuple[str, str]]:
+    """:func:`matching_summaries` as ``(title, HTML table)`` pairs."""
+    return [(s.title, summary_html_table(s)) for s in matching_summaries(result)]

@@ -41,7 +41,7 @@ def build_motion(spec: MotionSpec, dim: int, extras: int = 0, dt: float = 1.0):
                              "(the state length)")
         cv = models.ConstantVelocity(dim=dim, q=0.0)
         F = np.eye(n)
-        F[: 2 * dim, : 2 * dim] = cv.F(dt)
+        F[: 2 * dim, : 2 * dim] = cv.jacobian(np.zeros(2 * dim), dt)
         return models.LinearMotion(F, np.diag(spec.q_diag))
     if spec.model == "ConstantVelocity":
         base = models.ConstantVelocity(dim=dim, q=spec.q)

@@ -241,9 +241,9 @@ class PriorSpec(_Strict):
 class TuneSpec(_Strict):
     """Off-line tuning of a fuzzy-adaptive filter's membership functions (seed 000, 3-2):
     ``runs`` independent optimiser runs on the DOM cost of ``realisations`` simulated runs of
-    the scenario (or of the bundled scenario ``on``) drawn from ``seed``, which is kept apart
-    from the Monte Carlo seed so the filter is never scored on the data it was tuned on; the
-    best run's parameters are used."""
+    the scenario drawn from ``seed``, which is kept apart from the Monte Carlo seed so the
+    filter is never scored on the data it was tuned on; the best run's parameters are used.
+    ``on``: reuse the tuning of the same-named filter of that bundled scenario instead."""
 
     optimizer: Literal["GA", "PSO", "ICA"] = "ICA"
     population: Annotated[int, Field(ge=2)] = 50
