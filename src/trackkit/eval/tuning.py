@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackkit.belief import Gaussian
-from trackkit.filters.fuzzy import PARAM_BOUNDS, FuzzyAdaptive
+from trackkit.filters.fuzzy import PARAM_BOUNDS, FuzzyAdaptive, dom_cost
 from trackkit.optimize import GA, ICA, PSO
 from trackkit.optimize.base import Optimizer, repeat
 from trackkit.scenario.build import Plan
@@ -83,12 +83,16 @@ def dom_costs(template: FuzzyAdaptive, params: Array, plan: Plan, index: int, z:
     P0 = plan.priors[index][1]
     b = f.init(Gaussian(np.tile(x0, (P, 1)), np.broadcast_to(P0, (P * K, n, n)).copy()))
     dom_sq = np.zeros((P * K, z.shape[-1]))
+    seen = np.zeros((P * K, 1))
     for k in range(plan.steps):
+        zk = np.tile(z[k], (P, 1))
         b = f.predict(b, motion, plan.times[k + 1] - plan.times[k])
-        b, _ = f.update(b, np.tile(z[k], (P, 1)), plan.filter_sensor(index, k))
+        b, _ = f.update(b, zk, plan.filter_sensor(index, k))
         d = np.diagonal(b.dom, axis1=-2, axis2=-1)
-        dom_sq += np.where(np.isnan(d), 0.0, d * d)
-    cost = alpha * np.sqrt(dom_sq / plan.steps).sum(-1)
+        has = ~np.isnan(zk).any(-1, keepdims=True)  # J4 counts the steps with a measurement
+        dom_sq += np.where(has, d * d, 0.0)
+        seen += has
+    cost = dom_cost(dom_sq / np.maximum(seen, 1), 1, alpha)
     return np.where(np.isfinite(cost), cost, np.inf).reshape(P, K)
 
 

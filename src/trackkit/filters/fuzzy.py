@@ -122,10 +122,12 @@ def fis(params: ArrayLike, x: ArrayLike) -> Array:
     ratio (which leaves it unchanged), so the output never becomes 0/0.
     """
     p = np.asarray(params, dtype=float)
-    if p.shape[-1] != N_PARAMS:
+    if p.ndim < 1 or p.shape[-1] != N_PARAMS:
         raise ValueError(f"fuzzy parameters have shape {p.shape}; expected (..., {N_PARAMS}) "
                          "= [5 input centres, 5 widths, 5 output centres]")
     c, s, ybar = p[..., 0:5], p[..., 5:10], p[..., 10:15]
+    if not np.all(s > 0):
+        raise ValueError("fuzzy parameters: the widths (entries 5-9) must be > 0")
     x = np.clip(np.asarray(x, dtype=float), c[..., 0], c[..., 4])
     e = ((x[..., None] - c) / s) ** 2
     mu = np.exp(-(e - e.min(-1, keepdims=True)))
@@ -153,9 +155,8 @@ class FuzzyBelief(NamedTuple):
     ``R (..., m, m)`` the current measurement noise (``(..., 0, 0)`` until the first update
     starts it from ``sensor.noise``), ``Q (..., n, n)`` the current process noise
     (``(..., 0, 0)`` until the first prediction starts it from ``motion.noise``),
-    ``residuals (..., N, m)`` the innovation ring buffer (slot ``i mod N`` holds the i-th),
-    ``Q0 (..., n)`` the diagonal of the initial Q (the reference of ``normalise`` and
-    ``floor``), ``residuals (..., N, m)`` the innovation ring buffer (slot ``i mod N`` holds
+    ``Q0 (..., n)`` the diagonal of the initial Q (the reference of ``floor``, ``ceiling``
+    and ``normalise="initial"``), ``residuals (..., N, m)`` the innovation ring buffer (slot ``i mod N`` holds
     the i-th), ``count (...)`` innovations seen, and the last step's ``S`` and ``C``
     (``(..., m, m)``) for the logs (``DOM = S - C``).
     """
@@ -226,6 +227,9 @@ class FuzzyAdaptive(Filter):
                              f"> floor = {floor}")
         if warmup not in ("wait", "adapt"):
             raise ValueError(f"FuzzyAdaptive warmup = {warmup!r}; expected 'wait' or 'adapt'")
+        if q_inputs is not None and any(len(pair) != 2 or min(pair) < 0 for pair in q_inputs):
+            raise ValueError(f"FuzzyAdaptive q_inputs = {q_inputs!r}; expected pairs (i, l) of "
+                             "non-negative DOM indices")
         p.flags.writeable = False
         self.base = base
         self.params = p

@@ -356,12 +356,28 @@ class Scenario(_Strict):
                     len(f.motion.F) != n):
                 raise ValueError(f"filters[{i}].motion.F is {len(f.motion.F)} x "
                                  f"{len(f.motion.F)}; expected {n} x {n}")
-        for i, o in enumerate(self.observers):
-            for j, leg in enumerate(o.legs):
+        platforms = [("target", self.target.legs)] + [
+            (f"observers[{i}]", o.legs) for i, o in enumerate(self.observers)]
+        for where, legs in platforms:
+            for j, leg in enumerate(legs):
                 if leg.velocity_mps is not None and len(leg.velocity_mps) != self.dim:
-                    raise ValueError(f"observers[{i}].legs[{j}].velocity_mps has "
+                    raise ValueError(f"{where}.legs[{j}].velocity_mps has "
                                      f"{len(leg.velocity_mps)} components; expected "
                                      f"{self.dim} (dim)")
+        if self.linear_system:
+            allowed = {f"x{i}" for i in range(1, n + 1)}
+            bad = [g for g in self.report.groups if g not in allowed]
+            if bad:
+                raise ValueError(f"report.groups has {bad}; a Linear target's state has no "
+                                 f"positions or velocities, so expected groups among "
+                                 f"{sorted(allowed)}")
+        for i, o in enumerate(self.observers):
+            r = o.sensor.r_diag_si
+            if (o.sensor.model == "Position" and r is not None and not self.linear_system
+                    and len(r) != self.dim):
+                raise ValueError(f"observers[{i}].sensor.r_diag_si has {len(r)} values; a "
+                                 f"Position sensor measures the {self.dim} position "
+                                 "components (dim)")
         return self
 
     @property
