@@ -52,6 +52,20 @@ def test_proposed_filter_ratio_below_0_8(results, name):
     assert _pos(r, "AMCEKF") / _pos(r, "EKF") < 0.8
 
 
+PAPER_RATIO = {"dbt-approaching": 0.58, "dbt-receding": 0.47, "dbt-observer-manoeuvre": 0.66}
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_the_paper_ratio_is_below_what_the_bound_allows_against_our_ekf(results, name):
+    # Why the 0.8 target cannot hold here: our EKF is close to the PCRLB, so even an
+    # efficient filter would have RMSE / RMSE_EKF >= PCRLB / RMSE_EKF, which is above the
+    # paper's ratio (and near 0.8) in every scenario.
+    r = results[name]
+    floor = r.pcrlb_mean["position"] / _pos(r, "EKF")
+    assert floor > PAPER_RATIO[name]
+    assert floor > 0.7
+
+
 def test_receding_is_the_hardest_scenario_for_every_filter(results):
     for f in FILTERS:
         rec = _pos(results["dbt-receding"], f)
