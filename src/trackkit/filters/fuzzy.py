@@ -156,9 +156,9 @@ class FuzzyBelief(NamedTuple):
     starts it from ``sensor.noise``), ``Q (..., n, n)`` the current process noise
     (``(..., 0, 0)`` until the first prediction starts it from ``motion.noise``),
     ``Q0 (..., n)`` the diagonal of the initial Q (the reference of ``floor``, ``ceiling``
-    and ``normalise="initial"``), ``residuals (..., N, m)`` the innovation ring buffer (slot ``i mod N`` holds
-    the i-th), ``count (...)`` innovations seen, and the last step's ``S`` and ``C``
-    (``(..., m, m)``) for the logs (``DOM = S - C``).
+    and ``normalise="initial"``), ``residuals (..., N, m)`` the innovation ring buffer
+    (slot ``i mod N`` holds the i-th), ``count (...)`` innovations seen, and the last step's
+    ``S`` and ``C`` (``(..., m, m)``) for the logs (``DOM = S - C``).
     """
 
     mean: Array

@@ -32,6 +32,9 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "Cost",
+    "require",
+    "is_integer",
+    "is_real",
     "OptimizeResult",
     "Optimizer",
     "as_generators",
@@ -64,6 +67,23 @@ class OptimizeResult(NamedTuple):
         """The result of problem(s) ``index`` (e.g. ``res.at(3)`` or ``res.at(slice(0, 5))``)."""
         return OptimizeResult(self.best_x[index], self.best_f[index], self.history[:, index],
                               self.evaluations)
+
+
+def require(ok: bool, owner: str, what: str, value: Any, want: str) -> None:
+    """Raise ``ValueError("<owner> <what> = <value>; expected <want>")`` unless ``ok``: the
+    optimisers' settings are checked with messages that name the field."""
+    if not ok:
+        raise ValueError(f"{owner} {what} = {value!r}; expected {want}")
+
+
+def is_integer(v: Any) -> bool:
+    return isinstance(v, int | np.integer) and not isinstance(v, bool)
+
+
+def is_real(v: Any) -> bool:
+    """A finite real number (not a bool)."""
+    return (isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
+            and bool(np.isfinite(v)))
 
 
 def as_generators(rngs: Sequence[Any]) -> list[np.random.Generator]:

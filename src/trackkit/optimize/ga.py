@@ -47,6 +47,8 @@ from trackkit.optimize.base import (
     check_bounds,
     enforce_bounds,
     evaluate,
+    is_integer,
+    require,
 )
 
 __all__ = ["GA"]
@@ -82,19 +84,15 @@ class GA(Optimizer):
 
     def __post_init__(self) -> None:
         def need(ok: bool, what: str, value: Any, want: str) -> None:
-            if not ok:
-                raise ValueError(f"GA {what} = {value!r}; expected {want}")
+            require(ok, "GA", what, value, want)
 
-        def integer(v: Any) -> bool:
-            return isinstance(v, int | np.integer) and not isinstance(v, bool)
-
-        need(integer(self.population) and self.population >= 2, "population",
+        need(is_integer(self.population) and self.population >= 2, "population",
              self.population, "an integer >= 2")
-        need(integer(self.generations) and self.generations >= 0, "generations",
+        need(is_integer(self.generations) and self.generations >= 0, "generations",
              self.generations, "an integer >= 0")
-        need(integer(self.elite) and 0 <= self.elite < self.population, "elite", self.elite,
+        need(is_integer(self.elite) and 0 <= self.elite < self.population, "elite", self.elite,
              f"an integer in [0, population) = [0, {self.population})")
-        need(integer(self.tournament) and self.tournament >= 1, "tournament", self.tournament,
+        need(is_integer(self.tournament) and self.tournament >= 1, "tournament", self.tournament,
              "an integer >= 1")
         for what in ("crossover", "mutation"):
             v = getattr(self, what)
@@ -107,6 +105,11 @@ class GA(Optimizer):
         need(self.mutation_kind in _MUTATIONS, "mutation_kind", self.mutation_kind,
              f"one of {_MUTATIONS}")
         need(self.boundary in _BOUNDARIES, "boundary", self.boundary, f"one of {_BOUNDARIES}")
+
+    @property
+    def iterations(self) -> int:
+        """The generations, under the name the other optimisers use."""
+        return self.generations
 
     # --- random numbers: a fixed amount per problem and generation -----------------------
 

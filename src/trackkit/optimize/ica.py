@@ -91,6 +91,9 @@ from trackkit.optimize.base import (
     check_bounds,
     enforce_bounds,
     evaluate,
+    is_integer,
+    is_real,
+    require,
 )
 
 __all__ = ["ICA"]
@@ -154,30 +157,22 @@ class ICA(Optimizer):
 
     def __post_init__(self) -> None:
         def need(ok: bool, what: str, value: Any, want: str) -> None:
-            if not ok:
-                raise ValueError(f"ICA {what} = {value!r}; expected {want}")
+            require(ok, "ICA", what, value, want)
 
-        def integer(v: Any) -> bool:
-            return isinstance(v, int | np.integer) and not isinstance(v, bool)
-
-        def real(v: Any) -> bool:
-            return isinstance(v, int | float | np.integer | np.floating) and not isinstance(
-                v, bool) and bool(np.isfinite(v))
-
-        need(integer(self.population) and self.population >= 2, "population",
+        need(is_integer(self.population) and self.population >= 2, "population",
              self.population, "an integer >= 2")
-        need(integer(self.iterations) and self.iterations >= 0, "iterations",
+        need(is_integer(self.iterations) and self.iterations >= 0, "iterations",
              self.iterations, "an integer >= 0")
-        need(integer(self.imperialists) and 1 <= self.imperialists <= self.population // 2,
+        need(is_integer(self.imperialists) and 1 <= self.imperialists <= self.population // 2,
              "imperialists", self.imperialists,
              f"an integer in [1, population // 2] = [1, {self.population // 2}] (every "
              "empire starts with at least one colony)")
-        need(real(self.beta) and self.beta > 0, "beta", self.beta, "a finite value > 0")
-        need(real(self.gamma) and 0 <= self.gamma < np.pi / 2, "gamma", self.gamma,
+        need(is_real(self.beta) and self.beta > 0, "beta", self.beta, "a finite value > 0")
+        need(is_real(self.gamma) and 0 <= self.gamma < np.pi / 2, "gamma", self.gamma,
              "an angle in [0, pi/2) radians")
-        need(real(self.revolution) and 0 <= self.revolution <= 1, "revolution",
+        need(is_real(self.revolution) and 0 <= self.revolution <= 1, "revolution",
              self.revolution, "a probability in [0, 1]")
-        need(real(self.zeta) and self.zeta >= 0, "zeta", self.zeta, "a finite value >= 0")
+        need(is_real(self.zeta) and self.zeta >= 0, "zeta", self.zeta, "a finite value >= 0")
         need(self.boundary in _BOUNDARIES, "boundary", self.boundary, f"one of {_BOUNDARIES}")
 
     def _draw(self, gens: list[np.random.Generator], N: int, d: int) -> tuple[Array, Array]:

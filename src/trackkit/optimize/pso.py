@@ -58,6 +58,9 @@ from trackkit.optimize.base import (
     check_bounds,
     enforce_bounds,
     evaluate,
+    is_integer,
+    is_real,
+    require,
 )
 
 __all__ = ["PSO"]
@@ -88,24 +91,16 @@ class PSO(Optimizer):
 
     def __post_init__(self) -> None:
         def need(ok: bool, what: str, value: Any, want: str) -> None:
-            if not ok:
-                raise ValueError(f"PSO {what} = {value!r}; expected {want}")
+            require(ok, "PSO", what, value, want)
 
-        def integer(v: Any) -> bool:
-            return isinstance(v, int | np.integer) and not isinstance(v, bool)
-
-        def real(v: Any) -> bool:
-            return isinstance(v, int | float | np.integer | np.floating) and not isinstance(
-                v, bool) and bool(np.isfinite(v))
-
-        need(integer(self.population) and self.population >= 2, "population",
+        need(is_integer(self.population) and self.population >= 2, "population",
              self.population, "an integer >= 2")
-        need(integer(self.iterations) and self.iterations >= 0, "iterations",
+        need(is_integer(self.iterations) and self.iterations >= 0, "iterations",
              self.iterations, "an integer >= 0")
         for what in ("c1", "c2", "w_start", "w_end"):
             v = getattr(self, what)
-            need(real(v) and v >= 0, what, v, "a finite value >= 0")
-        need(real(self.v_max) and self.v_max > 0, "v_max", self.v_max,
+            need(is_real(v) and v >= 0, what, v, "a finite value >= 0")
+        need(is_real(self.v_max) and self.v_max > 0, "v_max", self.v_max,
              "a finite value > 0 (a fraction of the box width)")
         need(self.boundary in _BOUNDARIES, "boundary", self.boundary, f"one of {_BOUNDARIES}")
 
