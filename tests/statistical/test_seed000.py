@@ -49,6 +49,14 @@ def test_ch3_r_tuning_beats_the_kf(results):
         assert _j4(r, filt) <= 0.5 * _j4(r, "KF")
 
 
+@pytest.mark.parametrize("name", ["uw-ch3-r", "uw-ch3-q"])
+def test_the_ukf_is_the_kf_on_the_linear_benchmark(results, name):
+    r = results(name)
+    for g in ("x1", "x2", "x3"):
+        assert r.filters["UKF"].rmse_mean[g] == pytest.approx(r.filters["KF"].rmse_mean[g],
+                                                              rel=1e-9)
+
+
 def test_ch3_q_tuning_beats_the_kf(results):
     r = results("uw-ch3-q")
     for filt in ("GAFKF", "PSOFKF", "OFKF"):
