@@ -7,6 +7,8 @@ was bad, not just that a Cholesky failed somewhere.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -54,18 +56,103 @@ def mmT(A: Array, B: Array) -> Array:
     return A @ B.mT
 
 
+class _Triu(NamedTuple):
+    """Upper-triangle bookkeeping of an n x n matrix (row-major, read-only arrays)."""
+
+    i: NDArray[np.intp]  # row of each upper entry, (T,) with T = n (n + 1) / 2
+    j: NDArray[np.intp]  # its column
+    flat: NDArray[np.intp]  # its position in the flattened matrix, i * n + j
+    twin: NDArray[np.intp]  # for every entry of the full matrix, its upper-triangle index
+    full_twin: NDArray[np.intp]  # ... and that entry's position in the flattened matrix
+
+
+_TRIU: dict[int, _Triu] = {}
+
+
+def _triu(n: int) -> _Triu:
+    """Cached upper-triangle indices for n x n matrices (see ``_mirror``)."""
+    t = _TRIU.get(n)
+    if t is None:
+        i, j = np.triu_indices(n)
+        pos = np.empty((n, n), dtype=np.intp)
+        pos[i, j] = np.arange(i.size)
+        pos[j, i] = pos[i, j]
+        flat = i * n + j
+        t = _Triu(i, j, flat, pos.ravel(), flat[pos.ravel()])
+        for a in t:
+            a.flags.writeable = False
+        _TRIU[n] = t
+    return t
+
+
+def _mirror(upper: Array, n: int) -> Array:
+    """Full symmetric matrices ``(..., n, n)`` from their upper triangles ``(..., T)``
+    (row-major order, as ``_triu(n).flat``): exactly symmetric, whatever rounding produced
+    the upper triangle."""
+    return upper[..., _triu(n).twin].reshape(upper.shape[:-1] + (n, n))
+
+
 def _where_bad(mask: NDArray[np.bool_]) -> str:
     idx = np.argwhere(mask)
     first = tuple(int(i) for i in idx[0]) if idx.size else ()
     return f"{int(mask.sum())} of {mask.size} batch rows (first at index {first})"
 
 
+#: smallest stack for which the vectorised small-matrix Cholesky (factor columns, batch
+#: last) beats LAPACK's per-matrix calls (numpy 2.4, n = 4: about equal at 200 matrices,
+#: twice as fast at 1000); :func:`cholesky`, which also transposes the result back to
+#: ``(..., n, n)``, switches at ``_CHOL_MIN_BATCH_FULL``
+_CHOL_MIN_BATCH = 200
+_CHOL_MIN_BATCH_FULL = 300
+_CHOL_MAX_N = 6
+
+
+def _cholesky_t(P: Array) -> Array | None:
+    """Lower Cholesky factors of a stack ``P (N, n, n)``, batch axis last:
+    ``C[j, i] = L[:, i, j]`` (shape ``(n, n, N)``, zeros above the diagonal), or ``None``
+    when some matrix is not positive definite (a pivot not > 0, or nan).
+
+    Cholesky-Crout with every scalar formula vectorised over the batch, so about 2 n^2
+    numpy calls on contiguous length-N rows replace N LAPACK calls; only the lower triangle
+    of ``P`` is read, as LAPACK does. ``C[j].T`` is column j of every factor, which is what
+    sigma points need (``x +- c L[:, j]``).
+    """
+    N, n = P.shape[0], P.shape[-1]
+    C = np.zeros((n, n, N))
+    with np.errstate(invalid="ignore", divide="ignore"):  # a bad pivot is caught below
+        for j in range(n):
+            s = C[j, j]
+            np.copyto(s, P[:, j, j])
+            for k in range(j):
+                lk = C[k, j]
+                s -= lk * lk
+            np.sqrt(s, out=s)
+            if j + 1 < n:
+                t = C[j, j + 1:]  # rows i > j of column j
+                np.copyto(t, P[:, j + 1:, j].T)
+                for k in range(j):
+                    t -= C[k, j + 1:] * C[k, j]
+                t /= s
+    # every pivot > 0 (a negative one became nan and a zero one 0, and both are caught here)
+    if not (C.reshape(n * n, N)[:: n + 1] > 0).all():
+        return None
+    return C
+
+
 def cholesky(P: Array, name: str = "covariance") -> Array:
     """Lower Cholesky factor ``L`` with ``L L^T = P``, batched.
 
     Raises ``ValueError`` naming ``name`` and the first failing batch row when some ``P`` is
-    not positive definite; nothing is repaired (no jitter is added).
+    not positive definite; nothing is repaired (no jitter is added). Large stacks of small
+    matrices are factored by :func:`_cholesky_t` (same factor up to rounding).
     """
+    P = np.asarray(P)
+    n = P.shape[-1] if P.ndim > 2 and P.shape[-2] == P.shape[-1] else 0
+    if (0 < n <= _CHOL_MAX_N and P.dtype == np.float64
+            and P.size >= _CHOL_MIN_BATCH_FULL * n * n):
+        C = _cholesky_t(P.reshape(-1, n, n))
+        if C is not None:
+            return np.ascontiguousarray(C.transpose(2, 1, 0)).reshape(P.shape)
     try:
         return np.linalg.cholesky(P)
     except np.linalg.LinAlgError:

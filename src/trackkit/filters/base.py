@@ -37,6 +37,24 @@ def produced(P: Any) -> bool:
     return ref is not None and ref() is P
 
 
+_F64 = np.dtype(np.float64)
+_SMALL = 32  # arrays up to this size are summed in Python (cheaper than a numpy call)
+
+
+def _finite_sum(a: Array) -> bool:
+    """Whether the sum of ``a`` is finite: false for any nan or infinite entry (and, as for
+    any float sum, if finite entries near the float limit overflow)."""
+    if a.size <= _SMALL:
+        return math.isfinite(sum(a.ravel().tolist()))
+    return math.isfinite(np.add.reduce(a, axis=None))
+
+
+def _raise_non_finite(x: Array, where: str):
+    """The error for a non-finite mean or (when the mean is finite) covariance."""
+    what = "mean" if not _finite_sum(x) else "cov"
+    raise ValueError(f"{where}.{what} has non-finite entries; expected finite values")
+
+
 def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
     """Return ``(mean, cov)`` as float arrays after checking them.
 
@@ -45,7 +63,15 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
     asymmetric or non-PSD covariance.
     """
     x, P = b.mean, b.cov
-    if not (isinstance(x, np.ndarray) and x.dtype == np.float64):
+    if type(x) is np.ndarray and x.ndim == 1 and x.size <= 5 and x.dtype is _F64:
+        # one small problem (n + n^2 <= _SMALL): quick path for a covariance from a filter
+        ref = _produced.get(id(P))
+        if (ref is not None and ref() is P and P.shape == (x.size, x.size)
+                and (n is None or n == x.size)):
+            if math.isfinite(sum(x.tolist() + P.ravel().tolist())):
+                return x, P
+            _raise_non_finite(x, where)
+    if type(x) is not np.ndarray or x.dtype is not _F64:
         x = np.asarray(x, dtype=float)
     if x.ndim < 1:
         raise ValueError(f"{where}.mean is a scalar; expected shape (..., n)")
@@ -54,9 +80,13 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
             f"{where}.mean has shape {x.shape}; the model's state has {n} components, "
             f"so expected (..., {n})"
         )
-    if not math.isfinite(x.sum()):
-        raise ValueError(f"{where}.mean has non-finite entries; expected finite values")
-    Pshape = np.shape(P)
+    is_produced = produced(P)
+    if is_produced and x.size + P.size <= _SMALL:  # one Python sum for both (one problem)
+        if not math.isfinite(sum(x.ravel().tolist()) + sum(P.ravel().tolist())):
+            _raise_non_finite(x, where)
+    elif not _finite_sum(x):
+        _raise_non_finite(x, where)
+    Pshape = P.shape if type(P) is np.ndarray else np.shape(P)
     if len(Pshape) >= 2 and x.shape[:-1] != Pshape[:-2]:
         try:
             np.broadcast_shapes(x.shape[:-1], Pshape[:-2])
@@ -70,11 +100,11 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
                 f"{where}: cov has batch shape {Pshape[:-2]} but mean only {x.shape[:-1]}; "
                 "expected one mean per covariance"
             )
-    if produced(P):
+    if is_produced:
         if P.shape[-2:] != (x.shape[-1],) * 2:
             raise ValueError(f"{where}.cov has shape {P.shape}; expected (..., {x.shape[-1]}, "
                              f"{x.shape[-1]})")
-        if not math.isfinite(P.sum()):
+        if x.size + P.size > _SMALL and not _finite_sum(P):
             raise ValueError(f"{where}.cov has non-finite entries; expected finite values")
     else:
         P = check_covariance(P, f"{where}.cov", n=x.shape[-1])
@@ -84,7 +114,8 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
 def check_measurement(z: ArrayLike, m: int, where: str,
                       batch: tuple[int, ...] = ()) -> Array:
     """z as a float array of shape ``(..., m)`` whose batch axes broadcast with ``batch``."""
-    z = np.asarray(z, dtype=float)
+    if type(z) is not np.ndarray or z.dtype is not _F64:
+        z = np.asarray(z, dtype=float)
     if z.ndim < 1 or z.shape[-1] != m:
         raise ValueError(
             f"{where}: z has shape {z.shape}; the sensor measures {m} components, so "
@@ -103,7 +134,7 @@ def check_measurement(z: ArrayLike, m: int, where: str,
 
 def missing_rows(z: Array) -> Array | None:
     """Boolean mask of rows with any nan in z, or None when nothing is missing."""
-    if not math.isnan(z.sum()):
+    if not math.isnan(sum(z.ravel().tolist()) if z.size <= _SMALL else np.add.reduce(z, None)):
         return None
     return np.isnan(z).any(-1)
 

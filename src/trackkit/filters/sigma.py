@@ -11,6 +11,7 @@ batch axes (a moving observer per Monte Carlo run) broadcast against the points 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +27,17 @@ from trackkit.filters.base import (
     missing_rows,
     output,
 )
-from trackkit.linalg import cholesky, solve_psd
+from trackkit.linalg import (
+    _CHOL_MAX_N,
+    _CHOL_MIN_BATCH,
+    _cholesky_t,
+    _mirror,
+    _triu,
+    cholesky,
+    solve_psd,
+    symmetrize,
+)
+from trackkit.models.sensors import _wrap_small
 
 __all__ = ["UKF", "CKF", "SigmaPoints"]
 
@@ -45,32 +56,82 @@ class SigmaPoints:
 
     def points(self, x: Array, P: Array, name: str) -> Array:
         """Sigma points of N(x, P) with the point axis first: ``(k, ..., n)``."""
-        L = cholesky(P, name)
-        batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2])
-        n = x.shape[-1]
-        cols = self.c * np.moveaxis(L, -1, 0)  # (n, ..., n): column i of L as row i
-        pad = (1,) * (len(batch) - (P.ndim - 2))  # a covariance shared by a batch of means
-        cols = np.broadcast_to(cols.reshape((n,) + pad + P.shape[:-2] + (n,)),
-                               (n,) + batch + (n,))
-        xs = np.broadcast_to(x, batch + (n,))
-        parts = [xs[None]] if self.centre else []
-        return np.concatenate(parts + [xs + cols, xs - cols], axis=0)
+        x, P = np.asarray(x, dtype=float), np.asarray(P, dtype=float)
+        X, batch, _ = _points(self, x, P, name)
+        return X.reshape(X.shape[:1] + batch + x.shape[-1:])
+
+
+def _factor_columns(P: Array, batch: tuple[int, ...], name: str) -> Array:
+    """Cholesky columns of every covariance, batch flattened and last: ``C (n, n, N)`` with
+    ``C[j, i] = L[:, i, j]`` for the N = prod(batch) rows (a covariance shared by several
+    means is factored once and broadcast)."""
+    n = P.shape[-1]
+    Pb = P.reshape((-1, n, n))
+    C = None
+    if Pb.shape[0] >= _CHOL_MIN_BATCH and n <= _CHOL_MAX_N:
+        C = _cholesky_t(Pb)
+    if C is None:  # small stacks: LAPACK; and the diagnosis when a factor does not exist
+        C = cholesky(P, name).reshape(Pb.shape).transpose(2, 1, 0)
+    if P.shape[:-2] != batch:
+        pad = (1,) * (len(batch) - (P.ndim - 2))
+        C = np.broadcast_to(C.reshape((n, n) + pad + P.shape[:-2]), (n, n) + batch)
+        C = C.reshape(n, n, -1)
+    return C
+
+
+def _points(rule: SigmaPoints, x: Array, P: Array, name: str):
+    """Sigma points with the batch flattened: ``(X (k, N, n), batch, x (N, n))``."""
+    n = x.shape[-1]
+    batch = x.shape[:-1]
+    if P.shape[:-2] != batch:
+        batch = np.broadcast_shapes(batch, P.shape[:-2])
+    N = math.prod(batch)
+    x2 = np.broadcast_to(x, batch + (n,)).reshape(N, n)
+    cols = _factor_columns(P, batch, name).transpose(0, 2, 1)  # (n, N, n): column j of L
+    X = np.empty((rule.wm.shape[0], N, n))
+    o = 1 if rule.centre else 0
+    Xp, Xm = X[o:o + n], X[o + n:]
+    np.multiply(cols, rule.c, out=Xp)
+    np.subtract(x2, Xp, out=Xm)  # x - c L_j
+    Xp += x2  # x + c L_j
+    if rule.centre:
+        X[0] = x2
+    return X, batch, x2
+
+
+def _through(g, X: Array, batch: tuple[int, ...], *args) -> Array:
+    """``g`` applied to sigma points ``X (k, N, n)`` given to it with the batch axes
+    restored (models whose parameters carry batch axes broadcast against them);
+    the result with the batch flattened again, ``(k, N, d)``."""
+    k, N = X.shape[:2]
+    Y = np.asarray(g(X.reshape((k,) + batch + X.shape[-1:]), *args), dtype=float)
+    if Y.shape[1:-1] != batch:  # a model output constant over some batch axes
+        Y = np.broadcast_to(Y, (k,) + batch + Y.shape[-1:])
+    return Y.reshape(k, N, Y.shape[-1])
 
 
 def _mean(Y: Array, wm: Array, angular: tuple[bool, ...] | None) -> Array:
     """Weighted mean over the leading point axis; circular on the angle components."""
-    y = np.tensordot(wm, Y, axes=(0, 0))
+    k = Y.shape[0]
+    flat = Y.reshape(k, -1)
     if angular is not None and any(angular):
+        if all(angular):
+            s, c = wm.dot(np.sin(flat)), wm.dot(np.cos(flat))
+            return np.arctan2(s, c).reshape(Y.shape[1:])
+        y = wm.dot(flat).reshape(Y.shape[1:])
         mask = np.asarray(angular)
         s = np.tensordot(wm, np.sin(Y[..., mask]), axes=(0, 0))
         c = np.tensordot(wm, np.cos(Y[..., mask]), axes=(0, 0))
         y[..., mask] = np.arctan2(s, c)
-    return y
+        return y
+    return wm.dot(flat).reshape(Y.shape[1:])
 
 
 def _deviation(Y: Array, y: Array, angular: tuple[bool, ...] | None) -> Array:
     d = Y - y
     if angular is not None and any(angular):
+        if all(angular):
+            return _wrap_small(d)
         mask = np.asarray(angular)
         d[..., mask] = wrap(d[..., mask])
     return d
@@ -83,6 +144,26 @@ def _cross(wc: Array, dA: Array, dB: Array) -> Array:
     return A @ np.moveaxis(dB, 0, -2)  # (..., a, k) @ (..., k, b)
 
 
+def _upper_of(M: Array) -> Array:
+    """Upper triangles ``(N, T)`` of square matrices ``M (N, n, n)``."""
+    n = M.shape[-1]
+    return M.reshape(M.shape[0], n * n)[:, _triu(n).flat]
+
+
+def _noise_upper(Q: Array, batch: tuple[int, ...], n: int) -> Array:
+    """Upper triangle of Q (``(T,)`` or ``(N, T)``), averaged with the lower one when Q is
+    not exactly symmetric (as symmetrising the sum would)."""
+    flat = _triu(n).flat
+    if Q.ndim == 2:
+        if not (Q == Q.T).all():
+            Q = symmetrize(Q)
+        return Q.ravel()[flat]
+    Q = np.broadcast_to(Q, batch + (n, n)).reshape(-1, n, n)
+    if not (Q == Q.mT).all():
+        Q = symmetrize(Q)
+    return Q.reshape(-1, n * n)[:, flat]
+
+
 class _SigmaPointFilter(Filter):
     rule: SigmaPoints
 
@@ -91,44 +172,90 @@ class _SigmaPointFilter(Filter):
 
     def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
         """Unscented transform through f: ``x- = sum Wm f(X)``, ``P- = sum Wc dY dY^T + Q``."""
-        pred, _ = self.predict_with_cross(belief, motion, dt)
-        return pred
+        return self._predict(belief, motion, dt, False)[0]
 
     def predict_with_cross(self, belief: Gaussian, motion, dt: ArrayLike):
         """Prediction and the cross-covariance ``C = sum Wc (X - x)(Y - x-)^T`` (for RTS)."""
+        return self._predict(belief, motion, dt, True)
+
+    def _predict(self, belief: Gaussian, motion, dt: ArrayLike, with_cross: bool):
         n = getattr(motion, "dim_x", None)
         x, P = check_belief(belief, n, f"{self.name}.predict belief")
-        rule = self._rule(x.shape[-1])
-        X = rule.points(x, P, f"{self.name}.predict belief.cov")
-        Y = motion.f(X, dt)
+        n = x.shape[-1]
+        rule = self._rule(n)
+        X, batch, x2 = _points(rule, x, P, f"{self.name}.predict belief.cov")
+        Y = _through(motion.f, X, batch, dt)
         ang = getattr(motion, "angular", None)
         y = _mean(Y, rule.wm, ang)
         dY = _deviation(Y, y, ang)
-        Pp = _cross(rule.wc, dY, dY) + motion.noise(x, dt)
-        C = _cross(rule.wc, _deviation(X, x, ang), dY)
-        return output(y, Pp), C
+        # upper triangle of sum Wc dY dY^T + Q, mirrored: exactly symmetric
+        upper = _upper_of(_cross(rule.wc, dY, dY))
+        upper += _noise_upper(np.asarray(motion.noise(x, dt), dtype=float), batch, n)
+        pred = output(y.reshape(batch + (n,)), _mirror(upper, n).reshape(batch + (n, n)),
+                      symmetric=True)
+        if not with_cross:
+            return pred, None
+        C = _cross(rule.wc, _deviation(X, x2, ang), dY)
+        return pred, C.reshape(batch + (n, n))
 
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
         """Sigma points regenerated from the prediction; ``S = sum Wc dZ dZ^T + R``,
         ``C = sum Wc dX dZ^T``, ``K = C S^{-1}``, ``x+ = x- + K r``, ``P+ = P- - K S K^T``."""
         x, P = check_belief(belief, None, f"{self.name}.update belief")
         z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
-        rule = self._rule(x.shape[-1])
-        X = rule.points(x, P, f"{self.name}.update belief.cov")
-        Z = sensor.h(X)
-        zhat = _mean(Z, rule.wm, sensor.angular)
+        n = x.shape[-1]
+        rule = self._rule(n)
+        X, batch, x2 = _points(rule, x, P, f"{self.name}.update belief.cov")
+        Z = _through(sensor.h, X, batch)
+        k, N, m = Z.shape
+        zhat = _mean(Z, rule.wm, sensor.angular)  # (N, m)
         dZ = _deviation(Z, zhat, sensor.angular)
-        S = _cross(rule.wc, dZ, dZ) + sensor.noise
-        S = 0.5 * (S + np.swapaxes(S, -1, -2))
-        C = _cross(rule.wc, X - x, dZ)
-        K = np.swapaxes(solve_psd(S, np.swapaxes(C, -1, -2)), -1, -2)
+        dX = X - x2
+        R = np.asarray(sensor.noise, dtype=float)
+        if R.ndim > 2:  # one R per batch row
+            R = np.broadcast_to(R, batch + (m, m)).reshape(N, m, m)
+        if m == 1:
+            wdz = dZ[..., 0] * rule.wc[:, None]  # (k, N)
+            S = np.einsum("kn,kn->n", wdz, dZ[..., 0]).reshape(N, 1, 1) + R
+            C = np.einsum("kni,kn->ni", dX, wdz)[..., None]  # (N, n, 1)
+        else:
+            S = symmetrize(_cross(rule.wc, dZ, dZ) + R)
+            C = _cross(rule.wc, dX, dZ)
+        K = solve_psd(S, C.mT).mT  # (N, n, m)
         miss = missing_rows(z)
-        r = sensor.residual(z, zhat)
+        r = sensor.residual(z, zhat.reshape(batch + (m,)))
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
-        xn = x + (K @ r[..., None])[..., 0]
-        Pn = P - K @ S @ np.swapaxes(K, -1, -2)
-        return keep_prior_where_missing(miss, (x, P), output(xn, Pn), Innovation(r, S))
+        r2 = np.broadcast_to(r, batch + (m,)).reshape(N, m)
+        i, j = _triu(n)[:2]
+        P2 = np.broadcast_to(P, batch + (n, n)).reshape(N, n, n)
+        if m == 1:
+            xn = x2 + K[..., 0] * r2
+            k0 = K[..., 0]
+            upper = _upper_of(P2) - S[:, 0] * (k0[:, i] * k0[:, j])
+        else:
+            xn = x2 + (K @ r2[..., None])[..., 0]
+            KS = K @ S
+            upper = _upper_of(P2) - (KS[:, i, :] * K[:, j, :]).sum(-1)
+        post = output(xn.reshape(batch + (n,)), _mirror(upper, n).reshape(batch + (n, n)),
+                      symmetric=True)
+        innov = Innovation(r, S.reshape(batch + (m, m)))
+        return keep_prior_where_missing(miss, (x, P), post, innov)
+
+
+_RULES: dict[tuple, SigmaPoints] = {}
+
+
+def _cached_rule(key: tuple, build) -> SigmaPoints:
+    """A rule built once per (filter type, parameters, n); its weights are read-only."""
+    rule = _RULES.get(key)
+    if rule is None:
+        rule = build()
+        rule.wm.flags.writeable = rule.wc.flags.writeable = False
+        if len(_RULES) > 256:
+            _RULES.clear()
+        _RULES[key] = rule
+    return rule
 
 
 class UKF(_SigmaPointFilter):
@@ -150,6 +277,10 @@ class UKF(_SigmaPointFilter):
         self.alpha, self.beta, self.kappa = float(alpha), float(beta), kappa
 
     def _rule(self, n: int) -> SigmaPoints:
+        key = (type(self), self.alpha, self.beta, self.kappa, n)
+        return _cached_rule(key, lambda: self._build_rule(n))
+
+    def _build_rule(self, n: int) -> SigmaPoints:
         kappa = 3.0 - n if self.kappa is None else float(self.kappa)
         lam = self.alpha**2 * (n + kappa) - n
         if not n + lam > 0:
@@ -172,5 +303,5 @@ class CKF(_SigmaPointFilter):
     name = "CKF"
 
     def _rule(self, n: int) -> SigmaPoints:
-        w = np.full(2 * n, 0.5 / n)
-        return SigmaPoints(np.sqrt(n), w, w, centre=False)
+        return _cached_rule((type(self), n), lambda: SigmaPoints(
+            np.sqrt(n), np.full(2 * n, 0.5 / n), np.full(2 * n, 0.5 / n), centre=False))

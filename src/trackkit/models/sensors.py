@@ -55,6 +55,41 @@ def _pose(value: ArrayLike, name: str, d: int) -> Array:
     return v
 
 
+def _own(sensor: SensorModel, cls: type) -> bool:
+    """Whether ``sensor`` uses ``cls``'s own h and jacobian (a subclass that overrides
+    either must not get ``cls``'s fused ``linearize``)."""
+    t = type(sensor)
+    return t is cls or (t.h is cls.h and t.jacobian is cls.jacobian)
+
+
+def _offset(x: Array, origin: Array) -> tuple[Array, Array]:
+    """``x[..., 0] - origin[..., 0]`` and the same for component 1, as contiguous arrays
+    (numpy's transcendental loops are several times slower on strided views)."""
+    return x[..., 0] - origin[..., 0], x[..., 1] - origin[..., 1]
+
+
+def _wrap_small(a: Array) -> Array:
+    """``wrap(a)`` for a float array, returning ``a`` itself when every entry is within
+    (-3, 3): there ``wrap`` is the identity (``ceil((a - pi) / (2 pi))`` is -0), so the
+    common case of small angle residuals costs two reductions instead of a dozen passes."""
+    if a.size and -3.0 < a.min() and a.max() < 3.0:  # false for nan
+        return a
+    return wrap(a)
+
+
+def _bearing_gradient(u: Array, v: Array, r2: Array, convention: str, out_u: Array,
+                      out_v: Array) -> None:
+    """The bearing's gradient over (u, v), ``sign * (v, -u) / r^2``, written into two
+    (strided) views. (Negating before dividing: numpy 2.4's ``np.negative`` with a strided
+    ``out`` and a strided input reads the input as if contiguous.)"""
+    if convention == "nautical":
+        np.divide(v, r2, out=out_u)
+        np.divide(-u, r2, out=out_v)
+    else:
+        np.divide(-v, r2, out=out_u)
+        np.divide(u, r2, out=out_v)
+
+
 def _check_convention(convention: str) -> None:
     if convention not in ("nautical", "math"):
         raise ValueError(f"convention = {convention!r}; expected 'nautical' or 'math'")
@@ -119,13 +154,29 @@ class SensorModel:
     def _noise(self) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def _angle_mask(self):
+        """None (no angle components), True (all) or the boolean mask; cached per sensor."""
+        try:
+            return self.__dict__["_angle_mask_"]
+        except KeyError:
+            ang = tuple(self.angular)
+            mask = None if not any(ang) else True if all(ang) else np.asarray(ang)
+            self.__dict__["_angle_mask_"] = mask
+            return mask
+
     def residual(self, z: Array, zhat: Array) -> Array:
         """``z - zhat`` with the angle components wrapped to (-pi, pi]."""
         r = z - zhat
-        if any(self.angular):
-            mask = np.asarray(self.angular)
-            r = np.where(mask, wrap(r), r)
-        return r
+        mask = self._angle_mask()
+        if mask is None:
+            return r
+        if mask is True:
+            return _wrap_small(r)
+        return np.where(mask, wrap(r), r)
+
+    def linearize(self, x: Array) -> tuple[Array, Array]:
+        """``(h(x), jacobian(x))`` together (sensors override it to share the work)."""
+        return self.h(x), self.jacobian(x)
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,12 +208,18 @@ class Position(SensorModel):
 
     def jacobian(self, x: Array) -> Array:
         n = x.shape[-1]
-        H = self.__dict__.get(f"_H{n}")
-        if H is None:
+        try:
+            return self.__dict__["_H"][n]
+        except KeyError:
             H = np.eye(self.dim, n)
             H.flags.writeable = False
-            self.__dict__[f"_H{n}"] = H
-        return H
+            self.__dict__.setdefault("_H", {})[n] = H
+            return H
+
+    def linearize(self, x: Array) -> tuple[Array, Array]:
+        if type(self) is Position or _own(self, Position):
+            return x[..., : self.dim], self.jacobian(x)
+        return self.h(x), self.jacobian(x)
 
     def hessian(self, x: Array) -> Array:
         return np.zeros(x.shape[:-1] + (self.dim, x.shape[-1], x.shape[-1]))
@@ -191,25 +248,30 @@ class Bearing(SensorModel):
         return np.array([[self.sigma**2]])
 
     def _terms(self, x: Array) -> tuple[Array, Array, Array]:
-        d = x[..., :2] - self.origin
-        return _bearing_terms(d[..., 0], d[..., 1], self.convention)
+        return _bearing_terms(*_offset(x, self.origin), self.convention)
 
-    def h(self, x: Array) -> Array:
-        d = x[..., :2] - self.origin
-        b = np.arctan2(d[..., 0], d[..., 1]) if self.convention == "nautical" else (
-            np.arctan2(d[..., 1], d[..., 0])
-        )
+    def _bearing(self, u: Array, v: Array) -> Array:
+        b = np.arctan2(u, v) if self.convention == "nautical" else np.arctan2(v, u)
         return b[..., None]
 
-    def jacobian(self, x: Array) -> Array:
-        d = x[..., :2] - self.origin
-        u, v = d[..., 0], d[..., 1]
+    def _jacobian(self, u: Array, v: Array, n: int) -> Array:
+        """``sign * [v, -u] / r^2`` in the first two of n columns (sign -1 for "math")."""
         r2 = u * u + v * v
-        sign = 1.0 if self.convention == "nautical" else -1.0
-        J = np.zeros(d.shape[:-1] + (1, x.shape[-1]))
-        J[..., 0, 0] = sign * v / r2
-        J[..., 0, 1] = -sign * u / r2
+        J = np.zeros(r2.shape + (1, n))
+        _bearing_gradient(u, v, r2, self.convention, J[..., 0, 0], J[..., 0, 1])
         return J
+
+    def h(self, x: Array) -> Array:
+        return self._bearing(*_offset(x, self.origin))
+
+    def jacobian(self, x: Array) -> Array:
+        return self._jacobian(*_offset(x, self.origin), x.shape[-1])
+
+    def linearize(self, x: Array) -> tuple[Array, Array]:
+        if not _own(self, Bearing):
+            return self.h(x), self.jacobian(x)
+        u, v = _offset(x, self.origin)
+        return self._bearing(u, v), self._jacobian(u, v, x.shape[-1])
 
     def hessian(self, x: Array) -> Array:
         return _pad2(self._terms(x)[2][..., None, :, :], x.shape[-1])
@@ -237,18 +299,36 @@ class RangeBearing(SensorModel):
     def _noise(self) -> Array:
         return np.diag([self.sigma_range**2, self.sigma_bearing**2])
 
+    def _h(self, u: Array, v: Array) -> Array:
+        out = np.empty(np.broadcast_shapes(u.shape, v.shape) + (2,))
+        np.hypot(u, v, out=out[..., 0])
+        if self.convention == "nautical":
+            np.arctan2(u, v, out=out[..., 1])
+        else:
+            np.arctan2(v, u, out=out[..., 1])
+        return out
+
+    def _jacobian(self, u: Array, v: Array, n: int) -> Array:
+        """Rows ``[u, v] / r`` and ``sign * [v, -u] / r^2`` (sign -1 for "math")."""
+        r2 = u * u + v * v
+        r = np.sqrt(r2)
+        J = np.zeros(r.shape + (2, n))
+        np.divide(u, r, out=J[..., 0, 0])
+        np.divide(v, r, out=J[..., 0, 1])
+        _bearing_gradient(u, v, r2, self.convention, J[..., 1, 0], J[..., 1, 1])
+        return J
+
     def h(self, x: Array) -> Array:
-        d = x[..., :2] - self.origin
-        b = np.arctan2(d[..., 0], d[..., 1]) if self.convention == "nautical" else (
-            np.arctan2(d[..., 1], d[..., 0])
-        )
-        return np.stack([np.hypot(d[..., 0], d[..., 1]), b], -1)
+        return self._h(*_offset(x, self.origin))
 
     def jacobian(self, x: Array) -> Array:
-        d = x[..., :2] - self.origin
-        _, gr, _ = _norm_grad_hess(d)
-        _, gb, _ = _bearing_terms(d[..., 0], d[..., 1], self.convention)
-        return _pad(np.stack([gr, gb], -2), x.shape[-1])
+        return self._jacobian(*_offset(x, self.origin), x.shape[-1])
+
+    def linearize(self, x: Array) -> tuple[Array, Array]:
+        if not _own(self, RangeBearing):
+            return self.h(x), self.jacobian(x)
+        u, v = _offset(x, self.origin)
+        return self._h(u, v), self._jacobian(u, v, x.shape[-1])
 
     def hessian(self, x: Array) -> Array:
         d = x[..., :2] - self.origin
