@@ -26,7 +26,10 @@ SEED000 = ["uw-ch3-r", "uw-ch3-q", "uw-ch4-delays", "uw-ch5-fixed", "uw-ch5-cv",
 
 
 def base(name: str = "uw-ch3-r") -> dict:
-    return copy.deepcopy(S.load(name).model_dump())
+    """The bundled scenario as a dict, without the ch3 UKF (filters KF, GAFKF, PSOFKF, OFKF)."""
+    d = copy.deepcopy(S.load(name).model_dump())
+    d["filters"] = [f for f in d["filters"] if f["name"] != "UKF" or "ch3" not in name]
+    return d
 
 
 def rejects(d: dict, *patterns: str) -> str:
@@ -232,17 +235,17 @@ def test_ch3_r_numbers(plans):
     np.testing.assert_array_equal(p.sensors[0].jacobian(np.zeros(3)), np.eye(2, 3))  # H=[I 0]
     np.testing.assert_array_equal(p.x0, 0.0)
     np.testing.assert_array_equal(p.nominal, 0.0)
-    assert [f.name for f in p.filters] == ["KF", "OFKF", "OFKF", "OFKF"]
-    assert isinstance(p.filters[0], KF) and isinstance(p.filters[3].base, KF)
-    for i in range(4):
+    assert [f.name for f in p.filters] == ["KF", "UKF", "OFKF", "OFKF", "OFKF"]
+    assert isinstance(p.filters[0], KF) and isinstance(p.filters[4].base, KF)
+    for i in range(5):
         np.testing.assert_array_equal(p.filter_r0[i], np.diag([8.0, 1.0]))
         np.testing.assert_array_equal(p.filter_sensor(i, 7).noise, np.diag([8.0, 1.0]))
         mean, P0 = p.priors[i]
         np.testing.assert_array_equal(mean, 0.0)
         np.testing.assert_allclose(P0, 0.01 * np.eye(3), rtol=1e-15)
         np.testing.assert_array_equal(p.filter_motions[i].Q, 0.02 * np.eye(3))
-    assert p.filters[3].adapt == "R"
-    tunes = [f.tune for f in p.scenario.filters[1:]]
+    assert p.filters[4].adapt == "R"
+    tunes = [f.tune for f in p.scenario.filters[2:]]
     assert [t.optimizer for t in tunes] == ["GA", "PSO", "ICA"]
     # the thesis's 15 runs, population 50, 30 iterations; tuning data apart from the runs
     assert all((t.population, t.iterations, t.runs) == (50, 30, 15) for t in tunes)
@@ -253,11 +256,11 @@ def test_ch3_q_numbers(plans):
     p = plans["uw-ch3-q"]
     np.testing.assert_array_equal(p.truth_motion.Q, np.diag([1.0, 10.0, 2.0]))
     np.testing.assert_allclose(p.sensors[0].noise, np.diag([0.8, 9.0]), rtol=1e-15)
-    for i in range(4):
+    for i in range(5):
         assert p.filter_r0[i] is None  # R known
         np.testing.assert_array_equal(p.filter_motions[i].Q, np.diag([10.0, 0.2, 12.0]))
         np.testing.assert_array_equal(p.filter_motions[i].F, F3)
-    for f in p.filters[1:]:
+    for f in p.filters[2:]:
         assert f.adapt == "Q" and f.q_inputs == ((0, 0), (1, 1), (0, 1))
 
 

@@ -183,8 +183,9 @@ def test_noise_in_use_for_each_kind_of_belief():
 def small_ch3():
     d = S.load("uw-ch3-r").model_dump()
     d["time"]["duration_s"] = 60.0
-    d["filters"] = [d["filters"][0], dict(d["filters"][3], tune=None,
-                                          options={"params": list(DEFAULT_PARAMS)})]
+    by_name = {f["name"]: f for f in d["filters"]}
+    d["filters"] = [by_name["KF"], dict(by_name["OFKF"], tune=None,
+                                        options={"params": list(DEFAULT_PARAMS)})]
     d["run"].update(runs=3, block=2)
     return run_scenario(S.parse(d))
 
