@@ -578,6 +578,8 @@ def test_names_follow_the_base_filter_and_with_params_keeps_the_settings():
     (dict(params=np.full(15, np.nan)), "params"),
     (dict(params=np.where(np.arange(15) == 6, 0.0, DEFAULT_PARAMS)), "widths"),
     (dict(params=np.where(np.arange(15) == 9, -1.0, DEFAULT_PARAMS)), "widths"),
+    (dict(params=np.r_[[2.0, 1.0, 0.0, -1.0, -2.0], DEFAULT_PARAMS[5:]]), "increasing order"),
+    (dict(params=np.where(np.arange(15) == 1, -3.0, DEFAULT_PARAMS)), "input centres"),
     (dict(adapt="P"), "adapt"),
     (dict(window=0), "window"),
     (dict(window=2.5), "window"),

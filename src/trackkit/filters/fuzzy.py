@@ -112,7 +112,8 @@ PARAM_BOUNDS.flags.writeable = False
 def fis(params: ArrayLike, x: ArrayLike) -> Array:
     """The Mamdani system's output y(x) (module docstring), batched.
 
-    ``params (..., 15)``: ``[centres, widths, output centres]`` in rule order; its batch axes
+    ``params (..., 15)``: ``[centres, widths, output centres]`` in rule order, the centres
+    increasing (checked by :class:`FuzzyAdaptive`, not here on the hot path); its batch axes
     broadcast against ``x (...)``.
 
     The input is saturated to the universe of discourse, ``[c_1, c_5]`` (the outermost
@@ -216,6 +217,10 @@ class FuzzyAdaptive(Filter):
                              f"(..., {N_PARAMS})")
         if np.any(p[..., 5:10] <= 0):
             raise ValueError("FuzzyAdaptive params: the widths (entries 5-9) must be > 0")
+        if np.any(np.diff(p[..., 0:5], axis=-1) < 0):
+            raise ValueError("FuzzyAdaptive params: the input centres (entries 0-4) must be in "
+                             "increasing order NM <= NS <= ZE <= PS <= PM (the rules and the "
+                             "saturation to [c_1, c_5] rely on it)")
         if adapt not in ("R", "Q"):
             raise ValueError(f"FuzzyAdaptive adapt = {adapt!r}; expected 'R' or 'Q'")
         if not (isinstance(window, int | np.integer) and window >= 1):
