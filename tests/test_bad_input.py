@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import trackkit as tk
-from trackkit.filters import CKF, EKF, IEKF, KF, UKF
+from tests.test_filters import FILTERS
+from trackkit.filters import EKF, IEKF, KF, UKF
 from trackkit.models import (
     AzimuthElevation,
     Bearing,
@@ -31,14 +32,6 @@ from trackkit.models import (
     Stack,
 )
 
-FILTERS = {
-    "KF": KF,
-    "EKF": EKF,
-    "EKF2": lambda: EKF(order=2),
-    "IEKF": IEKF,
-    "UKF": UKF,
-    "CKF": CKF,
-}
 NAMES = list(FILTERS)
 
 CV = ConstantVelocity(dim=2, q=0.1)

@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "Cost",
+    "BOUNDARIES",
     "require",
     "is_integer",
     "is_real",
@@ -125,6 +126,10 @@ def evaluate(cost: Cost, X: Array) -> Array:
             f"expected {X.shape[:2]} (one cost per problem and candidate)"
         )
     return np.where(np.isnan(f), np.inf, f)
+
+
+#: the wall modes of :func:`enforce_bounds`, shared by every optimiser's ``boundary`` setting
+BOUNDARIES = ("reflect", "clip")
 
 
 def enforce_bounds(X: Array, lo: Array, hi: Array, mode: str = "reflect") -> Array:

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.optimize.base import (
+    BOUNDARIES,
     Cost,
     Optimizer,
     OptimizeResult,
@@ -57,7 +58,6 @@ Array = NDArray[np.float64]
 
 _CROSSOVERS = ("blend", "arithmetic", "single_point")
 _MUTATIONS = ("gaussian", "uniform")
-_BOUNDARIES = ("reflect", "clip")
 
 
 @dataclass(frozen=True, repr=True)
@@ -104,7 +104,7 @@ class GA(Optimizer):
              f"one of {_CROSSOVERS}")
         need(self.mutation_kind in _MUTATIONS, "mutation_kind", self.mutation_kind,
              f"one of {_MUTATIONS}")
-        need(self.boundary in _BOUNDARIES, "boundary", self.boundary, f"one of {_BOUNDARIES}")
+        need(self.boundary in BOUNDARIES, "boundary", self.boundary, f"one of {BOUNDARIES}")
 
     @property
     def iterations(self) -> int:

@@ -84,6 +84,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.optimize.base import (
+    BOUNDARIES,
     Cost,
     Optimizer,
     OptimizeResult,
@@ -100,7 +101,6 @@ __all__ = ["ICA"]
 
 Array = NDArray[np.float64]
 
-_BOUNDARIES = ("reflect", "clip")
 
 
 def _power(c: Array, alive: NDArray[np.bool_]) -> Array:
@@ -173,7 +173,7 @@ class ICA(Optimizer):
         need(is_real(self.revolution) and 0 <= self.revolution <= 1, "revolution",
              self.revolution, "a probability in [0, 1]")
         need(is_real(self.zeta) and self.zeta >= 0, "zeta", self.zeta, "a finite value >= 0")
-        need(self.boundary in _BOUNDARIES, "boundary", self.boundary, f"one of {_BOUNDARIES}")
+        need(self.boundary in BOUNDARIES, "boundary", self.boundary, f"one of {BOUNDARIES}")
 
     def _draw(self, gens: list[np.random.Generator], N: int, d: int) -> tuple[Array, Array]:
         """The uniforms ``(B, N (3 + d) + 1)`` and normals ``(B, N, d)`` of one iteration."""

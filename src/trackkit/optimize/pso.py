@@ -51,6 +51,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.optimize.base import (
+    BOUNDARIES,
     Cost,
     Optimizer,
     OptimizeResult,
@@ -67,7 +68,6 @@ __all__ = ["PSO"]
 
 Array = NDArray[np.float64]
 
-_BOUNDARIES = ("reflect", "clip")
 
 
 @dataclass(frozen=True, repr=True)
@@ -102,7 +102,7 @@ class PSO(Optimizer):
             need(is_real(v) and v >= 0, what, v, "a finite value >= 0")
         need(is_real(self.v_max) and self.v_max > 0, "v_max", self.v_max,
              "a finite value > 0 (a fraction of the box width)")
-        need(self.boundary in _BOUNDARIES, "boundary", self.boundary, f"one of {_BOUNDARIES}")
+        need(self.boundary in BOUNDARIES, "boundary", self.boundary, f"one of {BOUNDARIES}")
 
     def inertia(self, t: int) -> float:
         """``w(t)`` of the step from iterate t to t + 1, ``t = 0, ..., iterations - 1``."""
