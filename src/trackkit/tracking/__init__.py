@@ -1,0 +1,70 @@
+"""Multi-target tracking front end: scans, gating, association, track logic, initiation.
+
+    from trackkit import tracking as tt
+    g = tt.gate(zhat, S, z, p_gate=0.99)                 # KD-tree pre-gate, batched fine test
+    a = tt.gnn(g, tt.loglik_costs(g, p_d=0.9, clutter_density=1e-6))     # or tt.jpda(...)
+    logic = tt.HistoryLogic(confirm=(2, 3), delete=(3, 3))   # M-of-N, or tt.ScoreLogic
+    new = tt.single_point(z[a.unassigned], R, v_max=30.0)     # or two_point, converted plots
+"""
+
+from trackkit.tracking.association import (
+    JPDA_MAX_EVENTS,
+    Assignment,
+    Clusters,
+    Costs,
+    JPDAResult,
+    clusters,
+    distance_costs,
+    gnn,
+    jpda,
+    jpda_update,
+    loglik_costs,
+    pda_costs,
+    seed004_costs,
+)
+from trackkit.tracking.gating import (
+    GATE_PROBABILITY,
+    KDTREE_MIN_PAIRS,
+    Gate,
+    MeasurementPrediction,
+    gate,
+    gate_threshold,
+    predict_measurement,
+)
+from trackkit.tracking.initiate import (
+    convert_range_bearing,
+    converted_cov_given_truth,
+    pair_plots,
+    single_point,
+    two_point,
+)
+from trackkit.tracking.logic import (
+    HistoryLogic,
+    HistoryState,
+    IdCounter,
+    ScoreLogic,
+    ScoreState,
+    TrackStatus,
+    concatenate,
+    confirmed,
+    gaussian_log_likelihood,
+    select,
+    sprt_thresholds,
+    tentative,
+    to_delete,
+)
+from trackkit.tracking.scans import Scan, Scans
+
+__all__ = [
+    "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult", "clusters",
+    "distance_costs", "gnn", "jpda", "jpda_update", "loglik_costs", "pda_costs",
+    "seed004_costs",
+    "GATE_PROBABILITY", "KDTREE_MIN_PAIRS", "Gate", "MeasurementPrediction", "gate",
+    "gate_threshold", "predict_measurement",
+    "convert_range_bearing", "converted_cov_given_truth", "pair_plots", "single_point",
+    "two_point",
+    "HistoryLogic", "HistoryState", "IdCounter", "ScoreLogic", "ScoreState", "TrackStatus",
+    "concatenate", "confirmed", "gaussian_log_likelihood", "select", "sprt_thresholds",
+    "tentative", "to_delete",
+    "Scan", "Scans",
+]

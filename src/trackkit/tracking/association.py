@@ -1,0 +1,527 @@
+"""Association: which gated detection updates which track (GNN), or how much (JPDA).
+
+Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of gated
+(track i, detection j) pairs with their squared distances d2_ij, log-likelihoods
+``log N_ij = log N(z_j; zhat_i, S_i)`` and innovations nu_ij.
+
+* :func:`clusters`: connected components of the bipartite graph of gated pairs; tracks in
+  different clusters share no detection, so association splits into independent problems.
+* :func:`gnn`: the global nearest neighbour, the one assignment (each track at most one
+  detection, each detection at most one track) of least total cost, where a track may also
+  take its miss alternative. Costs come from a cost function:
+
+  - :func:`loglik_costs`: ``c_ij = -log(P_D N_ij / lambda)``, ``c_i0 = -log(1 - P_D P_G)``;
+    the least-cost assignment is then the most probable joint event (the JPDA event below);
+  - :func:`distance_costs`: ``c_ij = d_ij`` (Mahalanobis distance), ``c_i0`` a missed
+    distance (Stone Soup's ``DistanceHypothesiser``);
+  - :func:`pda_costs`: ``c_ij = -beta_ij`` with beta the single-track PDA probabilities
+    (Stone Soup's ``GNNWith2DAssignment`` over a ``PDAHypothesiser``, which maximises
+    their sum);
+  - :func:`seed004_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of seed 004.
+
+* :func:`jpda`: marginal association probabilities from the feasible joint events of each
+  cluster, and :func:`jpda_update`, the combined-innovation state update.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite_matching
+from scipy.stats import chi2
+
+from trackkit.belief import Gaussian
+from trackkit.linalg import symmetrize
+from trackkit.tracking.gating import Gate
+
+__all__ = [
+    "JPDA_MAX_EVENTS",
+    "Assignment",
+    "Clusters",
+    "Costs",
+    "JPDAResult",
+    "clusters",
+    "distance_costs",
+    "gnn",
+    "jpda",
+    "jpda_update",
+    "loglik_costs",
+    "pda_costs",
+    "seed004_costs",
+]
+
+Array = NDArray[np.float64]
+Index = NDArray[np.intp]
+
+#: largest number of joint events enumerated exactly in one JPDA cluster; a cluster with
+#: more falls back to loopy belief propagation (Williams and Lau 2014). 2e4 events of a
+#: 10-track cluster take about 5 ms to enumerate
+JPDA_MAX_EVENTS = 20_000
+
+#: loopy belief propagation stops when no message changes by more than this (relative), or
+#: after LBP_MAX_ITER sweeps
+LBP_TOL = 1e-13
+LBP_MAX_ITER = 10_000
+
+
+# -- clusters --------------------------------------------------------------------------------
+
+
+class Clusters(NamedTuple):
+    """``count`` clusters; ``track (T,)`` the cluster of each track (every track is in one,
+    a track with an empty gate alone); ``det (D,)`` the cluster of each detection, -1 for a
+    detection in no gate. Clusters are numbered in order of their first track."""
+
+    count: int
+    track: Index
+    det: Index
+
+
+def clusters(g: Gate) -> Clusters:
+    """Connected components of the graph with an edge per gated pair (scipy's
+    ``connected_components`` on the (T + D)-node adjacency)."""
+    T, D = g.n_tracks, g.n_dets
+    if T == 0:
+        return Clusters(0, np.zeros(0, dtype=np.intp), np.full(D, -1, dtype=np.intp))
+    A = sp.coo_matrix((np.ones(g.size, dtype=np.int8), (g.track, T + g.det)),
+                      shape=(T + D, T + D))
+    _, label = connected_components(A, directed=False)
+    # renumber by first track, so the numbering does not depend on scipy's traversal
+    comp, first, inverse = np.unique(label[:T], return_index=True, return_inverse=True)
+    rank = np.empty(comp.size, dtype=np.intp)
+    rank[np.argsort(first)] = np.arange(comp.size)
+    lookup = np.full(label.max() + 1, -1, dtype=np.intp)
+    lookup[comp] = rank
+    return Clusters(int(comp.size), rank[inverse], lookup[label[T:]])
+
+
+class _Layout(NamedTuple):
+    """The pairs, tracks and detections of the clusters of two or more tracks, each grouped
+    by cluster, with every index also local to its cluster (built once, vectorised, so that
+    the per-cluster loop only slices)."""
+
+    pairs: Index  # gated pairs, grouped by cluster (by track then detection inside)
+    tracks: Index  # tracks, grouped by cluster, ascending inside
+    dets: Index  # gated detections, grouped by cluster, ascending inside
+    local_track: Index  # (P_multi,) each pair's track's position in its cluster
+    local_det: Index  # (P_multi,) each pair's detection's position in its cluster
+    p_bounds: Index  # (K + 1,) pair slice of each cluster
+    t_bounds: Index  # (K + 1,) track slice
+    d_bounds: Index  # (K + 1,) detection slice
+    single: NDArray[np.bool_]  # (P,) pairs whose track is alone in its cluster
+
+
+def _layout(g: Gate, cl: Clusters) -> _Layout:
+    ntr = np.bincount(cl.track, minlength=cl.count)
+    single = ntr[cl.track[g.track]] == 1
+    multi = ntr > 1
+    K = np.flatnonzero(multi)  # the clusters to loop over, in order
+    pairs = np.flatnonzero(~single)
+    pairs = pairs[np.argsort(cl.track[g.track[pairs]], kind="stable")]
+    tracks = np.flatnonzero(multi[cl.track])
+    tracks = tracks[np.argsort(cl.track[tracks], kind="stable")]
+    dets = np.flatnonzero(cl.det >= 0)
+    dets = dets[multi[cl.det[dets]]]
+    dets = dets[np.argsort(cl.det[dets], kind="stable")]
+    t_bounds = np.r_[0, np.cumsum(ntr[K])]
+    d_bounds = np.r_[0, np.cumsum(np.bincount(cl.det[dets], minlength=cl.count)[K])]
+    p_bounds = np.r_[0, np.cumsum(np.bincount(cl.track[g.track[pairs]],
+                                              minlength=cl.count)[K])]
+    # position of each track (detection) inside its cluster's slice
+    slot = np.zeros(cl.count, dtype=np.intp)
+    slot[K] = np.arange(K.size)
+    pos_t = np.empty(g.n_tracks, dtype=np.intp)
+    pos_t[tracks] = np.arange(tracks.size) - t_bounds[slot[cl.track[tracks]]]
+    pos_d = np.empty(g.n_dets, dtype=np.intp)
+    pos_d[dets] = np.arange(dets.size) - d_bounds[slot[cl.det[dets]]]
+    return _Layout(pairs, tracks, dets, pos_t[g.track[pairs]], pos_d[g.det[pairs]],
+                   p_bounds, t_bounds, d_bounds, single)
+
+
+# -- costs -----------------------------------------------------------------------------------
+
+
+class Costs(NamedTuple):
+    """Assignment costs: ``pair (P,)`` per gated pair (``inf`` forbids the pair) and
+    ``miss (T,)`` per track."""
+
+    pair: Array
+    miss: Array
+
+
+def _p_gate(g: Gate, p_gate: float | None) -> float:
+    """P_G given, or the one that produced the gate: chi2.cdf(gamma, m)."""
+    return float(chi2.cdf(g.threshold, g.residual.shape[1])) if p_gate is None else p_gate
+
+
+def _log_ratio(g: Gate, p_d: float, clutter_density: float, p_gate: float | None) -> Array:
+    """``log(P_D N_ij / lambda) - log(1 - P_D P_G)``: a pair's weight over the miss's."""
+    _check_pd(p_d, clutter_density)
+    pg = _p_gate(g, p_gate)
+    return np.log(p_d) + g.loglik - np.log(clutter_density) - np.log1p(-p_d * pg)
+
+
+def _check_pd(p_d: float, clutter_density: float) -> None:
+    if not 0.0 < p_d <= 1.0:
+        raise ValueError(f"p_d = {p_d!r}; expected 0 < P_D <= 1")
+    if not clutter_density > 0:
+        raise ValueError(f"clutter_density = {clutter_density!r}; expected lambda > 0")
+
+
+def loglik_costs(g: Gate, p_d: float, clutter_density: float,
+                 p_gate: float | None = None) -> Costs:
+    """Negative log-likelihood-ratio costs: ``c_ij = -log(P_D N_ij / lambda)`` and
+    ``c_i0 = -log(1 - P_D P_G)`` (``P_G`` defaults to the gate's, chi2.cdf(gamma, m)).
+
+    Summed over an assignment this is minus the log of the joint event's weight (see
+    :func:`jpda`), so the GNN picks the most probable joint event.
+    """
+    _check_pd(p_d, clutter_density)
+    pg = _p_gate(g, p_gate)
+    pair = -(np.log(p_d) + g.loglik - np.log(clutter_density))
+    return Costs(pair, np.full(g.n_tracks, -np.log1p(-p_d * pg)))
+
+
+def distance_costs(g: Gate, missed_distance: float | None = None) -> Costs:
+    """``c_ij = d_ij`` (Mahalanobis distance), ``c_i0 = missed_distance`` (default the gate's
+    edge, sqrt(gamma)); pairs with ``d_ij >= missed_distance`` are forbidden, as in Stone
+    Soup's ``DistanceHypothesiser``."""
+    md = float(np.sqrt(g.threshold)) if missed_distance is None else float(missed_distance)
+    if not (md > 0 and np.isfinite(md)):
+        raise ValueError(f"missed_distance = {missed_distance!r}; expected a finite value > 0")
+    d = np.sqrt(g.d2)
+    return Costs(np.where(d < md, d, np.inf), np.full(g.n_tracks, md))
+
+
+def pda_costs(g: Gate, p_d: float, clutter_density: float,
+              p_gate: float | None = None) -> Costs:
+    """``c_ij = -beta_ij``, ``c_i0 = -beta_i0``, with the single-track PDA probabilities
+    ``beta_ij = L_ij / (1 - P_D P_G + sum_j L_ij)``, ``L_ij = P_D N_ij / lambda``.
+
+    The GNN then maximises the sum of the per-track probabilities, which is what Stone Soup's
+    ``GNNWith2DAssignment`` does with a ``PDAHypothesiser``; kept for comparison with it.
+    """
+    beta, beta0 = _pda(g.track, _log_ratio(g, p_d, clutter_density, p_gate), g.n_tracks)
+    return Costs(-beta, -beta0)
+
+
+def seed004_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | None = None,
+                  distance: Literal["mahalanobis", "residual"] = "mahalanobis") -> Costs:
+    """Seed 004's cost ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``.
+
+    ``gamma_ij^2`` is the squared Mahalanobis distance d2_ij, or with ``distance="residual"``
+    the squared innovation ``|nu_ij|^2`` (the paper's bearing difference, wrapped). The paper
+    gives neither K1 nor K2: K1 = 1, K2 = 1/2 make ``1 - c`` the Gaussian likelihood
+    shape ``exp(-d2 / 2)``. A missed track costs ``miss_cost``, by default K1, the cost of an
+    infinitely distant detection: then every track that can be assigned is (the paper runs
+    Munkres on the track x measurement matrix, which assigns min(T, D) pairs), and the gate
+    is the only way to refuse a detection.
+    """
+    if not (k1 > 0 and k2 > 0):
+        raise ValueError(f"k1 = {k1!r}, k2 = {k2!r}; expected K1 > 0 and K2 > 0")
+    if distance == "mahalanobis":
+        gamma2 = g.d2
+    elif distance == "residual":
+        gamma2 = np.einsum("pi,pi->p", g.residual, g.residual)
+    else:
+        raise ValueError(f"distance = {distance!r}; expected 'mahalanobis' or 'residual'")
+    pair = k1 * -np.expm1(-k2 * gamma2)
+    return Costs(pair, np.full(g.n_tracks, k1 if miss_cost is None else float(miss_cost)))
+
+
+# -- GNN -------------------------------------------------------------------------------------
+
+
+class Assignment(NamedTuple):
+    """``det (T,)``: the detection assigned to each track, -1 for a miss; ``unassigned``:
+    the detections no track took, sorted (for track initiation); ``cost``: the total."""
+
+    det: Index
+    unassigned: Index
+    cost: float
+
+
+def gnn(g: Gate, costs: Costs, method: Literal["clusters", "sparse"] = "clusters"
+        ) -> Assignment:
+    """Least-cost assignment of gated pairs, each track taking one detection or its miss.
+
+    With rows = tracks and columns = detections plus one miss column per track (the miss
+    block diagonal), minimise ``sum_i c_i,col(i)``. ``method="clusters"`` solves each
+    cluster of two or more tracks with a dense ``linear_sum_assignment`` and the tracks alone
+    in their cluster by one vectorised argmin; ``"sparse"`` solves the whole scan as one
+    sparse problem (scipy's LAPJVsp, ``min_weight_full_bipartite_matching``). Both give the
+    optimum. Per cluster is the default: its cost grows linearly with the clusters, while
+XX
+    slower at 10 000; benchmarks/bench_association.py).
+    """
+    T, D = g.n_tracks, g.n_dets
+    pair, miss = np.asarray(costs.pair, dtype=float), np.asarray(costs.miss, dtype=float)
+    if pair.shape != (g.size,) or miss.shape != (T,):
+        raise ValueError(f"costs have shapes pair {pair.shape}, miss {miss.shape}; expected "
+                         f"({g.size},) and ({T},)")
+    if np.any(np.isnan(pair)) or not np.all(np.isfinite(miss)):
+        raise ValueError("costs: nan pair costs or non-finite miss costs; expected a finite "
+                         "miss cost for every track (inf pair costs forbid a pair)")
+    ok = np.isfinite(pair)
+    t, d, c = g.track[ok], g.det[ok], pair[ok]
+    if method == "sparse":
+        det = _gnn_sparse(t, d, c, miss, T, D)
+    elif method == "clusters":
+        sub = g._replace(track=t, det=d, d2=g.d2[ok], loglik=g.loglik[ok],
+                         residual=g.residual[ok])
+        det = _gnn_clusters(sub, c, miss)
+    else:
+        raise ValueError(f"method = {method!r}; expected 'sparse' or 'clusters'")
+    taken = np.zeros(D, dtype=bool)
+    taken[det[det >= 0]] = True
+    # total cost: the chosen pair costs, looked up by (track, det) key in the sorted pairs
+    chosen = det >= 0
+    key = t * D + d
+    pos = np.searchsorted(key, np.flatnonzero(chosen) * D + det[chosen])
+    total = float(c[pos].sum() + miss[~chosen].sum())
+    return Assignment(det, np.flatnonzero(~taken), total)
+
+
+def _gnn_sparse(t: Index, d: Index, c: Array, miss: Array, T: int, D: int) -> Index:
+    """One LAPJVsp call on the T x (D + T) sparse matrix [pairs | diag(miss)].
+
+    Every row is matched exactly once, so adding a constant to a row moves every solution's
+    cost by the same amount: rows are shifted to costs >= 1, since the solver treats stored
+    zeros as missing edges and wants no negative weights.
+    """
+    det = np.full(T, -1, dtype=np.intp)
+    if t.size == 0:
+        return det
+    rows = np.unique(t)  # only tracks with some finite pair need solving
+    local = np.searchsorted(rows, t)
+    R = rows.size
+    low = np.minimum(miss[rows], _segment_min(c, local, R))
+    shift = 1.0 - low
+    data = np.concatenate([c + shift[local], miss[rows] + shift])
+    cols = np.concatenate([d, D + np.arange(R)])
+    ri = np.concatenate([local, np.arange(R)])
+    A = sp.csr_matrix((data, (ri, cols)), shape=(R, D + R))
+    r, col = min_weight_full_bipartite_matching(A)
+    hit = col < D
+    det[rows[r[hit]]] = col[hit]
+    return det
+
+
+def _segment_min(values: Array, seg: Index, n: int) -> Array:
+    out = np.full(n, np.inf)
+    np.minimum.at(out, seg, values)
+    return out
+
+
+def _gnn_clusters(g: Gate, c: Array, miss: Array) -> Index:
+    """Per-cluster dense assignment; one-track clusters by a vectorised argmin."""
+    det = np.full(g.n_tracks, -1, dtype=np.intp)
+    if g.size == 0:
+        return det
+    lay = _layout(g, clusters(g))
+    # one track: the cheapest of its pairs, if cheaper than its miss
+    ts, ds, cs = g.track[lay.single], g.det[lay.single], c[lay.single]
+    order = np.lexsort((cs, ts))
+    first = order[np.r_[True, ts[order][1:] != ts[order][:-1]]] if ts.size else order
+    win = cs[first] < miss[ts[first]]
+    det[ts[first][win]] = ds[first][win]
+    # the rest, one cluster at a time: [pair costs | diag(miss)], nt x (nd + nt)
+    cm, lt, ld = c[lay.pairs], lay.local_track, lay.local_det
+    pb, tb, db = lay.p_bounds.tolist(), lay.t_bounds.tolist(), lay.d_bounds.tolist()
+    for k in range(len(pb) - 1):
+        p0, p1, t0, t1, d0, d1 = pb[k], pb[k + 1], tb[k], tb[k + 1], db[k], db[k + 1]
+        nt, nd = t1 - t0, d1 - d0
+        M = np.full((nt, nd + nt), np.inf)
+        M[lt[p0:p1], ld[p0:p1]] = cm[p0:p1]
+        tr = lay.tracks[t0:t1]
+        M[np.arange(nt), nd + np.arange(nt)] = miss[tr]
+        r, col = linear_sum_assignment(M)
+        hit = col < nd
+        det[tr[r[hit]]] = lay.dets[d0 + col[hit]]
+    return det
+
+
+# -- JPDA ------------------------------------------------------------------------------------
+
+
+class JPDAResult(NamedTuple):
+    """``beta (P,)``: marginal probability that gated pair p's detection is the track's;
+    ``beta0 (T,)``: probability that the track was not detected (sum_j beta_ij + beta_i0 = 1);
+    ``clusters``; ``approximated (K,)``: the clusters whose marginals came from loopy belief
+    propagation instead of exact enumeration."""
+
+    beta: Array
+    beta0: Array
+    clusters: Clusters
+    approximated: NDArray[np.bool_]
+
+
+def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = None, *,
+         max_events: int = JPDA_MAX_EVENTS, cl: Clusters | None = None) -> JPDAResult:
+    """Parametric JPDA marginals (Bar-Shalom): a feasible joint event theta (each detection
+    to at most one track, each track at most one detection) has weight
+
+        w(theta) = prod_{(i,j) in theta} P_D N_ij / lambda  *  prod_{i missed} (1 - P_D P_G)
+
+    and ``beta_ij = sum_{theta ni (i,j)} w / sum_theta w``, ``beta_i0`` likewise over the
+    events that miss track i. Events are enumerated exactly within each cluster (a track alone
+    in its cluster in closed form, the PDA); a cluster with more than ``max_events`` events
+    falls back to loopy belief propagation (Williams and Lau 2014, exact on clusters without
+    cycles), reported in ``approximated``.
+    """
+    T = g.n_tracks
+    lr = _log_ratio(g, p_d, clutter_density, p_gate)
+    cl = clusters(g) if cl is None else cl
+    beta = np.zeros(g.size)
+    beta0 = np.ones(T)
+    approx = np.zeros(cl.count, dtype=bool)
+    if g.size == 0:
+        return JPDAResult(beta, beta0, cl, approx)
+    lay = _layout(g, cl)
+    single = lay.single
+    # one-track clusters: the PDA, beta_ij = r_ij / (1 + sum_j r_ij), all at once
+    b, b0 = _pda(g.track[single], lr[single], T)
+    beta[single] = b
+    has = np.bincount(g.track[single], minlength=T) > 0
+    beta0[has] = b0[has]
+    lrm, lt, ld = lr[lay.pairs], lay.local_track, lay.local_det
+    pb, tb, db = lay.p_bounds.tolist(), lay.t_bounds.tolist(), lay.d_bounds.tolist()
+    lbp_pairs = []
+    for k in range(len(pb) - 1):
+        p0, p1, t0, t1 = pb[k], pb[k + 1], tb[k], tb[k + 1]
+        B = _enumerate(lt[p0:p1], ld[p0:p1], lrm[p0:p1], t1 - t0, db[k + 1] - db[k],
+                       max_events)
+        if B is None:
+            lbp_pairs.append(lay.pairs[p0:p1])
+            continue
+        beta[lay.pairs[p0:p1]] = B[lt[p0:p1], ld[p0:p1] + 1]
+        beta0[lay.tracks[t0:t1]] = B[:, 0]
+    if lbp_pairs:
+        idx = np.concatenate(lbp_pairs)
+        beta[idx], b0 = _lbp(g.track[idx], g.det[idx], lr[idx], T, g.n_dets)
+        tr = np.unique(g.track[idx])
+        beta0[tr] = b0[tr]
+        approx[cl.track[tr]] = True
+    return JPDAResult(beta, beta0, cl, approx)
+
+
+def _pda(track: Index, lr: Array, T: int) -> tuple[Array, Array]:
+    """Single-track PDA over pairs (track, log ratio r): ``beta_ij = r_ij / (1 + sum r)``,
+    ``beta_i0 = 1 / (1 + sum r)``, in log space (a tight gate makes r overflow)."""
+    mx = np.zeros(T)
+    np.maximum.at(mx, track, lr)
+    s = np.exp(-mx) + np.bincount(track, np.exp(lr - mx[track]), minlength=T)
+    lse = mx + np.log(s)
+    return np.exp(lr - lse[track]), np.exp(-lse)
+
+
+def _enumerate(lt: Index, ld: Index, lr: Array, nt: int, nd: int, max_events: int
+               ) -> Array | None:
+    """Exact marginals of one cluster: ``B (nt, nd + 1)`` with ``B[i, 0] = beta_i0`` and
+    ``B[i, j + 1] = beta_ij``, or None past ``max_events`` events.
+
+    Events are built track by track; each step extends every event so far by the track's
+    miss and by each of its detections that the event has not used (vectorised over events
+    and options).
+    """
+    ev = np.full((1, nt), -1, dtype=np.intp)  # each track's detection, -1 = miss (so far)
+    used = np.zeros((1, nd), dtype=bool)
+    logw = np.zeros(1)
+    bounds = np.searchsorted(lt, np.arange(nt + 1)).tolist()  # lt is sorted
+    for i in range(nt):
+        dets, w = ld[bounds[i]:bounds[i + 1]], lr[bounds[i]:bounds[i + 1]]
+        e, o = np.nonzero(~used[:, dets])  # event e can add option o
+        if logw.size + e.size > max_events:
+            return None
+        # the events so far already carry the miss (-1) of track i: append the extensions
+        ext = ev[e]
+        ext[:, i] = dets[o]
+        ext_used = used[e]
+        ext_used[np.arange(e.size), dets[o]] = True
+        ev = np.concatenate([ev, ext])
+        used = np.concatenate([used, ext_used])
+        logw = np.concatenate([logw, logw[e] + w[o]])
+    p = np.exp(logw - logw.max())
+    p /= p.sum()
+    flat = (np.arange(nt) * (nd + 1))[None, :] + ev + 1
+    B = np.bincount(flat.ravel(), np.repeat(p, nt), minlength=nt * (nd + 1))
+    return B.reshape(nt, nd + 1)
+
+
+def _lbp(track: Index, det: Index, lr: Array, T: int, D: int) -> tuple[Array, Array]:
+    """Loopy belief propagation for the marginals (Williams and Lau 2014), over pairs.
+
+    With ``r_ij`` the pair's weight over the miss's, messages
+    ``mu_ij = r_ij / (1 + sum_{j' != j} r_ij' nu_ij')`` (track to detection) and
+    ``nu_ij = 1 / (1 + sum_{i' != i} mu_i'j)`` (detection to track) are iterated from
+    nu = 1; then ``beta_ij = r_ij nu_ij / (1 + sum_j' r_ij' nu_ij')``, ``beta_i0 = 1 / (...)``.
+    """
+    # e^500 ~ 1e217: a few such weights still sum without overflow
+    r = np.exp(np.clip(lr, -500.0, 500.0))
+    nu = np.ones_like(r)
+    for _ in range(LBP_MAX_ITER):
+        mu = r / _one_plus_others(r * nu, track, T)
+        new = 1.0 / _one_plus_others(mu, det, D)
+        done = np.max(np.abs(new - nu) / new) <= LBP_TOL
+        nu = new
+        if done:
+            break
+    val = r * nu
+    s = 1.0 + np.bincount(track, val, minlength=T)
+    return val / s[track], 1.0 / s
+
+
+def _one_plus_others(v: Array, seg: Index, n: int) -> Array:
+    """``1 + sum_{k != p, seg_k = seg_p} v_k`` for every element p, without cancellation.
+
+    ``1 + total - v_p`` loses everything when v_p dominates its segment (a detection far
+    likelier than the miss makes total - v_p round to 0, and the message divides by 0), so
+    the largest element of each segment gets the direct sum of the others; for the rest,
+    ``total - v_p`` keeps the maximum in, and is accurate to a few ulps of it.
+    """
+    top = np.full(n, -np.inf)
+    np.maximum.at(top, seg, v)
+    is_top = v == top[seg]
+    # one element per segment plays the maximum (ties: the first)
+    cand = np.flatnonzero(is_top)
+    _, keep = np.unique(seg[cand], return_index=True)
+    is_top[:] = False
+    is_top[cand[keep]] = True
+    total = np.bincount(seg, v, minlength=n)
+    rest = np.bincount(seg, np.where(is_top, 0.0, v), minlength=n)
+    return 1.0 + np.where(is_top, rest[seg], total[seg] - v)
+
+
+def jpda_update(prior: Gaussian, K: Array, S: Array, track: Index, residual: Array,
+                beta: Array, beta0: Array, P_upd: Array | None = None) -> Gaussian:
+    """JPDA (PDAF) state update of every track at once (Bar-Shalom):
+
+        nu_i = sum_j beta_ij nu_ij                                  (combined innovation)
+        x_i+ = x_i + K_i nu_i
+        P_i+ = beta_i0 P_i + (1 - beta_i0) P_i^c
+               + K_i [sum_j beta_ij nu_ij nu_ij^T - nu_i nu_i^T] K_i^T
+
+    with ``P^c = P - K S K^T`` the covariance after a certain detection (pass ``P_upd`` to
+    use the filter's own, e.g. Joseph form). ``prior`` is the predicted belief ``(T, n)``;
+    ``K (T, n, m)``, ``S (T, m, m)``; pairs given by ``track (P,)``, ``residual (P, m)``,
+    ``beta (P,)``; ``beta0 (T,)``. A track with no gated detection (beta_i0 = 1) keeps its
+    prediction.
+    """
+    x, P = np.asarray(prior.mean, dtype=float), np.asarray(prior.cov, dtype=float)
+    T, m = x.shape[0], S.shape[-1]
+    nP = track.shape[0]
+    # one sparse (T x P) matrix of the betas sums every track's pairs in one product
+    Bm = sp.csr_matrix((beta, (track, np.arange(nP))), shape=(T, nP))
+    nu = np.asarray(Bm @ residual).reshape(T, m)
+    outer = (residual[:, :, None] * residual[:, None, :]).reshape(nP, m * m)
+    spread = np.asarray(Bm @ outer).reshape(T, m, m) - nu[:, :, None] * nu[:, None, :]
+    x_new = x + (K @ nu[:, :, None])[:, :, 0]
+    if P_upd is None:
+        P_upd = P - K @ S @ K.mT
+    b0 = np.asarray(beta0, dtype=float)[:, None, None]
+    P_new = b0 * P + (1.0 - b0) * P_upd + K @ spread @ K.mT
+    return Gaussian(x_new, symmetrize(P_new))
