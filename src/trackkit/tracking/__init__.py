@@ -5,6 +5,12 @@
     a = tt.gnn(g, tt.loglik_costs(g, p_d=0.9, clutter_density=1e-6))     # or tt.jpda(...)
     logic = tt.HistoryLogic(confirm=(2, 3), delete=(3, 3))   # M-of-N, or tt.ScoreLogic
     new = tt.single_point(z[a.unassigned], R, v_max=30.0)     # or two_point, converted plots
+
+    tracker = tt.Tracker(tk.filters.EKF(), motion, radar, pd=0.9, clutter_density=lam,
+                         associator=tt.JPDA(), logic=logic, initiator=tt.TwoPoint(v_max=40))
+    tracks = tracker.init()
+    for scan in scans:                   # all live tracks are one batched belief
+        tracks = tracker.step(tracks, scan)
 """
 
 from trackkit.tracking.association import (
@@ -54,6 +60,15 @@ from trackkit.tracking.logic import (
     to_delete,
 )
 from trackkit.tracking.scans import Scan, Scans
+from trackkit.tracking.tracker import (
+    GNN,
+    JPDA,
+    SinglePoint,
+    StepInfo,
+    Tracker,
+    Tracks,
+    TwoPoint,
+)
 
 __all__ = [
     "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult", "clusters",
@@ -67,4 +82,5 @@ __all__ = [
     "concatenate", "confirmed", "gaussian_log_likelihood", "select", "sprt_thresholds",
     "tentative", "to_delete",
     "Scan", "Scans",
+    "GNN", "JPDA", "SinglePoint", "StepInfo", "Tracker", "Tracks", "TwoPoint",
 ]

@@ -1,0 +1,401 @@
+"""The multi-target tracker: the radar loop of seed 001 (section 1) on the batched core.
+
+One scan, for every live track at once (axis 0 of one batched belief is the track axis):
+
+    predict      x-, P- = f.predict(x, P, dt)                      one filter call
+    measure      zhat, S from the filter's own innovation            one filter call
+    gate         d2_ij = nu_ij^T S_i^-1 nu_ij <= gamma(P_G)         KD-tree pre-gate
+    associate    GNN (least cost, per cluster) or JPDA (marginals beta_ij, beta_i0)
+    update       GNN: f.update(x-, z_assigned)  (nan: a missed track keeps x-)
+                 JPDA: every gated hypothesis updated as one batch, then the mixture
+                 x = beta_0 x- + sum_j beta_j x_j, P = sum (beta (P + d d^T)) moment-matched
+    logic        hit/miss -> M-of-N or SPRT score -> confirm, delete
+    initiate     unassigned plots -> new tentative tracks, new IDs
+
+``zhat`` and ``S`` come from the filter itself: an update at ``z0 = h(x-)`` returns the
+residual ``z0 - zhat`` and the innovation covariance ``S`` of that filter (exactly
+``h(x-)`` and ``H P H^T + R`` for the KF and EKF, the unscented ones for the UKF and CKF,
+the mixture's for an IMM), so the gate and the association use the filter's likelihood.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from trackkit.angles import wrap
+from trackkit.belief import Gaussian
+from trackkit.models.sensors import Position, RangeBearing
+from trackkit.tracking.association import (
+    JPDA_MAX_EVENTS,
+    clusters,
+    distance_costs,
+    gnn,
+    jpda,
+    loglik_costs,
+    seed004_costs,
+)
+from trackkit.tracking.gating import GATE_PROBABILITY, Gate, gate
+from trackkit.tracking.initiate import convert_range_bearing, single_point, two_point
+from trackkit.tracking.logic import (
+    HistoryLogic,
+    HistoryState,
+    IdCounter,
+    ScoreLogic,
+    ScoreState,
+    concatenate,
+    confirmed,
+    select,
+    to_delete,
+)
+from trackkit.tracking.scans import Scan
+
+Array = NDArray[np.float64]
+Index = NDArray[np.intp]
+
+__all__ = ["GNN", "JPDA", "SinglePoint", "TwoPoint", "Tracks", "StepInfo", "Tracker"]
+
+_NO_PAIR = 1e300  # the cost of a pair of plots too far apart to be one target
+
+
+# --- the strategies -----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GNN:
+    """Global nearest neighbour: the least-cost assignment, per cluster of tracks that share
+    gated detections. ``cost``: "loglik" (negative log-likelihood ratio against clutter and
+    a miss: the most probable joint event), "distance" (Mahalanobis d^2, a miss costing the
+    gate threshold) or "seed004" (``K1 (1 - exp(-K2 d^2))``, 004.md 2.6)."""
+
+    cost: Literal["loglik", "distance", "seed004"] = "loglik"
+    k1: float = 1.0
+    k2: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.cost not in ("loglik", "distance", "seed004"):
+            raise ValueError(f"GNN cost = {self.cost!r}; expected 'loglik', 'distance' or "
+                             "'seed004'")
+
+
+@dataclass(frozen=True)
+class JPDA:
+    """Joint probabilistic data association: exact joint events per cluster, loopy belief
+    propagation past ``max_events`` (reported in ``StepInfo.approximated``). A detection in
+    a track's gate with total association probability of at least ``claim`` does not start
+    a new track."""
+
+    max_events: int = JPDA_MAX_EVENTS
+    claim: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.max_events, int) and self.max_events >= 1):
+            raise ValueError(f"JPDA max_events = {self.max_events!r}; expected an int >= 1")
+        if not 0.0 < self.claim <= 1.0:
+            raise ValueError(f"JPDA claim = {self.claim!r}; expected 0 < claim <= 1")
+
+
+@dataclass(frozen=True)
+class SinglePoint:
+    """A tentative track at every unassigned plot: position from the plot (range-bearing
+    plots by the unbiased conversion), velocity zero with ``v_std`` per axis."""
+
+    v_std: float = 50.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.v_std) and self.v_std > 0):
+            raise ValueError(f"SinglePoint v_std = {self.v_std!r}; expected a positive number")
+
+
+@dataclass(frozen=True)
+class TwoPoint:
+    """A tentative track from two unassigned plots of consecutive scans within
+    ``v_max * dt + margin`` of each other (two-point differencing); a plot that pairs with
+    none waits one scan for a partner."""
+
+    v_max: float = 300.0
+    margin: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.v_max) and self.v_max > 0):
+            raise ValueError(f"TwoPoint v_max = {self.v_max!r}; expected a positive number")
+        if not (np.isfinite(self.margin) and self.margin >= 0):
+            raise ValueError(f"TwoPoint margin = {self.margin!r}; expected a number >= 0")
+
+
+# --- what the tracker carries -------------------------------------------------------------
+
+
+class StepInfo(NamedTuple):
+    """What happened in the last scan: the gated pairs, which tracks were hit, the clusters
+    whose JPDA marginals were approximated, tracks started and deleted (their IDs)."""
+
+    pairs: int
+    hit: NDArray[np.bool_]
+    clusters: int
+    approximated: int
+    started: NDArray[np.int64]
+    deleted: NDArray[np.int64]
+
+
+class Tracks(NamedTuple):
+    """Every live track, batched: ``belief`` (the filter's belief, axis 0 = track), stable
+    ``ids``, the logic's ``state``, ``born`` (time of the first plot), the ``time`` of the
+    beliefs, the ID ``counter``, the plots waiting for a partner (two-point initiation) and
+    the last scan's ``info``."""
+
+    belief: Any
+    ids: NDArray[np.int64]
+    state: HistoryState | ScoreState
+    born: Array
+    time: float
+    counter: IdCounter
+    waiting: tuple[Array, Array, float]  # (z (K, d), R (K, d, d), time) Cartesian plots
+    info: StepInfo | None = None
+
+    @property
+    def confirmed(self) -> NDArray[np.bool_]:
+        return confirmed(self.state)
+
+    def __len__(self) -> int:  # the number of tracks, not of fields
+        return int(self.ids.shape[0])
+
+
+def _take(belief: Any, index: Index) -> Any:
+    """Rows ``index`` of a batched belief (any NamedTuple of arrays with axis 0 = track)."""
+    return type(belief)._make(np.asarray(a)[index] for a in belief)
+
+
+def _join(a: Any, b: Any) -> Any:
+    return type(a)._make(np.concatenate([x, y]) for x, y in zip(a, b, strict=True))
+
+
+# --- the tracker ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Tracker:
+    """``Tracker(filter, motion, sensor, ...)``; ``tracks = tracker.step(tracks, scan)``.
+
+    ``sensor`` is the sensor model of every scan, or a mapping from a scan's sensor id to its
+    model. ``pd`` and ``clutter_density`` (false plots per unit of measurement space per
+    scan) set the association's likelihood ratios and the score logic; ``p_gate`` the gate.
+    The state is ``[x, y, vx, vy]`` with any extras after (e.g. a turn rate), which new tracks
+    get with ``extra_mean`` and ``extra_std``.
+    """
+
+    filter: Any
+    motion: Any
+    sensor: Any
+    pd: float = 0.9
+    clutter_density: float = 1e-6
+    p_gate: float = GATE_PROBABILITY
+    associator: GNN | JPDA = field(default_factory=GNN)
+    logic: HistoryLogic | ScoreLogic = field(default_factory=HistoryLogic)
+    initiator: SinglePoint | TwoPoint = field(default_factory=SinglePoint)
+    extra_mean: tuple[float, ...] = ()
+    extra_std: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.pd <= 1.0:
+            raise ValueError(f"Tracker pd = {self.pd!r}; expected 0 < pd <= 1")
+        if not (np.isfinite(self.clutter_density) and self.clutter_density > 0):
+            raise ValueError(f"Tracker clutter_density = {self.clutter_density!r}; expected a "
+                             "positive density (false plots per unit volume per scan)")
+        if not 0.0 < self.p_gate < 1.0:
+            raise ValueError(f"Tracker p_gate = {self.p_gate!r}; expected 0 < P_G < 1")
+        if len(self.extra_mean) != len(self.extra_std):
+            raise ValueError(f"Tracker extra_mean has {len(self.extra_mean)} values and "
+                             f"extra_std {len(self.extra_std)}; expected one each per extra")
+
+    # -- the pieces ------------------------------------------------------------------------
+
+    def sensor_for(self, scan: Scan) -> Any:
+        if isinstance(self.sensor, dict):
+            if scan.sensor not in self.sensor:
+                raise ValueError(f"scan at t = {scan.time} is from sensor {scan.sensor}; the "
+                                 f"tracker knows sensors {sorted(self.sensor)}")
+            return self.sensor[scan.sensor]
+        return self.sensor
+
+    def init(self, time: float = 0.0) -> Tracks:
+        """No tracks yet, at ``time``."""
+        n = 4 + len(self.extra_mean)
+        empty = Gaussian._make((np.zeros((0, n)), np.zeros((0, n, n))))
+        belief = self.filter.init(empty) if hasattr(self.filter, "init") else empty
+        return Tracks(belief, np.zeros(0, np.int64), self.logic.init(0), np.zeros(0),
+                      float(time), IdCounter(), (np.zeros((0, 2)), np.zeros((0, 2, 2)),
+                                                 float(time)))
+
+    def _estimate(self, belief: Any) -> Gaussian:
+        return self.filter.estimate(belief) if hasattr(self.filter, "estimate") else belief
+
+    def measurement_prediction(self, belief: Any, sensor: Any) -> tuple[Array, Array]:
+        """``zhat (T, m)`` and ``S (T, m, m)`` of the filter: its update at ``z0 = h(x-)``
+        gives the residual ``z0 - zhat`` and S."""
+        z0 = np.asarray(sensor.h(self._estimate(belief).mean), dtype=float)
+        _, innov = self.filter.update(belief, z0, sensor)
+        zhat = z0 - innov.residual
+        ang = np.asarray(getattr(sensor, "angular", (False,) * z0.shape[-1]))
+        if ang.any():
+            zhat[:, ang] = wrap(zhat[:, ang])
+        return zhat, np.asarray(innov.cov, dtype=float)
+
+    def _plots(self, z: Array, sensor: Any) -> tuple[Array, Array]:
+        """Cartesian positions and covariances of plots, for initiation."""
+        if isinstance(sensor, RangeBearing):
+            return convert_range_bearing(z, sensor)
+        if isinstance(sensor, Position) and sensor.dim_z == 2:
+            return z, np.broadcast_to(np.asarray(sensor.noise), (len(z), 2, 2))
+        raise ValueError(f"tracks start from plots of a RangeBearing or 2-D Position sensor; "
+                         f"got {type(sensor).__name__}")
+
+    def _new_beliefs(self, g: Gaussian) -> Any:
+        """The initiator's [x, y, vx, vy] Gaussians with the extras appended."""
+        k = g.mean.shape[0]
+        e = len(self.extra_mean)
+        if e:
+            mean = np.concatenate([g.mean, np.tile(self.extra_mean, (k, 1))], axis=1)
+            cov = np.zeros((k, 4 + e, 4 + e))
+            cov[:, :4, :4] = g.cov
+            cov[:, 4:, 4:] = np.diag(np.square(self.extra_std))
+            g = Gaussian._make((mean, cov))
+        return self.filter.init(g) if hasattr(self.filter, "init") else g
+
+    # -- one scan --------------------------------------------------------------------------
+
+    def step(self, tracks: Tracks, scan: Scan) -> Tracks:
+        """Predict, gate, associate, update, run the logic and start tracks, for one scan."""
+        sensor = self.sensor_for(scan)
+        z = np.asarray(scan.z, dtype=float).reshape(-1, sensor.dim_z)
+        dt = float(scan.time) - tracks.time
+        if dt < 0:
+            raise ValueError(f"scan at t = {scan.time} is earlier than the tracks (t = "
+                             f"{tracks.time}); expected scans in time order")
+        T, D = len(tracks), z.shape[0]
+        claimed = np.zeros(D, dtype=bool)
+        info = dict(pairs=0, clusters=0, approximated=0)
+        belief, state = tracks.belief, tracks.state
+        hit = np.zeros(T, dtype=bool)
+        if T:
+            belief = self.filter.predict(belief, self.motion, dt)
+            zhat, S = self.measurement_prediction(belief, sensor)
+            g = gate(zhat, S, z, self.p_gate, angular=getattr(sensor, "angular", None))
+            info["pairs"] = g.size
+            if isinstance(self.associator, JPDA):
+                belief, hit, ll, claimed = self._jpda(belief, g, z, sensor, info)
+            else:
+                belief, hit, ll, claimed = self._gnn(belief, g, z, sensor, info)
+            state = (self.logic.step(state, hit, ll) if isinstance(self.logic, ScoreLogic)
+                     else self.logic.step(state, hit))
+        # delete, then start tracks from the plots no track claimed
+        keep = ~to_delete(state)
+        deleted = tracks.ids[~keep]
+        belief, state = _take(belief, np.flatnonzero(keep)), select(state, keep)
+        ids, born = tracks.ids[keep], tracks.born[keep]
+        new, waiting = self._initiate(z[~claimed], sensor, float(scan.time), tracks.waiting)
+        counter = tracks.counter
+        started = np.zeros(0, np.int64)
+        if new is not None:
+            k = new.mean.shape[0]
+            started, counter = counter.issue(k)
+            belief = _join(belief, self._new_beliefs(new))
+            state = concatenate(state, self.logic.init(k))
+            ids = np.concatenate([ids, started])
+            born = np.concatenate([born, np.full(k, float(scan.time))])
+        step_info = StepInfo(info["pairs"], hit, info["clusters"], info["approximated"],
+                             started, deleted)
+        return Tracks(belief, ids, state, born, float(scan.time), counter, waiting, step_info)
+
+    def _gnn(self, belief: Any, g: Gate, z: Array, sensor: Any, info: dict):
+        a = self.associator
+        if a.cost == "loglik":
+            costs = loglik_costs(g, self.pd, self.clutter_density, self.p_gate)
+        elif a.cost == "distance":
+            costs = distance_costs(g, g.threshold)
+        else:
+            costs = seed004_costs(g, a.k1, a.k2)
+        cl = clusters(g)
+        info["clusters"] = cl.count
+        assignment = gnn(g, costs)
+        hit = assignment.det >= 0
+        z_assigned = np.full((g.n_tracks, z.shape[1]), np.nan)
+        z_assigned[hit] = z[assignment.det[hit]]
+        belief, _ = self.filter.update(belief, z_assigned, sensor)
+        claimed = np.zeros(z.shape[0], dtype=bool)
+        claimed[assignment.det[hit]] = True
+        # the score logic's hit term: ln N(z_j; zhat_i, S_i) of the assigned pair
+        ll = np.zeros(g.n_tracks)
+        key = g.track * z.shape[0] + g.det
+        rows = np.flatnonzero(hit)
+        ll[rows] = g.loglik[np.searchsorted(key, rows * z.shape[0] + assignment.det[rows])]
+        return belief, hit, ll, claimed
+
+    def _jpda(self, belief: Any, g: Gate, z: Array, sensor: Any, info: dict):
+        a = self.associator
+        r = jpda(g, self.pd, self.clutter_density, self.p_gate, max_events=a.max_events)
+        info["clusters"], info["approximated"] = r.clusters.count, int(r.approximated.sum())
+        prior = self._estimate(belief)
+        T, n = prior.mean.shape
+        if g.size:
+            # every gated hypothesis (track i, detection j) updated as one batch
+            post, _ = self.filter.update(_take(belief, g.track), z[g.det], sensor)
+            xj, Pj = self._estimate(post)
+        else:
+            xj, Pj = np.zeros((0, n)), np.zeros((0, n, n))
+        # the mixture beta_0 N(x-, P-) + sum_j beta_j N(x_j, P_j), moment-matched
+        b0 = r.beta0
+        x = b0[:, None] * prior.mean
+        np.add.at(x, g.track, r.beta[:, None] * xj)
+        d0 = prior.mean - x
+        dj = xj - x[g.track]
+        P = b0[:, None, None] * (prior.cov + d0[:, :, None] * d0[:, None, :])
+        np.add.at(P, g.track, r.beta[:, None, None] * (Pj + dj[:, :, None] * dj[:, None, :]))
+        P = 0.5 * (P + P.mT)
+        mixed = Gaussian._make((x, P))
+        belief = self.filter.init(mixed) if hasattr(self.filter, "init") else mixed
+        hit = b0 < 0.5  # more likely detected than not
+        claim = np.bincount(g.det, r.beta, minlength=z.shape[0])
+        # the score logic's hit term: ln N of the most probable gated detection
+        best = np.full(T, -np.inf)
+        np.maximum.at(best, g.track, r.beta)
+        ll = np.zeros(T)
+        top = r.beta == best[g.track]
+        ll[g.track[top]] = g.loglik[top]
+        return belief, hit, ll, claim >= a.claim
+
+    def _initiate(self, z: Array, sensor: Any, t: float, waiting):
+        """New track beliefs ([x, y, vx, vy]) from the unclaimed plots, and the plots left
+        waiting for a partner (two-point)."""
+        if z.shape[0] == 0 and not isinstance(self.initiator, TwoPoint):
+            return None, waiting
+        p, R = self._plots(z, sensor) if z.shape[0] else (np.zeros((0, 2)),
+                                                            np.zeros((0, 2, 2)))
+        if isinstance(self.initiator, SinglePoint):
+            if p.shape[0] == 0:
+                return None, waiting
+            return single_point(p, R, v_std=self.initiator.v_std), waiting
+        zw, Rw, tw = waiting
+        left = (p, R, t)
+        if zw.shape[0] == 0 or p.shape[0] == 0 or t <= tw:
+            return None, left
+        pairs, g = two_point(zw, Rw, tw, p, R, t, v_max=self.initiator.v_max,
+                             margin=self.initiator.margin)
+        if pairs.shape[0] == 0:
+            return None, left
+        # each plot starts at most one track: the pairing of least total speed
+        cost = np.full((zw.shape[0], p.shape[0]), _NO_PAIR)
+        cost[pairs[:, 0], pairs[:, 1]] = np.linalg.norm(g.mean[:, 2:4], axis=1)
+        i, j = linear_sum_assignment(cost)
+        ok = cost[i, j] < _NO_PAIR
+        lookup = np.full(cost.shape, -1, np.intp)
+        lookup[pairs[:, 0], pairs[:, 1]] = np.arange(pairs.shape[0])
+        chosen = lookup[i[ok], j[ok]]
+        rest = np.ones(p.shape[0], bool)
+        rest[j[ok]] = False
+        return (Gaussian._make((g.mean[chosen], g.cov[chosen])),
+                (p[rest], R[rest], t))
