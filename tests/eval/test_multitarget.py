@@ -419,10 +419,15 @@ def test_clean_track_with_late_confirmation():
     X, Y = _scenario(10, truth, tracks)
     r = _counts(track_counts(X, Y, c=5.0, times=5.0 * np.arange(10)))
     assert r == {
-        "truths": 1, "truths_confirmed": 1, "confirm_delay": 15.0, "truth_steps": 10,
+        "truths": 1, "truths_confirmed": 1, "confirmed_within": 1, "confirm_delay": 15.0,
+        "truth_steps": 10,
         "assigned_steps": 7, "tracks": 1, "false_tracks": 0, "track_steps": 7,
         "purity": 1.0, "breaks": 0, "truth_switches": 0, "id_switches": 0, "sq_error": 7.0,
     }  # fmt: skip
+    # confirmed 15 s after birth: within 15 s, not within 14.9 s
+    assert track_counts(X, Y, c=5.0, times=5.0 * np.arange(10), within=15.0).confirmed_within[0]
+    assert not track_counts(X, Y, c=5.0, times=5.0 * np.arange(10),
+                            within=14.9).confirmed_within[0]
     s = track_summary(track_counts(X, Y, c=5.0))
     assert s["mean_confirm_delay"] == 3.0 and s["rmse"] == 1.0
     assert s["completeness"] == 0.7 and s["mean_purity"] == 1.0
@@ -506,7 +511,8 @@ def test_runs_batched_equal_runs_alone():
     assert s["truths"] == 3 and s["tracks"] == 4 and s["false_track_fraction"] == 0.25
 
 
-def _reference_counts(truth: Frames, tracks: Frames, c: float, run_offsets, min_assigned):
+def _reference_counts(truth: Frames, tracks: Frames, c: float, run_offsets, min_assigned,
+                      within: float = math.inf):
     """The definitions of ``track_counts`` written out with dicts, run by run."""
     I, J = assign(truth, tracks, c)
     pair = dict(zip(I.tolist(), J.tolist(), strict=True))
@@ -546,6 +552,7 @@ def _reference_counts(truth: Frames, tracks: Frames, c: float, run_offsets, min_
         n.update(
             truths=len(birth),
             truths_confirmed=len(first),
+            confirmed_within=sum(first[t] - birth[t] <= within for t in first),
             confirm_delay=float(sum(first[t] - birth[t] for t in first)),
             tracks=len(life),
             false_tracks=len(false),
@@ -579,9 +586,9 @@ def test_track_counts_equal_reference_on_random_runs():
             yi.append(j)
         ro.append(ro[-1] + K)
     X, Y = frames(xs, xi, dim=2), frames(ys, yi, dim=2)
-    for frac in (0.5, 0.2):
-        got = track_counts(X, Y, c=3.0, run_offsets=ro, min_assigned=frac)
-        ref = _reference_counts(X, Y, 3.0, ro, frac)
+    for frac, within in ((0.5, math.inf), (0.2, 3.0)):
+        got = track_counts(X, Y, c=3.0, run_offsets=ro, min_assigned=frac, within=within)
+        ref = _reference_counts(X, Y, 3.0, ro, frac, within)
         for r, want in enumerate(ref):
             for name in TrackCounts._fields:
                 assert getattr(got, name)[r] == pytest.approx(want[name], rel=1e-12), (r, name)

@@ -122,6 +122,7 @@ class TrackCounts(NamedTuple):
 
     truths: IntArray  #: distinct truth IDs
     truths_confirmed: IntArray  #: truths assigned to a track at some step
+    confirmed_within: IntArray  #: truths confirmed no later than ``within`` after birth
     confirm_delay: Array  #: sum over confirmed truths of t(first assigned) - t(birth)
     truth_steps: IntArray  #: sum over steps of the number of truths present
     assigned_steps: IntArray  #: assigned (truth, track) pairs over all steps
@@ -569,6 +570,7 @@ def track_counts(
     run_offsets: ArrayLike | None = None,
     times: ArrayLike | None = None,
     min_assigned: float = 0.5,
+    within: float = math.inf,
 ) -> TrackCounts:
     """Track-level counts per run, from truth and confirmed tracks with integer IDs.
 
@@ -581,6 +583,7 @@ def track_counts(
     * a truth's *birth* is the first step it is present; it is *confirmed* if it is assigned
       at some step, and its confirmation delay is t(first assigned step) - t(birth)
       (MATLAB ``trackAssignmentMetrics``: establishment length, but in time);
+      ``confirmed_within`` counts the truths whose delay is at most ``within``;
     * a track's *life* is the number of steps it is present; it is *false* if it is assigned
       on fewer than ``min_assigned`` (default 1/2) of them, i.e. unassigned for most of its
       life; its *purity* is the number of steps assigned to its dominant truth (the truth it
@@ -599,6 +602,8 @@ def track_counts(
     c, p = _check_params(c, p)
     if not 0 < min_assigned <= 1:
         raise ValueError(f"min_assigned = {min_assigned!r}; expected a fraction in (0, 1]")
+    if not within >= 0:
+        raise ValueError(f"within = {within!r}; expected a delay >= 0")
     X = _check_frames("truth", truth, need_ids=True)
     Y = _check_frames("tracks", tracks, need_ids=True)
     _check_pair(X, Y, "truth", "tracks")
@@ -681,6 +686,7 @@ def track_counts(
     return TrackCounts(
         truths=per_run(truth_run),
         truths_confirmed=per_run(truth_run[conf]),
+        confirmed_within=per_run(truth_run[conf][delay <= within]),
         confirm_delay=per_run(truth_run[conf], delay),
         truth_steps=per_run(run_of_step[xs]),
         assigned_steps=per_run(prun),
@@ -698,7 +704,8 @@ def track_counts(
 def track_summary(counts: TrackCounts) -> dict[str, float]:
     """Totals over runs (integers exactly, floats by ``math.fsum``, correctly rounded) and
     the rates built from them: ``completeness`` = assigned_steps / truth_steps,
-    ``confirmed_fraction`` = truths_confirmed / truths, ``mean_confirm_delay``,
+    ``confirmed_fraction`` = truths_confirmed / truths, ``confirmed_within_fraction`` =
+    confirmed_within / truths, ``mean_confirm_delay``,
     ``false_track_fraction`` = false_tracks / tracks, ``mean_purity`` (over non-false tracks),
     ``rmse`` = sqrt(sq_error / assigned_steps). A rate with a zero denominator is nan."""
     tot: dict[str, float] = {}
@@ -711,6 +718,7 @@ def track_summary(counts: TrackCounts) -> dict[str, float]:
 
     tot["completeness"] = ratio(tot["assigned_steps"], tot["truth_steps"])
     tot["confirmed_fraction"] = ratio(tot["truths_confirmed"], tot["truths"])
+    tot["confirmed_within_fraction"] = ratio(tot["confirmed_within"], tot["truths"])
     tot["mean_confirm_delay"] = ratio(tot["confirm_delay"], tot["truths_confirmed"])
     tot["false_track_fraction"] = ratio(tot["false_tracks"], tot["tracks"])
     tot["mean_purity"] = ratio(tot["purity"], tot["tracks"] - tot["false_tracks"])

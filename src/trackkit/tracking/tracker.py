@@ -85,11 +85,13 @@ class GNN:
 @dataclass(frozen=True)
 class JPDA:
     """Joint probabilistic data association: exact joint events per cluster, loopy belief
-    propagation past ``max_events`` (reported in ``StepInfo.approximated``). A detection in
-    a track's gate with total association probability of at least ``claim`` does not start
-    a new track."""
+    propagation past ``max_events`` (reported in ``StepInfo.approximated``). A track counts
+    as hit when its detection probability ``1 - beta_0`` is at least ``hit`` (MATLAB's
+    ``trackerJPDA`` HitMissThreshold, default 0.2); a detection with total association
+    probability of at least ``claim`` does not start a new track."""
 
     max_events: int = JPDA_MAX_EVENTS
+    hit: float = 0.2
     claim: float = 0.5
 
     def __post_init__(self) -> None:
@@ -97,6 +99,8 @@ class JPDA:
             raise ValueError(f"JPDA max_events = {self.max_events!r}; expected an int >= 1")
         if not 0.0 < self.claim <= 1.0:
             raise ValueError(f"JPDA claim = {self.claim!r}; expected 0 < claim <= 1")
+        if not 0.0 < self.hit <= 1.0:
+            raise ValueError(f"JPDA hit = {self.hit!r}; expected 0 < hit <= 1")
 
 
 @dataclass(frozen=True)
@@ -231,13 +235,14 @@ class Tracker:
                       float(time), IdCounter(), (np.zeros((0, 2)), np.zeros((0, 2, 2)),
                                                  float(time)))
 
-    def _estimate(self, belief: Any) -> Gaussian:
+    def estimate(self, belief: Any) -> Gaussian:
+        """The Gaussian of a belief (the filter's estimate for filters with memory)."""
         return self.filter.estimate(belief) if hasattr(self.filter, "estimate") else belief
 
     def measurement_prediction(self, belief: Any, sensor: Any) -> tuple[Array, Array]:
         """``zhat (T, m)`` and ``S (T, m, m)`` of the filter: its update at ``z0 = h(x-)``
         gives the residual ``z0 - zhat`` and S."""
-        z0 = np.asarray(sensor.h(self._estimate(belief).mean), dtype=float)
+        z0 = np.asarray(sensor.h(self.estimate(belief).mean), dtype=float)
         _, innov = self.filter.update(belief, z0, sensor)
         zhat = z0 - innov.residual
         ang = np.asarray(getattr(sensor, "angular", (False,) * z0.shape[-1]))
@@ -339,12 +344,12 @@ class Tracker:
         a = self.associator
         r = jpda(g, self.pd, self.clutter_density, self.p_gate, max_events=a.max_events)
         info["clusters"], info["approximated"] = r.clusters.count, int(r.approximated.sum())
-        prior = self._estimate(belief)
+        prior = self.estimate(belief)
         T, n = prior.mean.shape
         if g.size:
             # every gated hypothesis (track i, detection j) updated as one batch
             post, _ = self.filter.update(_take(belief, g.track), z[g.det], sensor)
-            xj, Pj = self._estimate(post)
+            xj, Pj = self.estimate(post)
         else:
             xj, Pj = np.zeros((0, n)), np.zeros((0, n, n))
         # the mixture beta_0 N(x-, P-) + sum_j beta_j N(x_j, P_j), moment-matched
@@ -358,7 +363,7 @@ class Tracker:
         P = 0.5 * (P + P.mT)
         mixed = Gaussian._make((x, P))
         belief = self.filter.init(mixed) if hasattr(self.filter, "init") else mixed
-        hit = b0 < 0.5  # more likely detected than not
+        hit = 1.0 - b0 >= a.hit
         claim = np.bincount(g.det, r.beta, minlength=z.shape[0])
         # the score logic's hit term: ln N of the most probable gated detection
         best = np.full(T, -np.inf)

@@ -1,0 +1,45 @@
+"""Recorded data in: readers of AIS, ADS-B and detection files, and the local frame.
+
+    from trackkit import io as tio
+    reports, report = tio.read_ais_csv(path)              # Solent layout; AisColumns(...) else
+    reports, report = tio.read_opensky_csv(path)          # OpenSky state vectors
+    scans, report = tio.read_detections(path, DetectionColumns(...), DetectionUnits(...))
+    print(report.summary())                               # skipped, sorted, duplicates
+
+Every reader validates with array operations, names a bad record's file, line and column,
+and with ``on_bad="skip"`` (the default) skips and counts it (``on_bad="stop"`` raises at the
+first). ``report.rows_read == report.rows_kept + report.n_skipped + report.duplicates``.
+Positions are converted once to a local east-north-up frame (:class:`EnuFrame`, x east,
+y north, z up, metres) at the data's median position or a given reference; times are float
+seconds from ``report.epoch``.
+"""
+
+from trackkit.io.adsb import read_opensky_csv
+from trackkit.io.ais import SOLENT, AisColumns, read_ais_csv
+from trackkit.io.detections import DetectionColumns, DetectionUnits, read_detections
+from trackkit.io.frames import (
+    KNOT,
+    NAUTICAL_MILE,
+    EnuFrame,
+    course_from_velocity,
+    velocity_from_course,
+)
+from trackkit.io.records import BadRecord, ReadReport, Reports
+
+__all__ = [
+    "KNOT",
+    "NAUTICAL_MILE",
+    "SOLENT",
+    "AisColumns",
+    "BadRecord",
+    "DetectionColumns",
+    "DetectionUnits",
+    "EnuFrame",
+    "ReadReport",
+    "Reports",
+    "course_from_velocity",
+    "read_ais_csv",
+    "read_detections",
+    "read_opensky_csv",
+    "velocity_from_course",
+]

@@ -1,0 +1,570 @@
+"""The engine under the readers: stream a table in blocks, validate each column with array
+operations, and account for every record.
+
+A reader describes what it wants as a list of :class:`Field` (which column, what kind of value,
+whether it may be blank, its valid range). :func:`read_csv_table` and
+:func:`read_parquet_table` stream the file (pyarrow, a few MB at a time, every column read as
+text from CSV so that one bad value cannot fail the whole parse), convert every field of a
+block at once, and build per-record messages only for the bad records. A record with several
+bad fields is counted once, under its first bad field in the file's column order.
+
+CSV line numbers are physical lines (the header is line 1) as long as no quoted value holds a
+line break; Parquet records are numbered by row from 1.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from trackkit.io.records import BadRecord
+
+__all__ = ["Field", "Table", "read_csv_table", "read_parquet_table", "parse_epoch"]
+
+Progress = Callable[[int, int], None]
+RowCheck = Callable[[dict], list]
+
+# What pyarrow's string-to-double cast accepts (checked against it in the tests), so that the
+# cast of the matching strings cannot fail; everything else is "not a number".
+_NUMBER = r"^[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?$|^[+-]?(?i:nan|inf|infinity)$"
+_INTEGER = r"^\+?[0-9]+$"
+_ISO = (r"^(?P<dt>[0-9]{4}-[0-9]{2}-[0-9]{2}[T ][0-9]{2}:[0-9]{2}:[0-9]{2})"
+        r"(?P<frac>\.[0-9]{1,9})?(?P<tz>Z|[+-][0-9]{2}:?[0-9]{2})?$")
+_TRUE = ("true", "t", "1", "yes")
+_FALSE = ("false", "f", "0", "no")
+
+#: Time formats besides strptime patterns (any format holding ``%``).
+TIME_FORMATS = {
+    "iso": "an ISO 8601 time such as 2016-01-12 13:02:11.218 (UTC unless an offset is given)",
+    "unix": "seconds since 1970-01-01 UTC",
+    "unix_ms": "milliseconds since 1970-01-01 UTC",
+    "seconds": "seconds (relative)",
+}
+BAD_FIELDS = "wrong number of fields"
+BLANK = "blank line"  # skipped and counted, but never fatal
+NAT = np.iinfo(np.int64).min  # numpy's NaT: a time not given
+BLOCK_SIZE = 1 << 22  # bytes of CSV parsed at a time: memory is a few blocks, not the file
+
+
+@dataclass(frozen=True)
+class Field:
+    """One column to read: ``role`` names it in the output, ``column`` in the file.
+
+    ``kind`` is ``"number"``, ``"time"``, ``"text"``, ``"int"`` or ``"bool"``. A blank value
+    of a ``required`` field makes the record bad (reason ``missing``, which is soft, i.e.
+    skipped even with ``on_bad="stop"``, when ``missing_soft``); of an optional field it is
+    "not given": nan (numbers), False (bool), counted in ``not_given``. ``unavailable`` is a
+    code that the source uses for "not available" (AIS COG 360): read as not given. ``lo,
+    hi`` bound valid numbers (inclusive).
+    """
+
+    role: str
+    column: str
+    kind: str = "number"
+    required: bool = True
+    lo: float | None = None
+    hi: float | None = None
+    what: str = ""
+    unavailable: float | None = None
+    time_format: str = "iso"
+    missing: str = "missing value"
+    missing_soft: bool = False
+
+    @property
+    def label(self) -> str:
+        return self.what or self.role
+
+    def range_text(self) -> str:
+        lo = "-inf" if self.lo is None else f"{self.lo:g}"
+        hi = "inf" if self.hi is None else f"{self.hi:g}"
+        return f"[{lo}, {hi}]"
+
+
+@dataclass
+class Table:
+    """What a read produced: the kept records' values by role (numpy arrays; text fields as
+    pyarrow string arrays) and lines, and the account of the rest."""
+
+    path: str
+    columns: dict
+    lines: np.ndarray
+    rows_read: int
+    skipped: Counter
+    bad: list
+    skipped_lines: np.ndarray
+    not_given: Counter
+
+
+# -- value conversion -------------------------------------------------------------------------
+
+
+def _blank(arr: pa.Array) -> np.ndarray:
+    if pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type):
+        m = pc.or_kleene(pc.is_null(arr), pc.equal(arr, ""))
+    else:
+        m = pc.is_null(arr)
+    return np.asarray(m.fill_null(True).to_numpy(zero_copy_only=False), dtype=bool)
+
+
+def _is_text(arr: pa.Array) -> bool:
+    return pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type)
+
+
+def _numbers(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
+    """(values as float64 with nan where not a number, mask of non-numbers among non-blank)."""
+    if _is_text(arr):
+        ok = np.asarray(pc.match_substring_regex(arr, _NUMBER).fill_null(False)
+                        .to_numpy(zero_copy_only=False), dtype=bool)
+        masked = pc.if_else(pa.array(ok), arr, pa.scalar(None, arr.type))
+        vals = pc.cast(masked, pa.float64())
+    elif pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type) or \
+            pa.types.is_decimal(arr.type):
+        ok = ~_blank(arr)
+        vals = pc.cast(arr, pa.float64())
+    else:
+        return np.full(len(arr), np.nan), np.ones(len(arr), dtype=bool)
+    v = np.asarray(vals.fill_null(np.nan).to_numpy(zero_copy_only=False), dtype=float)
+    return v, ~ok
+
+
+def _times(arr: pa.Array, fmt: str) -> tuple[np.ndarray, np.ndarray]:
+    """(times, mask of bad values among non-blank). Absolute formats give int64 ns since
+    1970 UTC, numeric ones float64 seconds (since 1970 for unix, relative for seconds)."""
+    if fmt == "seconds":
+        v, bad = _numbers(arr)
+        return v, bad | ~np.isfinite(v)
+    if fmt in ("unix", "unix_ms"):
+        v, bad = _numbers(arr)
+        digits = 9 if fmt == "unix" else 6
+        bad = bad | ~(np.abs(v) < 9e18 / 10**digits)  # int64 ns holds years 1678 to 2262
+        ns = np.round(np.where(bad, 0.0, v) * 10**digits).astype(np.int64)
+        if _is_text(arr):
+            # plain decimals exactly, digit by digit: a float64 of unix seconds keeps only
+            # about 0.2 microseconds
+            parts = pc.extract_regex(arr, r"^(?P<i>[+-]?[0-9]{1,13})(?:\.(?P<f>[0-9]*))?$")
+            ok = np.asarray(pc.is_valid(parts).to_numpy(zero_copy_only=False), dtype=bool)
+            ok &= ~bad
+            if ok.any():
+                i = pc.cast(pc.if_else(pa.array(ok), parts.field("i"), "0"), pa.int64())
+                f = pc.utf8_slice_codeunits(parts.field("f").fill_null(""), 0, digits)
+                f = pc.utf8_rpad(pc.if_else(pa.array(ok), f, ""), digits, "0")
+                i = np.asarray(i.to_numpy(zero_copy_only=False), dtype=np.int64)
+                f = np.asarray(pc.cast(f, pa.int64()).to_numpy(zero_copy_only=False),
+                               dtype=np.int64)
+                neg = np.asarray(pc.starts_with(parts.field("i").fill_null(""), "-")
+                                 .to_numpy(zero_copy_only=False), dtype=bool)
+                exact = np.where(neg, i * 10**digits - f, i * 10**digits + f)
+                ns = np.where(ok, exact, ns)
+        return ns, bad
+    if pa.types.is_timestamp(arr.type) or pa.types.is_date(arr.type):
+        ts = pc.cast(arr, pa.timestamp("ns", tz=getattr(arr.type, "tz", None)))
+        v = ts.cast(pa.int64()).fill_null(0).to_numpy(zero_copy_only=False)
+        return np.asarray(v, dtype=np.int64), np.zeros(len(arr), dtype=bool)
+    if not _is_text(arr):
+        return np.zeros(len(arr), dtype=np.int64), np.ones(len(arr), dtype=bool)
+    if fmt == "iso":
+        parts = pc.extract_regex(arr, _ISO)
+        dt = pc.replace_substring(parts.field("dt"), " ", "T")
+        ts = pc.strptime(dt, "%Y-%m-%dT%H:%M:%S", "ns", error_is_null=True)
+        ns = np.asarray(ts.cast(pa.int64()).fill_null(0).to_numpy(zero_copy_only=False),
+                        dtype=np.int64)
+        bad = np.asarray(pc.is_null(ts).to_numpy(zero_copy_only=False), dtype=bool)
+        frac = parts.field("frac").fill_null("")
+        if pc.any(pc.not_equal(frac, "")).as_py():
+            # ".218" -> 218000000 ns, padded to nine digits so no float rounding enters
+            digits = pc.utf8_rpad(pc.utf8_slice_codeunits(frac, 1), 9, "0")
+            digits = pc.if_else(pc.equal(digits, "000000000"), "0", digits)
+            ns = ns + np.asarray(pc.cast(pc.if_else(pc.equal(frac, ""), "0", digits),
+                                         pa.int64()).to_numpy(zero_copy_only=False))
+        tz = parts.field("tz").fill_null("")
+        if pc.any(pc.and_(pc.not_equal(tz, ""), pc.not_equal(tz, "Z"))).as_py():
+            t = np.asarray(tz.to_numpy(zero_copy_only=False), dtype=object)
+            off = np.array([_offset_ns(s) for s in t], dtype=np.int64)
+            ns = ns - off
+        return ns, bad
+    ts = pc.strptime(arr, fmt, "ns", error_is_null=True)
+    ns = np.asarray(ts.cast(pa.int64()).fill_null(0).to_numpy(zero_copy_only=False),
+                    dtype=np.int64)
+    return ns, np.asarray(pc.is_null(ts).to_numpy(zero_copy_only=False), dtype=bool)
+
+
+def _offset_ns(tz: str) -> int:
+    if tz in ("", "Z"):
+        return 0
+    sign = -1 if tz[0] == "-" else 1
+    hh, mm = int(tz[1:3]), int(tz[-2:])
+    return sign * (hh * 3600 + mm * 60) * 1_000_000_000
+
+
+def _ints(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
+    if _is_text(arr):
+        ok = np.asarray(pc.match_substring_regex(arr, _INTEGER).fill_null(False)
+                        .to_numpy(zero_copy_only=False), dtype=bool)
+        # digits beyond int64 would overflow the cast: treat as bad
+        ok &= np.asarray(pc.less_equal(pc.utf8_length(arr), 18).fill_null(False)
+                         .to_numpy(zero_copy_only=False), dtype=bool)
+        masked = pc.if_else(pa.array(ok), arr, pa.scalar(None, arr.type))
+        v = np.asarray(pc.cast(masked, pa.int64()).fill_null(0).to_numpy(zero_copy_only=False),
+                       dtype=np.int64)
+        return v, ~ok
+    f, bad = _numbers(arr)
+    bad = bad | ~np.isfinite(f) | (np.round(f) != f) | (f < 0) | (np.abs(f) > 2.0**62)
+    return np.where(bad, 0, f).astype(np.int64), bad
+
+
+def _bools(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
+    if pa.types.is_boolean(arr.type):
+        return np.asarray(arr.fill_null(False).to_numpy(zero_copy_only=False), dtype=bool), \
+            np.zeros(len(arr), dtype=bool)
+    if not _is_text(arr):
+        f, bad = _numbers(arr)
+        return f == 1, bad | ~np.isin(f, (0.0, 1.0))
+    low = pc.utf8_lower(arr)
+    t = np.asarray(pc.is_in(low, pa.array(_TRUE)).to_numpy(zero_copy_only=False), dtype=bool)
+    f = np.asarray(pc.is_in(low, pa.array(_FALSE)).to_numpy(zero_copy_only=False), dtype=bool)
+    return t, ~(t | f)
+
+
+def convert(field: Field, raw: pa.Array):
+    """Convert one column of a block. Returns ``(values, entries, not_given)`` where
+    entries is a list of ``(row indices, reason, expected)`` for the bad values and
+    not_given masks the optional values left blank (or "not available")."""
+    arr = pc.utf8_trim_whitespace(raw) if _is_text(raw) else raw
+    blank = _blank(arr)
+    entries = []
+    if field.required and blank.any():
+        entries.append((np.flatnonzero(blank), field.missing, f"a {field.label}"))
+    kind = field.kind
+    ng = blank if not field.required else np.zeros(len(blank), dtype=bool)
+    if kind == "text":
+        return arr, entries, ng
+    if kind == "number":
+        v, nan_ = _numbers(arr)
+        notnum = nan_ & ~blank
+        entries.append((np.flatnonzero(notnum), "not a number", f"a decimal {field.label}"))
+        nonfin = ~blank & ~notnum & ~np.isfinite(v)
+        entries.append((np.flatnonzero(nonfin), "not finite", f"a finite {field.label}"))
+        given = ~blank & ~notnum & ~nonfin
+        unavail = np.zeros_like(given)
+        if field.unavailable is not None:
+            unavail = given & (v == field.unavailable)
+            given &= ~unavail
+        if field.lo is not None or field.hi is not None:
+            lo = -np.inf if field.lo is None else field.lo
+            hi = np.inf if field.hi is None else field.hi
+            out = given & ((v < lo) | (v > hi))
+            reason = (f"negative {field.label}" if lo == 0 and hi == np.inf
+                      else f"{field.label} outside {field.range_text()}")
+            entries.append((np.flatnonzero(out), reason,
+                            f"a {field.label} in {field.range_text()}"))
+        return np.where(given, v, np.nan), entries, ng | unavail
+    if kind == "time":
+        v, bad = _times(arr, field.time_format)
+        bad &= ~blank
+        # blank (or bad) times are NaT for absolute times, nan for relative ones
+        v = np.where(blank | bad, NAT if v.dtype == np.int64 else np.nan, v)
+        expected = TIME_FORMATS.get(field.time_format, f"a time like {field.time_format!r}")
+        entries.append((np.flatnonzero(bad), "bad time", expected))
+        return v, entries, ng
+    if kind == "int":
+        v, bad = _ints(arr)
+        bad &= ~blank
+        entries.append((np.flatnonzero(bad), f"bad {field.label}",
+                        f"a non-negative integer {field.label}"))
+        return v, entries, ng
+    if kind == "bool":
+        v, bad = _bools(arr)
+        bad &= ~blank
+        entries.append((np.flatnonzero(bad), "not a boolean", "True or False"))
+        return v & ~blank, entries, ng
+    raise ValueError(f"Field {field.role!r}: kind {kind!r} is not known")
+
+
+# -- the accumulator --------------------------------------------------------------------------
+
+
+class _Accumulator:
+    def __init__(self, path: str, fields: Sequence[Field], order: dict[str, int], on_bad: str,
+                 soft: frozenset[str], max_listed: int, row_check: RowCheck | None,
+                 unit: str):
+        if on_bad not in ("skip", "stop"):
+            raise ValueError(f"on_bad = {on_bad!r}; expected 'skip' or 'stop'")
+        self.path, self.fields, self.order, self.on_bad = path, fields, order, on_bad
+        self.soft, self.max_listed, self.row_check, self.unit = soft, max_listed, row_check, unit
+        self.values: dict[str, list] = {f.role: [] for f in fields}
+        self.lines: list[np.ndarray] = []
+        self.rows = 0
+        self.skipped: Counter = Counter()
+        self.not_given: Counter = Counter()
+        self.bad: list[BadRecord] = []
+        self.bad_lines: list[np.ndarray] = []
+        self.whole_rows: list[BadRecord] = []  # wrong field counts, from the CSV parser
+
+    def _record(self, rec: BadRecord) -> None:
+        if self.on_bad == "stop" and rec.reason not in self.soft | {BLANK}:
+            raise ValueError(f"{rec} [on_bad='stop'; pass on_bad='skip' to skip bad records]")
+        if len(self.bad) < self.max_listed:
+            self.bad.append(rec)
+
+    def add(self, cols: dict[str, pa.Array], lines: np.ndarray) -> None:
+        n = len(lines)
+        self.rows += n
+        values, idx, col, reason, expected, ngs = {}, [], [], [], [], {}
+        all_blank = np.ones(n, dtype=bool)
+        for f in self.fields:
+            raw = cols[f.role]
+            all_blank &= _blank(pc.utf8_trim_whitespace(raw) if _is_text(raw) else raw)
+        if all_blank.any():  # a blank line: not data, but counted like any skipped record
+            idx.append(np.flatnonzero(all_blank))
+            col.append(np.full(int(all_blank.sum()), -1))
+            reason.extend([BLANK] * int(all_blank.sum()))
+            expected.extend(["a record"] * int(all_blank.sum()))
+        for f in self.fields:
+            v, entries, ngs[f.label] = convert(f, cols[f.role])
+            values[f.role] = v
+            for i, r, e in entries:
+                if len(i):
+                    idx.append(i)
+                    col.append(np.full(len(i), self.order[f.role]))
+                    reason.extend([r] * len(i))
+                    expected.extend([e] * len(i))
+        if self.row_check is not None:
+            for mask, role, r, e in self.row_check(values):
+                i = np.flatnonzero(mask)
+                if len(i):
+                    idx.append(i)
+                    col.append(np.full(len(i), self.order[role] + 0.5))
+                    reason.extend([r] * len(i))
+                    expected.extend([e] * len(i))
+        # parser-level bad rows at or before this block's last line go first, in line order
+        last = int(lines[-1]) if n else -1
+        pending = [r for r in self.whole_rows if r.line <= last] if n else []
+        self.whole_rows = [r for r in self.whole_rows if r.line > last] if n else \
+            self.whole_rows
+        keep = np.ones(n, dtype=bool)
+        recs: list[BadRecord] = list(pending)
+        if idx:
+            idx_a = np.concatenate(idx)
+            col_a = np.concatenate(col)
+            o = np.lexsort((col_a, idx_a))
+            first = np.ones(len(o), dtype=bool)
+            first[1:] = idx_a[o][1:] != idx_a[o][:-1]
+            sel = o[first]  # one entry per bad row, its first bad column
+            rows = idx_a[sel]
+            keep[rows] = False
+            reasons = np.asarray(reason, dtype=object)[sel]
+            self.skipped.update(reasons.tolist())
+            self.bad_lines.append(lines[rows])
+            # messages only for the rows that may be listed, and the first fatal one
+            need = self.max_listed - len(self.bad)
+            names = {self.order[f.role]: f for f in self.fields}
+            exp = np.asarray(expected, dtype=object)
+            for k in range(len(rows)):
+                fatal = self.on_bad == "stop" and reasons[k] not in self.soft | {BLANK}
+                if k >= need and not fatal:
+                    if self.on_bad == "skip":
+                        break
+                    continue
+                f = names.get(int(col_a[sel[k]]))
+                v = "" if f is None else cols[f.role][int(rows[k])].as_py()
+                recs.append(BadRecord(self.path, int(lines[rows[k]]),
+                                      "*" if f is None else f.column, reasons[k],
+                                      "" if v is None else str(v), exp[sel[k]], self.unit))
+                if fatal:
+                    break
+        for r in sorted(recs, key=lambda r: r.line):
+            self._record(r)
+        for label, ng in ngs.items():
+            if (k := int((ng & keep).sum())):
+                self.not_given[label] += k
+        for f in self.fields:
+            v = values[f.role]
+            self.values[f.role].append(v.filter(pa.array(keep)) if isinstance(v, pa.Array)
+                                       else v[keep])
+        self.lines.append(lines[keep])
+
+    def whole_row(self, line: int, expected: int, actual: int, text: str) -> None:
+        """A record the CSV parser could not split into the header's fields."""
+        self.rows += 1
+        self.skipped[BAD_FIELDS] += 1
+        self.bad_lines.append(np.array([line], dtype=np.int64))
+        self.whole_rows.append(BadRecord(self.path, line, "*", BAD_FIELDS, text[:200],
+                                         f"{expected} fields, got {actual}", self.unit))
+
+    def finish(self) -> Table:
+        for r in self.whole_rows:
+            self._record(r)
+        self.whole_rows = []
+        cols = {}
+        for f in self.fields:
+            parts = self.values[f.role]
+            if f.kind == "text":
+                cols[f.role] = pa.concat_arrays([p.cast(pa.string()) for p in parts]) if parts \
+                    else pa.array([], pa.string())
+            else:
+                cols[f.role] = np.concatenate(parts) if parts else np.zeros(0)
+        lines = np.concatenate(self.lines) if self.lines else np.zeros(0, np.int64)
+        bl = np.sort(np.concatenate(self.bad_lines)) if self.bad_lines else np.zeros(0, np.int64)
+        self.bad.sort(key=lambda r: r.line)
+        return Table(self.path, cols, lines.astype(np.int64), self.rows, self.skipped,
+                     self.bad[: self.max_listed], bl.astype(np.int64), self.not_given)
+
+
+# -- readers ----------------------------------------------------------------------------------
+
+
+def _header(path: str) -> list[str]:
+    with open(path, encoding="utf-8-sig", newline="") as fh:
+        header = next(csv.reader(fh), None)
+    if not header:
+        raise ValueError(f"{path}:1: no header line; expected the column names")
+    return [h.strip() for h in header]
+
+
+def _check_columns(path: str, have: Sequence[str], fields: Sequence[Field], where: str) -> None:
+    missing = [f.column for f in fields if f.column not in have]
+    if missing:
+        raise ValueError(f"{path}{where}: no column {', '.join(map(repr, missing))}; the "
+                         f"file has {', '.join(map(repr, have))} (pass a column mapping)")
+
+
+def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str = "skip",
+                   progress: Progress | None = None, soft: frozenset[str] = frozenset(),
+                   max_listed: int = 100, row_check: RowCheck | None = None,
+                   block_size: int | None = None) -> Table:
+    """Stream a CSV file through the fields, ``block_size`` bytes at a time (default
+    :data:`BLOCK_SIZE`); see the module docstring."""
+    import pyarrow.csv as pacsv
+
+    path = os.fspath(path)
+    header = _header(path)
+    _check_columns(path, header, fields, ":1")
+    order = {f.role: header.index(f.column) for f in fields}
+    acc = _Accumulator(path, fields, order, on_bad, soft, max_listed, row_check, "line")
+
+    rejected: list[int] = []  # lines the parser rejected (it may do so before a block is read)
+
+    def invalid(row) -> str:
+        # row.number counts records from the header (line 1) on, blank lines included
+        rejected.append(int(row.number))
+        acc.whole_row(int(row.number), row.expected_columns, row.actual_columns, row.text)
+        return "skip"
+
+    wanted = sorted({f.column for f in fields}, key=header.index)
+    size = os.path.getsize(path)
+    next_line = 2
+    with pa.OSFile(path) as fh:
+        reader = pacsv.open_csv(
+            fh,
+            # single-threaded: the parser then knows the line of a bad row, and memory stays
+            # one block
+            read_options=pacsv.ReadOptions(use_threads=False,
+                                           block_size=block_size or BLOCK_SIZE),
+            parse_options=pacsv.ParseOptions(invalid_row_handler=invalid,
+                                             ignore_empty_lines=False),
+            convert_options=pacsv.ConvertOptions(
+                column_types={c: pa.string() for c in header}, include_columns=wanted,
+                strings_can_be_null=False, quoted_strings_can_be_null=False))
+        while True:
+            try:
+                batch = reader.read_next_batch()
+            except StopIteration:
+                break
+            rejected[:] = [x for x in rejected if x >= next_line]
+            n = batch.num_rows
+            lines = _lines(next_line, n, rejected)
+            if n:
+                next_line = int(lines[-1]) + 1
+            cols = {f.role: batch.column(f.column) for f in fields}
+            acc.add(cols, lines)
+            if progress is not None:
+                progress(min(fh.tell(), size), size)
+    if progress is not None:
+        progress(size, size)
+    return acc.finish()
+
+
+def _lines(start: int, n: int, skipped: list[int]) -> np.ndarray:
+    """The first n line numbers >= start that the parser did not reject."""
+    s = np.asarray([x for x in skipped if x >= start], dtype=np.int64)
+    k = 0
+    while True:
+        cand = np.arange(start, start + n + k, dtype=np.int64)
+        hit = np.isin(cand, s)
+        if int(hit.sum()) == k:
+            return cand[~hit]
+        k = int(hit.sum())
+
+
+def read_parquet_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str = "skip",
+                       progress: Progress | None = None, soft: frozenset[str] = frozenset(),
+                       max_listed: int = 100, row_check: RowCheck | None = None,
+                       batch_size: int = 1 << 16) -> Table:
+    """Stream a Parquet file through the fields; records are numbered by row from 1."""
+    import pyarrow.parquet as pq
+
+    path = os.fspath(path)
+    pf = pq.ParquetFile(path)
+    names = pf.schema_arrow.names
+    _check_columns(path, names, fields, "")
+    order = {f.role: names.index(f.column) for f in fields}
+    acc = _Accumulator(path, fields, order, on_bad, soft, max_listed, row_check, "row")
+    total = pf.metadata.num_rows
+    size = os.path.getsize(path)
+    done = 0
+    wanted = sorted({f.column for f in fields}, key=names.index)
+    for batch in pf.iter_batches(batch_size=batch_size, columns=wanted):
+        n = batch.num_rows
+        cols = {f.role: batch.column(f.column) for f in fields}
+        acc.add(cols, np.arange(done + 1, done + n + 1, dtype=np.int64))
+        done += n
+        if progress is not None:
+            progress(int(size * done / max(total, 1)), size)
+    if progress is not None:
+        progress(size, size)
+    return acc.finish()
+
+
+# -- time ---------------------------------------------------------------------------------------
+
+
+def parse_epoch(epoch) -> np.datetime64 | None:
+    """A user's epoch (ISO text, datetime, datetime64, or unix seconds) as datetime64[ns]."""
+    if epoch is None:
+        return None
+    if isinstance(epoch, (int, float, np.integer, np.floating)):
+        return np.datetime64(int(round(float(epoch) * 1e9)), "ns")
+    try:
+        s = epoch.rstrip("Z") if isinstance(epoch, str) else epoch
+        return np.datetime64(s, "ns")
+    except (ValueError, TypeError):
+        raise ValueError(f"epoch = {epoch!r}; expected an ISO 8601 UTC time, a datetime or "
+                         "unix seconds") from None
+
+
+def relative_times(t: np.ndarray, fmt: str, epoch=None
+                   ) -> tuple[np.ndarray, np.datetime64 | None]:
+    """Absolute times (int64 ns or float unix seconds, as :func:`convert` gives them) to float
+    seconds from an epoch: the given one, else the earliest time floored to the second (so
+    that the fractions of the file's times survive)."""
+    ep = parse_epoch(epoch)
+    if fmt == "seconds":
+        if ep is not None:
+            raise ValueError("epoch given but the time format 'seconds' is relative")
+        return np.asarray(t, dtype=float), None
+    if t.dtype == np.int64:  # ns since 1970
+        e_ns = (int(ep.astype("datetime64[ns]").astype(np.int64)) if ep is not None else
+                (int(t.min()) // 1_000_000_000 * 1_000_000_000 if len(t) else 0))
+        return (t - e_ns) / 1e9, np.datetime64(e_ns, "ns")
+    if ep is not None:
+        e_ns = int(ep.astype("datetime64[ns]").astype(np.int64))
+        return t - e_ns / 1e9, np.datetime64(e_ns, "ns")
+    e_s = float(np.floor(t.min())) if len(t) else 0.0
+    return t - e_s, np.datetime64(int(e_s), "s").astype("datetime64[ns]")
