@@ -379,3 +379,70 @@ def test_ukf_rejects_non_positive_spread():
 def test_sensor_state_length_check():
     with pytest.raises(ValueError, match="f0"):
         EKF().update(tk.Gaussian(*_good(())), np.zeros(2), BearingFrequency())
+
+
+# -- the Python API (issue 10): cheap checks at construction, bad dt and inf in z ---------------
+
+
+@pytest.mark.parametrize(
+    "mean, cov, words",
+    [
+        ([np.nan, 0.0], np.eye(2), ["Gaussian.mean", "nan", "(0,)", "finite"]),
+        ([0.0, 0.0], [[1.0, 0.0], [0.0, np.inf]], ["Gaussian.cov", "inf", "(1, 1)"]),
+        ([0.0, 0.0], np.eye(3), ["Gaussian.cov", "(3, 3)", "(..., 2, 2)"]),
+        (0.0, np.eye(1), ["Gaussian.mean", "scalar"]),
+        (np.zeros((3, 2)), np.zeros((4, 2, 2)), ["(3,)", "(4,)", "broadcast"]),
+        (np.zeros(2), np.tile(np.eye(2), (3, 1, 1)), ["one mean per covariance"]),
+        ([0.0, 0.0], [1.0, 1.0], ["Gaussian.cov", "(2,)"]),
+    ],
+)
+def test_gaussian_checks_shapes_and_finiteness_at_construction(mean, cov, words):
+    with pytest.raises(ValueError) as err:
+        tk.Gaussian(mean, cov)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+
+
+def test_gaussian_leaves_the_costly_checks_to_the_filters():
+    # an asymmetric or indefinite covariance is accepted at construction (an eigen-
+    # decomposition per belief would cost more than a filter step) and refused where a filter
+    # takes it in, naming the quantity
+    for cov in ([[1.0, 0.5], [0.0, 1.0]], [[1.0, 0.0], [0.0, -1.0]]):
+        b = tk.Gaussian(np.zeros(2), cov)
+        with pytest.raises(ValueError, match="cov"):
+            EKF().update(b, np.zeros(2), Position(dim=2, sigma=1.0))
+    # lists become float arrays; an integer mean too
+    b = tk.Gaussian([1, 2], [[1, 0], [0, 1]])
+    assert b.mean.dtype == b.cov.dtype == np.float64
+
+
+def test_gaussian_unchecked_constructor_keeps_what_a_filter_produced():
+    # a diverging filter's nan must reach the metrics, not stop a Monte Carlo study
+    b = tk.Gaussian._make((np.array([np.nan, 0.0]), np.eye(2)))
+    assert np.isnan(b.mean[0]) and type(b) is tk.Gaussian
+    assert type(tk.Gaussian(np.zeros((3, 2)), np.tile(np.eye(2), (3, 1, 1))).at(1)) is tk.Gaussian
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("dt", [np.nan, np.inf, -1.0, np.array([1.0, np.nan, 1.0])])
+def test_predict_refuses_a_bad_time_step(name, dt):
+    f = FILTERS[name]()
+    b = tk.Gaussian(*_good((3,)))
+    with pytest.raises(ValueError, match=r"predict.*dt"):
+        f.predict(f.init(b) if hasattr(f, "init") else b, CV, dt)
+
+
+@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("batch", [(), (3,)])
+def test_update_refuses_inf_in_z_and_keeps_nan_as_missing(name, batch):
+    f = FILTERS[name]()
+    b = tk.Gaussian(*_good(batch))
+    b = f.init(b) if hasattr(f, "init") else b
+    z = np.zeros(batch + (2,))
+    z[..., 1] = np.inf
+    with pytest.raises(ValueError, match="z has an infinite entry"):
+        f.update(b, z, POS)
+    z[..., 1] = np.nan  # missing: the prediction comes back
+    post, innov = f.update(b, z, POS)
+    est = f.estimate(post) if hasattr(f, "estimate") else post
+    np.testing.assert_array_equal(est.mean, _good(batch)[0])

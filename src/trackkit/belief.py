@@ -16,11 +16,49 @@ from trackkit.linalg import check_covariance
 __all__ = ["Gaussian", "Innovation", "check_gaussian"]
 
 
-class Gaussian(NamedTuple):
-    """Gaussian belief N(mean, cov): ``mean`` is ``(..., n)``, ``cov`` is ``(..., n, n)``."""
-
+class _GaussianFields(NamedTuple):
     mean: NDArray[np.float64]
     cov: NDArray[np.float64]
+
+
+class Gaussian(_GaussianFields):
+    """Gaussian belief N(mean, cov): ``mean`` is ``(..., n)``, ``cov`` is ``(..., n, n)``.
+
+    Construction checks what is cheap: the shapes (and that the batch shapes broadcast) and
+    that every entry is finite, naming the field. Symmetry and positive definiteness cost an
+    eigen-decomposition and are checked where a filter first takes the covariance in.
+    ``Gaussian._make((mean, cov))`` is the unchecked constructor, for a filter's own outputs
+    (they are checked when they come back in, and a diverging filter's nan must reach the
+    metrics rather than stop a Monte Carlo study).
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, mean: ArrayLike, cov: ArrayLike) -> Gaussian:
+        m = mean if type(mean) is np.ndarray and mean.dtype == np.float64 else (
+            np.asarray(mean, dtype=float))
+        P = cov if type(cov) is np.ndarray and cov.dtype == np.float64 else (
+            np.asarray(cov, dtype=float))
+        if m.ndim < 1:
+            raise ValueError("Gaussian.mean is a scalar; expected shape (..., n)")
+        n = m.shape[-1]
+        if P.ndim < 2 or P.shape[-2:] != (n, n):
+            raise ValueError(f"Gaussian.cov has shape {P.shape}; the mean has {n} components, "
+                             f"so expected (..., {n}, {n})")
+        if P.ndim - 2 > m.ndim - 1:
+            raise ValueError(f"Gaussian: cov has batch shape {P.shape[:-2]} but mean only "
+                             f"{m.shape[:-1]}; expected one mean per covariance")
+        try:
+            np.broadcast_shapes(m.shape[:-1], P.shape[:-2])
+        except ValueError:
+            raise ValueError(f"Gaussian: mean batch shape {m.shape[:-1]} and cov batch shape "
+                             f"{P.shape[:-2]} do not broadcast") from None
+        for name, a in (("mean", m), ("cov", P)):
+            if not np.isfinite(np.add.reduce(a, axis=None)) and not np.isfinite(a).all():
+                where = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
+                raise ValueError(f"Gaussian.{name} has a non-finite entry ({a[where]} at "
+                                 f"index {where}); expected finite values")
+        return super().__new__(cls, m, P)
 
     @property
     def dim(self) -> int:
@@ -35,7 +73,7 @@ class Gaussian(NamedTuple):
 
         (Plain ``b[0]`` is the tuple's first field, the mean, as for any NamedTuple.)
         """
-        return Gaussian(self.mean[index], self.cov[index])
+        return Gaussian._make((self.mean[index], self.cov[index]))
 
 
 class Innovation(NamedTuple):
@@ -75,4 +113,4 @@ def check_gaussian(mean: ArrayLike, cov: ArrayLike, name: str = "belief") -> Gau
             f"{name}: mean batch shape {m.shape[:-1]} and cov batch shape {P.shape[:-2]} "
             "do not broadcast"
         ) from None
-    return Gaussian(m, P)
+    return Gaussian._make((m, P))

@@ -13,8 +13,8 @@ import pytest
 
 import trackkit.scenario as S
 from trackkit.belief import Gaussian, Innovation
+from trackkit.eval.compare import compare
 from trackkit.eval.matching import MatchingMetrics, measurement_noise_rms, noise_in_use
-from trackkit.eval.montecarlo import run_scenario
 from trackkit.filters import KF, FuzzyAdaptive
 from trackkit.filters.adaptive import AdaptiveBelief, SageHusaBelief
 from trackkit.filters.fuzzy import DEFAULT_PARAMS
@@ -187,7 +187,7 @@ def small_ch3():
     d["filters"] = [by_name["KF"], dict(by_name["OFKF"], tune=None,
                                         options={"params": list(DEFAULT_PARAMS)})]
     d["run"].update(runs=3, block=2)
-    return run_scenario(S.parse(d))
+    return compare(S.parse(d))
 
 
 def test_engine_matching_numbers_of_run_0_from_its_example(small_ch3):

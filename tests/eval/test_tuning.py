@@ -16,11 +16,13 @@ import pytest
 
 import trackkit.scenario as S
 from trackkit.belief import Gaussian
-from trackkit.eval.montecarlo import plan_of, run_scenario, simulate_block, with_run
+from trackkit.eval.compare import compare
+from trackkit.eval.montecarlo import plan_of, run_scenario, with_run
 from trackkit.eval.tuning import TuningResult, dom_costs, tune_filter, tune_scenario
 from trackkit.filters import KF, FuzzyAdaptive
 from trackkit.filters.fuzzy import DEFAULT_PARAMS, N_PARAMS, PARAM_BOUNDS
 from trackkit.models import LinearMotion, Position
+from trackkit.sim.simulate import simulate_block
 
 F3 = np.array([[0.77, 0.20, 0.0], [0.22, 0.72, 0.22], [0.02, 0.0, 0.72]])
 OFKF = 3  # index of the ICA-tuned filter in uw-ch3-r and uw-ch3-q
@@ -202,10 +204,15 @@ def test_tuning_is_cached_whatever_the_run_section(ch3r):
     assert other is not a and not np.array_equal(other.params, a.params)
 
 
-def test_run_scenario_tunes_first_and_reports_the_tuning(ch3r):
+def test_compare_tunes_first_and_reports_the_tuning(ch3r):
     d = ch3r.model_dump()
     d["run"].update(runs=2, block=2)
-    res = run_scenario(S.parse(d))
+    with pytest.raises(ValueError, match="not tuned yet"):
+        run_scenario(S.parse(d))
+    seen = []
+    res = compare(S.parse(d), tuning_progress=lambda done, total: seen.append((done, total)))
+    # cached tunings report their generations at once; the count still adds up
+    assert seen[-1][0] == seen[-1][1] > 0 and all(a <= b for a, b in seen)
     assert set(res.tuning) == {"GAFKF", "PSOFKF", "OFKF"}
     assert res.tuning["OFKF"] is tune_filter(ch3r, OFKF)
     assert set(res.filters) == {"KF", "GAFKF", "PSOFKF", "OFKF"}

@@ -1,11 +1,13 @@
-"""The ``trackkit`` CLI. Most tests replace the scenario loader and the Monte Carlo engine by
-fakes (``trackkit.cli._load`` etc.), so they test the CLI alone; ``test_cli_run_default_real``
-runs the real default scenario once the engine exists."""
+"""The ``trackkit`` CLI. Most tests replace the scenario loader and the comparison engine by
+fakes (``trackkit.cli._load`` etc.), so they test the CLI alone; the tests at the end run the
+real engine in-process on a few runs."""
 
 from __future__ import annotations
 
-import importlib
 import json
+import os
+import subprocess
+import sys
 from types import SimpleNamespace
 
 import pytest
@@ -18,6 +20,7 @@ from . import FILTERS, fake_result
 from .test_files import ALL_FILES, check_results_json
 
 runner = CliRunner()
+WIDE = {"COLUMNS": "200", "NO_COLOR": "1"}
 
 
 class FakeScenarioError(ValueError):
@@ -33,8 +36,9 @@ def fake_scenario(name: str) -> SimpleNamespace:
 
 @pytest.fixture
 def fake(monkeypatch):
-    """Fake scenario stage and engine; records the calls."""
-    calls = SimpleNamespace(load=[], run=[])
+    """Fake scenario stage and engine; records the calls (and the output directory's state
+    while the engine runs)."""
+    calls = SimpleNamespace(load=[], run=[], during=[])
 
     def load(name):
         calls.load.append(name)
@@ -44,19 +48,28 @@ def fake(monkeypatch):
 
     def run(scenario, **kwargs):
         calls.run.append(kwargs)
+        calls.during.append(sorted(p.name for p in calls.out.iterdir())
+                            if getattr(calls, "out", None) and calls.out.is_dir() else None)
+        kwargs["tuning_progress"](0, 6)
+        kwargs["tuning_progress"](6, 6)
         total = kwargs["runs"] or scenario.run.runs
-        for done in range(0, total + 1, 5):
-            kwargs["progress"](min(done, total), total)
-        kwargs["progress"](total, total)
+        for done in range(0, 4 * total + 1):  # a quarter of a run at a time, as floats
+            kwargs["progress"](done / 4, total)
         return fake_result(runs=total, seed=kwargs["seed"] or scenario.run.seed)
 
     monkeypatch.setattr(cli, "_load", load)
     monkeypatch.setattr(cli, "_run", run)
+    monkeypatch.setattr(cli, "_dumps", lambda sc: f'name = "{sc.name}"\n\n[run]\nruns = 20\n')
     monkeypatch.setattr(cli, "_default_name", lambda: "fake_default")
     monkeypatch.setattr(cli, "_bundled", lambda: {"fake_default": "The default one.",
                                                   "other": "Another one."})
     monkeypatch.delenv("TRACKKIT_DEBUG", raising=False)
     return calls
+
+
+def _engine(monkeypatch, behaviour):
+    """Replace the fake engine by ``behaviour(scenario, **kwargs)``."""
+    monkeypatch.setattr(cli, "_run", behaviour)
 
 
 def test_list(fake):
@@ -66,17 +79,30 @@ def test_list(fake):
     assert "other" in res.stdout and "Another one." in res.stdout
 
 
-def test_show(fake, monkeypatch):
+def test_show_prints_toml_by_default_and_json_on_request(fake):
     res = runner.invoke(cli.app, ["show", "other"])
     assert res.exit_code == 0, res.output
     assert fake.load == ["other"]
+    assert res.stdout == 'name = "other"\n\n[run]\nruns = 20\n'  # exactly, for a file
+    res = runner.invoke(cli.app, ["show", "other", "--format", "json"])
+    assert res.exit_code == 0, res.output
     assert json.loads(res.stdout) == {"name": "other", "run": {"runs": 20, "seed": 7},
                                       "time": {"step_s": 2.0}}
-    with_toml = fake_scenario("t")
-    with_toml.to_toml = lambda: 'name = "t"\n'
-    monkeypatch.setattr(cli, "_load", lambda name: with_toml)
-    res = runner.invoke(cli.app, ["show", "t"])
-    assert res.exit_code == 0 and 'name = "t"' in res.stdout
+    res = runner.invoke(cli.app, ["show", "other", "--format", "yaml"])
+    assert res.exit_code == 2 and "yaml" in res.output
+
+
+@pytest.mark.parametrize("command, defaults", [
+    ("run", ["the bundled default", "the scenario's run.runs", "the scenario's run.seed",
+             "trackkit-out/SCENARIO", "none: in this process"]),
+    ("show", ["the bundled default", "toml"]),
+])
+def test_help_shows_the_defaults(command, defaults):
+    res = runner.invoke(cli.app, [command, "--help"], env=WIDE, terminal_width=200)
+    assert res.exit_code == 0, res.output
+    for default in defaults:
+        assert default in res.output, f"{default!r} missing from\n{res.output}"
+    assert res.output.count("[default:") >= len(defaults)
 
 
 def test_run_writes_everything(fake, tmp_path):
@@ -86,7 +112,7 @@ def test_run_writes_everything(fake, tmp_path):
     assert res.exit_code == 0, res.output
     assert fake.load == ["other"]
     (kwargs,) = fake.run
-    assert {k: v for k, v in kwargs.items() if k != "progress"} == {
+    assert {k: v for k, v in kwargs.items() if "progress" not in k} == {
         "runs": 4, "seed": 3, "workers": 2, "scheduler": "tcp://h:8786"}
     assert {p.name for p in out.iterdir()} == ALL_FILES
     doc = json.loads((out / "results.json").read_text())
@@ -96,7 +122,8 @@ def test_run_writes_everything(fake, tmp_path):
         assert name in res.stdout
     assert "PCRLB" in res.stdout and "[deg]" in res.stdout  # the summary table
     assert "report.html" in res.stdout
-    assert "4/4" in res.stderr  # the progress bar finished
+    assert "4/4 runs" in res.stderr  # the progress bar finished
+    assert "tuning" in res.stderr and "6/6 generations" in res.stderr  # and the tuning one
 
 
 def test_run_without_scenario_uses_default(fake, tmp_path, monkeypatch):
@@ -124,12 +151,12 @@ def test_engine_value_error_writes_nothing(fake, tmp_path, monkeypatch):
         kwargs["progress"](1, 20)
         raise ValueError("filters[1].name = 'XKF': expected one of EKF, UKF")
 
-    monkeypatch.setattr(cli, "_run", run)
+    _engine(monkeypatch, run)
     out = tmp_path / "out"
     res = runner.invoke(cli.app, ["run", "--out", str(out)])
     assert res.exit_code == 2
     assert "error: filters[1].name = 'XKF'" in res.stderr
-    assert not out.exists()
+    assert not out.exists() and list(tmp_path.iterdir()) == []
 
 
 def test_failure_while_writing_leaves_no_results(fake, tmp_path, monkeypatch):
@@ -156,20 +183,119 @@ def test_out_is_a_file_exit_2_before_running(fake, tmp_path):
     target.write_text("x")
     res = runner.invoke(cli.app, ["run", "--out", str(target)])
     assert res.exit_code == 2 and "is not a directory" in res.stderr
+    assert f"--out {target}" in res.stderr
     assert fake.run == [] and target.read_text() == "x"
 
 
-def _engine_available() -> bool:
-    try:
-        montecarlo = importlib.import_module("trackkit.eval.montecarlo")
-        importlib.import_module("trackkit.scenario")
-    except ImportError:
-        return False
-    return hasattr(montecarlo, "run_scenario")
+def test_out_below_a_file_exit_2_before_running(fake, tmp_path):
+    target = tmp_path / "file"
+    target.write_text("x")
+    res = runner.invoke(cli.app, ["run", "--out", str(target / "sub")])
+    assert res.exit_code == 2, res.output
+    assert f"--out {target / 'sub'}" in res.stderr and f"{target} is a file" in res.stderr
+    assert fake.run == [] and target.read_text() == "x"
 
 
-@pytest.mark.skipif(not _engine_available(), reason="trackkit.eval.montecarlo.run_scenario "
-                    "not there yet")
+def test_output_directory_is_created_and_locked_while_the_engine_runs(fake, tmp_path):
+    fake.out = tmp_path / "new" / "out"
+    res = runner.invoke(cli.app, ["run", "--runs", "2", "--out", str(fake.out)])
+    assert res.exit_code == 0, res.output
+    assert fake.during == [[cli.LOCK_FILE]]  # created and locked before any compute
+    assert {p.name for p in fake.out.iterdir()} == ALL_FILES  # lock released
+
+
+def test_second_run_into_a_locked_directory_refuses(fake, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    lock = out / cli.LOCK_FILE
+    lock.write_text(f"{os.getpid()}\n")  # a live process holds it
+    res = runner.invoke(cli.app, ["run", "--out", str(out)], env=WIDE)
+    assert res.exit_code == 2, res.output
+    assert "in use by another trackkit run" in res.stderr
+    assert f"pid {os.getpid()}" in res.stderr and str(lock) in res.stderr
+    assert fake.run == [] and lock.read_text() == f"{os.getpid()}\n"
+    assert [p.name for p in out.iterdir()] == [cli.LOCK_FILE]
+
+
+def _dead_pid() -> int:
+    child = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)
+    return int(child.stdout)
+
+
+def test_stale_lock_is_taken_over_and_said(fake, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    pid = _dead_pid()
+    (out / cli.LOCK_FILE).write_text(f"{pid}\n")
+    res = runner.invoke(cli.app, ["run", "--runs", "2", "--out", str(out)], env=WIDE)
+    assert res.exit_code == 0, res.output
+    assert "took over the stale lock" in res.stderr and f"pid {pid}, no longer running" in (
+        res.stderr)
+    assert {p.name for p in out.iterdir()} == ALL_FILES
+
+
+@pytest.mark.parametrize("failure, code, words", [
+    (KeyboardInterrupt(), 130, "interrupted; nothing was written to"),
+    (ValueError("runs = 0; expected at least 1"), 2, "error: runs = 0; expected at least 1"),
+    (OSError(28, "No space left on device"), 1, "error: No space left on device"),
+    (MemoryError(), 1, "error: out of memory; try fewer runs"),
+    (TypeError("unsupported operand"), 1, "error: unexpected TypeError: unsupported operand"),
+])
+def test_every_exit_path_releases_the_lock(fake, tmp_path, monkeypatch, failure, code, words):
+    def run(scenario, **kwargs):
+        kwargs["progress"](0.5, 20)
+        raise failure
+
+    _engine(monkeypatch, run)
+    out = tmp_path / "out"
+    res = runner.invoke(cli.app, ["run", "--out", str(out)], env=WIDE)
+    assert res.exit_code == code, res.output
+    assert words in res.stderr
+    assert "Traceback" not in res.output
+    assert not out.exists()  # the lock is gone, and so is the directory this run created
+
+
+def test_interrupt_inside_class_construction_is_an_interrupt(fake, tmp_path, monkeypatch):
+    """Python 3.11 wraps an interrupt inside __set_name__ (pydantic building a model class
+    while modules import) in a RuntimeError; that is still Ctrl-C, not a bug."""
+    def run(scenario, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as err:
+            raise RuntimeError("Error calling __set_name__ on 'Field' instance 'run_last'") \
+                from err
+
+    _engine(monkeypatch, run)
+    res = runner.invoke(cli.app, ["run", "--out", str(tmp_path / "o")], env=WIDE)
+    assert res.exit_code == 130, res.output
+    assert "interrupted" in res.stderr and "__set_name__" not in res.output
+
+
+def test_debug_keeps_the_traceback(fake, tmp_path, monkeypatch):
+    def run(scenario, **kwargs):
+        raise TypeError("unsupported operand")
+
+    _engine(monkeypatch, run)
+    monkeypatch.setenv("TRACKKIT_DEBUG", "1")
+    res = runner.invoke(cli.app, ["run", "--out", str(tmp_path / "o")])
+    assert isinstance(res.exception, TypeError)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("name", ["../../escaped", "..", ".", "a/b", "/abs/path"])
+def test_default_output_stays_inside_trackkit_out(fake, tmp_path, monkeypatch, name):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(cli, "_load", lambda _: fake_scenario(name))
+    res = runner.invoke(cli.app, ["run"], env=WIDE)
+    assert res.exit_code == 2, res.output
+    assert repr(name) in res.stderr and "--out DIR" in res.stderr
+    assert fake.run == [] and list(tmp_path.iterdir()) == []
+
+
+# --- the real engine, in-process, a few runs ---------------------------------------------------
+
+
 def test_cli_run_default_real(tmp_path, monkeypatch):
     monkeypatch.delenv("TRACKKIT_DEBUG", raising=False)
     out = tmp_path / "tmp"
@@ -177,7 +303,28 @@ def test_cli_run_default_real(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     names = {p.name for p in out.iterdir()}
     assert ALL_FILES - {"geometry.png"} <= names  # geometry only when the engine gives a run
+    assert cli.LOCK_FILE not in names
     doc = json.loads((out / "results.json").read_text())
     check_results_json(doc)
     assert doc["runs"] == 4
-    assert doc["scenario"] == importlib.import_module("trackkit.scenario").DEFAULT
+    from trackkit.scenario import DEFAULT
+
+    assert doc["scenario"] == DEFAULT
+    timings = json.loads((out / "timings.json").read_text())
+    assert set(timings["seconds_per_step"]) == set(doc["filters"])
+    assert all(v > 0 for v in timings["seconds_per_step"].values())
+
+
+def test_equal_seeds_give_byte_identical_results_json(tmp_path, monkeypatch):
+    monkeypatch.delenv("TRACKKIT_DEBUG", raising=False)
+    for out in ("a", "b"):
+        res = runner.invoke(cli.app, ["run", "cv-position", "--runs", "3", "--seed", "11",
+                                      "--out", str(tmp_path / out)])
+        assert res.exit_code == 0, res.output
+    a, b = ((tmp_path / out / "results.json").read_bytes() for out in ("a", "b"))
+    assert a == b
+    assert json.loads(a)["seed"] == 11
+    res = runner.invoke(cli.app, ["run", "cv-position", "--runs", "3", "--seed", "12",
+                                  "--out", str(tmp_path / "c")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "c" / "results.json").read_bytes() != a  # the seed matters

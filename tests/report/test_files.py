@@ -16,28 +16,41 @@ from trackkit.report import files, plots
 from . import FILTERS, GROUPS, fake_result
 from .test_plots import png_size
 
-ALL_FILES = {"results.json", "metrics.parquet", "geometry.png", "rmse.png", "nees.png",
-             "report.html"}
-FILTER_KEYS = {"rmse", "anees", "anis", "nees_in_bounds", "diverged", "seconds_per_step"}
+ALL_FILES = {"results.json", "timings.json", "metrics.parquet", "geometry.png", "rmse.png",
+             "nees.png", "report.html"}
+FILTER_KEYS = {"rmse", "anees", "anis", "nees_in_bounds", "diverged"}
 
 
 def check_results_json(doc: dict) -> None:
-    """The results.json schema of issue 3 (shared with the CLI tests)."""
-    assert set(doc) == {"scenario", "runs", "seed", "steps", "dt", "filters", "pcrlb"}
+    """The results.json schema (issues 3 and 10; shared with the CLI tests): SI values whose
+    units are named, the averaging window in seconds, no wall-clock timings."""
+    assert set(doc) == {"scenario", "runs", "seed", "steps", "dt", "window", "units", "filters",
+                        "pcrlb"}
     assert isinstance(doc["scenario"], str)
     for key in ("runs", "seed", "steps"):
         assert isinstance(doc[key], int) and not isinstance(doc[key], bool)
     assert isinstance(doc["dt"], float)
+    window = doc["window"]
+    assert set(window) == {"from_s", "to_s", "first_step", "steps"}
+    assert 0.0 <= window["from_s"] <= window["to_s"]
+    assert 1 <= window["steps"] == doc["steps"] - window["first_step"]
     assert doc["filters"]
+    units = doc["units"]
     for entry in doc["filters"].values():
         assert set(entry) == FILTER_KEYS
         assert {"position", "velocity"} <= set(entry["rmse"])
         assert all(isinstance(v, float) for v in entry["rmse"].values())
-        for key in ("anees", "anis", "nees_in_bounds", "seconds_per_step"):
+        assert set(entry["rmse"]) <= set(units["rmse"])
+        for key in ("anees", "anis", "nees_in_bounds"):
             assert entry[key] is None or isinstance(entry[key], float)
         assert isinstance(entry["diverged"], int)
     assert {"position", "velocity"} <= set(doc["pcrlb"])
     assert all(v is None or isinstance(v, float) for v in doc["pcrlb"].values())
+    assert set(doc["pcrlb"]) == set(units["pcrlb"])
+    assert units["rmse"]["position"] == "m" and units["rmse"]["velocity"] == "m/s"
+    for key in ("dt", "window", "anees", "anis", "nees_in_bounds", "diverged"):
+        assert units[key], key
+    assert "seconds" not in json.dumps(doc)  # wall-clock times live in timings.json
 
 
 @pytest.fixture(scope="module")
@@ -63,11 +76,37 @@ def test_results_json_schema_and_values(written):
     r, out, _ = written
     doc = json.loads((out / "results.json").read_text())
     check_results_json(doc)
-    assert doc == r.to_json_dict()
+    expected = r.to_json_dict()
+    for entry in expected["filters"].values():
+        entry.pop("seconds_per_step")
+    assert {k: doc[k] for k in expected} == expected
     assert set(doc["filters"]) == set(FILTERS)
     assert doc["filters"]["UKF"]["diverged"] == 1
-    assert doc["filters"]["EKF"]["rmse"]["course"] == r.filters["EKF"].rmse_mean["course"]  # SI
+    # course is SI (radians), and says so
+    assert doc["filters"]["EKF"]["rmse"]["course"] == r.filters["EKF"].rmse_mean["course"]
+    assert doc["units"]["rmse"]["course"] == doc["units"]["pcrlb"]["course"] == "rad"
     assert doc["pcrlb"]["position"] == pytest.approx(r.pcrlb_mean["position"])
+    # the averaging window: from the time of step `start` to the last step
+    assert doc["window"] == {"from_s": float(r.times[r.start]), "to_s": float(r.times[-1]),
+                             "first_step": r.start, "steps": r.steps - r.start}
+
+
+def test_timings_json(written):
+    r, out, _ = written
+    doc = json.loads((out / "timings.json").read_text())
+    assert doc["seconds_per_step"] == {n: f.seconds_per_step for n, f in r.filters.items()}
+    assert doc["units"]["seconds_per_step"].startswith("s ")
+    assert "tuning_seconds" not in doc  # nothing was tuned
+
+
+def test_results_json_does_not_depend_on_timings(tmp_path):
+    a, b = fake_result(), fake_result()
+    b.filters["EKF"].seconds_per_step *= 7
+    for r, name in ((a, "a"), (b, "b")):
+        files.write_results_json(r, tmp_path / f"{name}.json")
+        files.write_timings_json(r, tmp_path / f"t{name}.json")
+    assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
+    assert (tmp_path / "ta.json").read_bytes() != (tmp_path / "tb.json").read_bytes()
 
 
 def test_results_json_is_strict_json(tmp_path):
@@ -126,6 +165,9 @@ def test_html_is_self_contained(written):
     assert "&lt;script&gt;alert(1)&lt;/script&gt; notes are escaped" in page
     assert "PCRLB assumes the prior covariance" in page
     assert '<table class="summary">' in page and "RMSE course<br>[deg]" in page
+    assert "<h2>Glossary</h2>" in page
+    for term in ("ANEES", "ANIS", "NEES in 95% bounds", "Diverged", "Time per run-step"):
+        assert f"<dt>{term}</dt>" in page
 
 
 def test_failure_mid_write_leaves_no_partial_results(tmp_path, monkeypatch):
@@ -180,3 +222,21 @@ def test_efficiency_consistent_with_json():
         for g in GROUPS:
             eff = doc["filters"][name]["rmse"][g] / doc["pcrlb"][g]
             assert math.isclose(eff, r.efficiency(name, g))
+
+
+def test_nothing_is_written_beside_the_output_directory(tmp_path, monkeypatch):
+    """The temporary files live inside the output directory, never next to it."""
+    out = tmp_path / "out"
+    out.mkdir()
+    seen = []
+    make_plots = plots.make_plots
+
+    def watching(*args, **kwargs):
+        seen.append(sorted(p.name for p in tmp_path.iterdir()))
+        return make_plots(*args, **kwargs)
+
+    monkeypatch.setattr(plots, "make_plots", watching)
+    files.write_report(fake_result(), out)
+    assert seen == [["out"]]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    assert {p.name for p in out.iterdir()} == ALL_FILES

@@ -27,13 +27,14 @@ NEW_FIGURES = ("matching", "membership", "convergence")
 
 def _run(name: str, runs: int, cheap_tuning: bool = False):
     scenario = pytest.importorskip("trackkit.scenario")
-    montecarlo = pytest.importorskip("trackkit.eval.montecarlo")
+    from trackkit.eval.compare import compare
+
     data = scenario.load(name).model_dump()
     if cheap_tuning:
         for f in data["filters"]:
             if f.get("tune"):
                 f["tune"].update(runs=2, iterations=3, population=10)
-    return montecarlo.run_scenario(scenario.parse(data, name), runs=runs)
+    return compare(scenario.parse(data, name), runs=runs)
 
 
 @pytest.fixture(scope="module")

@@ -48,7 +48,7 @@ def test_summary_values_and_units():
     assert rows["UKF"][col["NEES in\n95% bounds"]] == "50%"
     assert rows["EKF"][col["time\nper step"]] == "3 µs"
     assert rows["EKF"][col["ANEES"]] == f"{ekf.anees:.3g}"
-    assert "averages over t >= 20 s" in s.caption
+    assert "averages over t = 20 to 98 s (40 steps)" in s.caption
 
 
 def test_summary_without_bound_and_nan_values():

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.eval.compare import compare
 
 pytestmark = pytest.mark.slow
 
@@ -25,7 +25,7 @@ def results():
 
     def get(name):
         if name not in cache:
-            cache[name] = run_scenario(S.load(name))
+            cache[name] = compare(S.load(name))
         return cache[name]
 
     return get

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.stats import multivariate_normal
 
 from trackkit.tracking.logic import (
     HistoryLogic,
@@ -18,7 +17,6 @@ from trackkit.tracking.logic import (
     TrackStatus,
     concatenate,
     confirmed,
-    gaussian_log_likelihood,
     select,
     sprt_thresholds,
     tentative,
@@ -344,15 +342,6 @@ def test_score_hit_increment_matches_matlab_form():
     assert s1.score[0] - s0.score[0] == pytest.approx(np.log(V * like * pd / pfa), rel=1e-13)
     s2 = logic.step(s0, np.array([False]))
     assert s2.score[0] - s0.score[0] == pytest.approx(np.log(1 - pd), rel=1e-13)
-
-
-def test_gaussian_log_likelihood_matches_scipy():
-    rng = np.random.default_rng(3)
-    A = rng.normal(size=(5, 3, 3))
-    S = A @ np.swapaxes(A, -1, -2) + 0.5 * np.eye(3)
-    nu = rng.normal(size=(5, 3))
-    want = [multivariate_normal(np.zeros(3), S[i]).logpdf(nu[i]) for i in range(5)]
-    assert np.allclose(gaussian_log_likelihood(nu, S), want, rtol=1e-12)
 
 
 def test_score_bad_input():

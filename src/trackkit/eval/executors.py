@@ -1,41 +1,65 @@
 """Where Monte Carlo chunks run: in this process, or on Dask workers (local or remote).
 
-Each task is a list of blocks; results come back in task order. A Dask task whose worker dies
-is re-run elsewhere (``retries``), so no runs are lost; if a task still fails, the whole
-comparison fails rather than reporting a partial result.
+Each task is a list of blocks; results come back in task order. A task reports its progress
+as the runs it has done; on Dask the reports travel as worker events (``log_event``) to the
+client, so the progress moves inside long tasks too. A Dask task whose worker dies is re-run
+elsewhere (``retries``), so no runs are lost; if a task still fails, the whole comparison
+fails rather than reporting a partial result.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterable
 from typing import Any
 
-__all__ = ["execute"]
+__all__ = ["execute", "PROGRESS_TOPIC"]
+
+PROGRESS_TOPIC = "trackkit-progress"
+
+Task = list[int]
+TaskFn = Callable[[Any, Task, Callable[[float], None] | None], list]
 
 
 def execute(
-    fn: Callable[[Any, list[int]], list],
+    fn: TaskFn,
     scenario: Any,
-    tasks: Sequence[list[int]],
-    sizes: Sequence[int],
+    tasks: Iterable[Task],
+    size_of: Callable[[Task], int],
+    total: int,
     workers: int | None = None,
     scheduler: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Callable[[float, int], None] | None = None,
 ) -> list[list]:
-    """Run ``fn(scenario, task)`` for every task; ``sizes`` are the runs per task (progress)."""
-    total = sum(sizes)
+    """Run ``fn(scenario, task, report)`` for every task, ``report(runs_done_in_task)``
+    feeding ``progress(runs_done, total)``; ``size_of(task)`` is a task's runs."""
     if not workers and not scheduler:
-        out, done = [], 0
-        for task, size in zip(tasks, sizes, strict=True):
-            out.append(fn(scenario, task))
-            done += size
+        out: list[list] = []
+        done = 0.0
+        for task in tasks:
+            report = None if progress is None else (lambda d, base=done: progress(base + d,
+                                                                                  total))
+            out.append(fn(scenario, task, report))
+            done += size_of(task)
             if progress:
                 progress(done, total)
         return out
-    return _dask(fn, scenario, tasks, sizes, workers, scheduler, progress)
+    return _dask(fn, scenario, list(tasks), size_of, total, workers, scheduler, progress)
 
 
-def _dask(fn, scenario, tasks, sizes, workers, scheduler, progress) -> list[list]:
+def _report_from_worker(key: str) -> Callable[[float], None]:
+    def report(done: float) -> None:
+        from dask.distributed import get_worker
+
+        get_worker().log_event(PROGRESS_TOPIC, (key, float(done)))
+    return report
+
+
+def _on_worker(fn: TaskFn, scenario: Any, task: Task, key: str) -> list:
+    return fn(scenario, task, _report_from_worker(key))
+
+
+def _dask(fn, scenario, tasks, size_of, total, workers, scheduler, progress) -> list[list]:
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError as err:  # pragma: no cover - dask is a dependency
@@ -47,22 +71,42 @@ def _dask(fn, scenario, tasks, sizes, workers, scheduler, progress) -> list[list
         cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
                                dashboard_address=None)
         client = Client(cluster)
+    keys = [f"trackkit-{i}-{task[0]}" for i, task in enumerate(tasks)]
+    partial: dict[str, float] = {}
+    finished: dict[str, float] = {}
+    lock = threading.Lock()
+
+    def tell() -> None:
+        if progress:
+            progress(sum(finished.values()) + sum(v for k, v in partial.items()
+                                                  if k not in finished), total)
+
+    def on_event(event: tuple) -> None:
+        _, (key, done) = event
+        with lock:
+            if key not in finished:  # a retried task starts again from 0: keep the maximum
+                partial[key] = max(partial.get(key, 0.0), done)
+                tell()
+
     try:
+        if progress:
+            client.subscribe_topic(PROGRESS_TOPIC, on_event)
         s_future = client.scatter(scenario, broadcast=True)
-        futures = [client.submit(fn, s_future, task, key=f"trackkit-{i}-{task[0]}",
-                                 retries=3, pure=False)
-                   for i, task in enumerate(tasks)]
+        futures = [client.submit(_on_worker, fn, s_future, task, key, key=key, retries=3,
+                                 pure=False)
+                   for key, task in zip(keys, tasks, strict=True)]
         index = {f.key: i for i, f in enumerate(futures)}
         results: list = [None] * len(futures)
-        done, total = 0, sum(sizes)
         for fut in as_completed(futures):
             i = index[fut.key]
             results[i] = fut.result()
-            done += sizes[i]
-            if progress:
-                progress(done, total)
+            with lock:
+                finished[fut.key] = size_of(tasks[i])
+                tell()
         return results
     finally:
+        if progress:
+            client.unsubscribe_topic(PROGRESS_TOPIC)
         client.close()
         if cluster is not None:
             cluster.close()

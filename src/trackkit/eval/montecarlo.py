@@ -1,20 +1,26 @@
 """Monte Carlo comparison of filters on a scenario: simulate, estimate, evaluate, streamed.
 
 The runs are cut into fixed blocks (``scenario.run.block`` runs each). A block is simulated
-and filtered as one batch; its statistics are accumulated exactly (``MonteCarloMetrics``) and
-its PCRLB information sums are added in block order. Run r always draws from child r of
-``SeedSequence(seed)`` and always sits in the same block, so the numbers are identical whether
-the blocks are computed in one process, in other chunkings, or on Dask workers.
+(``trackkit.sim.simulate``) and filtered as one batch; its statistics are accumulated exactly
+(``MonteCarloMetrics``) and its PCRLB information sums are added in block order.
 
-Per block and run, the random draws come in a fixed order: the prior offset (n), the process
-noise (T x n), the measurement noise (T x m) and the detection draws (T), so every filter sees
-the same truth, measurements and prior offset.
+What is bit-identical: with the same scenario, seed and block size, every number (timings
+aside) on one machine, whatever the executor, the chunking or the number of Dask workers. Run
+r always draws from its own generator (``run_rng(seed, r)``) and always sits at the same place
+in the same block, and the exact accumulator's sums do not depend on the order they are merged
+in. What agrees only to a tolerance: the same computation on another CPU (numpy's SIMD loops
+and the BLAS kernels round differently with AVX2 and AVX-512), and a run placed in another
+block or at another position in its block (a vectorised transcendental function may round an
+element differently in a loop's body and its tail). Both are checked to 1e-12 relative on the
+goldens (tests/goldens), which CI also runs with numpy's AVX-512 paths and OpenBLAS's AVX-512
+kernels disabled.
 """
 
 from __future__ import annotations
 
+import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -29,11 +35,14 @@ from trackkit.eval.metrics import MonteCarloMetrics
 from trackkit.eval.results import Example, FilterResult, MonteCarloResult
 from trackkit.scenario.build import Plan, compile_scenario
 from trackkit.scenario.schema import Scenario
-from trackkit.sim.kinematics import step as platform_step
+from trackkit.sim.simulate import simulate_block
 
 Array = NDArray[np.float64]
 
-__all__ = ["run_scenario", "run_block", "simulate_block", "combine", "BlockResult"]
+#: steps of one filter between progress reports inside a block (a report costs a callback)
+PROGRESS_STEPS = 50
+
+__all__ = ["run_scenario", "run_block", "combine", "BlockResult", "plan_of", "with_run"]
 
 UNITS = {"position": "m", "velocity": "m/s", "speed": "m/s", "course": "rad", "x": "m",
          "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s", "x1": "-", "x2": "-",
@@ -118,68 +127,6 @@ def _derived_gradient(group: str, dim: int, n: int, x: Array, origin: Array) -> 
     return g
 
 
-# --- simulation ---------------------------------------------------------------------------
-
-
-@dataclass
-class BlockData:
-    truth: Array  # (T + 1, B, n)
-    z: Array  # (T, B, m)
-    prior_offset: Array  # (B, n) standard-normal draws
-
-
-def simulate_block(plan: Plan, r0: int, r1: int) -> BlockData:
-    """Truth and measurements for runs r0..r1-1, batched, from each run's own generator."""
-    s = plan.scenario
-    T, n, d = plan.steps, plan.n, plan.dim
-    children = np.random.SeedSequence(s.run.seed).spawn(s.run.runs)[r0:r1]
-    B = r1 - r0
-    m = plan.sensors[0].dim_z
-    u0 = np.empty((B, n))
-    w = np.empty((T, B, n))
-    e = np.empty((T, B, m))
-    det = np.empty((T, B))
-    for i, child in enumerate(children):
-        g = np.random.default_rng(child)
-        u0[i] = g.standard_normal(n)
-        w[:, i] = g.standard_normal((T, n))
-        e[:, i] = g.standard_normal((T, m))
-        det[:, i] = g.random(T)
-    truth = np.empty((T + 1, B, n))
-    truth[0] = plan.x0
-    kin = 2 * d
-    for k in range(T):
-        dt = plan.times[k + 1] - plan.times[k]
-        L = _noise_factor(np.asarray(plan.truth_motion.noise(truth[k], dt)))
-        if s.linear_system:
-            nxt = plan.truth_motion.f(truth[k], dt)
-        else:
-            nxt = truth[k].copy()
-            nxt[:, :kin] = platform_step(truth[k][:, :kin], plan.times[k], dt,
-                                         plan.target_legs, d)
-        truth[k + 1] = nxt + w[k] @ L.T
-    z = np.empty((T, B, m))
-    for k in range(T):
-        sensor = plan.sensors[k]
-        R = sensor.noise
-        z[k] = sensor.h(truth[k + 1]) + e[k] @ np.linalg.cholesky(R).T
-        ang = np.asarray(sensor.angular)
-        z[k][:, ang] = wrap(z[k][:, ang])
-    if plan.p_detect < 1.0:
-        z[det >= plan.p_detect] = np.nan
-    return BlockData(truth, z, u0)
-
-
-def _noise_factor(Q: Array) -> Array:
-    """A factor L with L L^T = Q: Cholesky, or for a singular Q (deterministic components,
-    zero process noise) the scaled eigenvectors; no jitter is added to the noise."""
-    try:
-        return np.linalg.cholesky(Q)
-    except np.linalg.LinAlgError:
-        vals, vecs = np.linalg.eigh(Q)
-        return vecs * np.sqrt(np.clip(vals, 0, None))
-
-
 # --- estimation and evaluation of one block -----------------------------------------------
 
 
@@ -198,8 +145,10 @@ class BlockResult:
     j1: Array | None = None  # (runs, m) per-run raw noise RMS
 
 
-def run_block(scenario: Scenario, block: int) -> BlockResult:
-    """Simulate, filter and evaluate block ``block`` of the scenario's runs."""
+def run_block(scenario: Scenario, block: int,
+              progress: Callable[[float], None] | None = None) -> BlockResult:
+    """Simulate, filter and evaluate block ``block`` of the scenario's runs; ``progress`` is
+    told the fraction of the block done, after every ``PROGRESS_STEPS`` steps of a filter."""
     plan = plan_of(scenario)
     s = plan.scenario
     r0 = block * s.run.block
@@ -242,6 +191,8 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
                 match.add(k, data.truth[k + 1], g.mean, innov, R_used, plan.sensors[k])
             if keep:
                 hm[k], hP[k] = g.mean[0], g.cov[0]
+            if progress is not None and (k + 1) % PROGRESS_STEPS == 0:
+                progress((i + (k + 1) / T) / len(plan.filters))
         metrics[name], seconds[name] = acc, elapsed
         if match is not None:
             matching[name] = match.per_run(s.report.dom_alpha)
@@ -249,6 +200,8 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
                 logs[name] = match.logs
         if keep:
             est_hist[name] = (hm, hP)
+        if progress is not None:
+            progress((i + 1) / len(plan.filters))
     # PCRLB ingredients: measurement information and derived-group gradients, summed over runs
     info = np.empty((T, n, n))
     for k in range(T):
@@ -271,9 +224,17 @@ def run_block(scenario: Scenario, block: int) -> BlockResult:
     return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example, matching, j1)
 
 
-def run_blocks(scenario: Scenario, blocks: list[int]) -> list[BlockResult]:
-    """A chunk of blocks (one executor task)."""
-    return [run_block(scenario, b) for b in blocks]
+def run_blocks(scenario: Scenario, blocks: list[int],
+               progress: Callable[[float], None] | None = None) -> list[BlockResult]:
+    """A chunk of blocks (one executor task); ``progress`` is told the runs done in it."""
+    size = scenario.run.block
+    out = []
+    for b in blocks:
+        runs = min(scenario.run.runs, (b + 1) * size) - b * size
+        done = sum(p.runs for p in out)
+        tell = None if progress is None else (lambda f, d=done, n=runs: progress(d + f * n))
+        out.append(run_block(scenario, b, tell))
+    return out
 
 
 # --- combining blocks ---------------------------------------------------------------------
@@ -367,6 +328,73 @@ def with_run(scenario: Scenario, runs: int | None, seed: int | None) -> Scenario
     return Scenario.model_validate(data)
 
 
+#: bytes each run keeps until the end, per filter: the exact accumulator's per-run divergence
+#: counters (``MonteCarloMetrics.run_*``), with room for the bookkeeping around them
+BYTES_PER_RUN_PER_FILTER = 64
+
+
+class RunBudgetError(ValueError):
+    """A run count that cannot finish on this machine (memory) or within the time allowed."""
+
+
+def _memory_bytes() -> int:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 8 << 30
+
+
+def check_memory(scenario: Scenario) -> None:
+    """Refuse a run count whose per-run results alone would take half of this machine's
+    memory, before anything runs."""
+    runs, filters = scenario.run.runs, len(scenario.filters)
+    per_run = BYTES_PER_RUN_PER_FILTER * filters
+    if scenario.report.matching:
+        per_run += 8 * filters * (scenario.state_dim + 4)  # per-run J2-J4 and J1
+    budget = _memory_bytes() // 2
+    if runs * per_run > budget:
+        raise RunBudgetError(
+            f"runs = {runs} would keep about {runs * per_run / 2**30:.1f} GiB of per-run "
+            f"results ({per_run} bytes per run for {filters} filters); this machine has "
+            f"{_memory_bytes() / 2**30:.1f} GiB, so at most {budget // per_run} runs fit")
+
+
+def check_time(runs: int, done: int, seconds: float, max_seconds: float | None,
+               parallel: int = 1) -> None:
+    """Refuse to go on when the runs would take longer than ``max_seconds``, estimated from
+    the ``done`` runs that took ``seconds`` here, shared by ``parallel`` workers."""
+    if max_seconds is None or done >= runs:
+        return
+    estimate = seconds / done * runs / parallel
+    if estimate > max_seconds:
+        raise RunBudgetError(
+            f"runs = {runs} would take about {_duration(estimate)} here ({seconds / done * 1e3:.3g}"
+            f" ms per run, measured on the first {done}), more than the {_duration(max_seconds)}"
+            " allowed; run fewer runs, more workers, or allow more time (--max-hours)")
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 3 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.0f} days"
+
+
+def _tasks(runs: int, block: int, per_task: int, first: int = 0) -> Iterator[list[int]]:
+    """Tasks of ``per_task`` consecutive blocks from block ``first``, made as they are needed
+    (a billion runs must not build four million lists before the first block runs)."""
+    nblocks = -(-runs // block)
+    for i in range(first, nblocks, per_task):
+        yield list(range(i, min(nblocks, i + per_task)))
+
+
+def _task_runs(runs: int, block: int, task: list[int]) -> int:
+    return min(runs, (task[-1] + 1) * block) - task[0] * block
+
+
 def run_scenario(
     scenario: Scenario,
     runs: int | None = None,
@@ -374,33 +402,49 @@ def run_scenario(
     workers: int | None = None,
     scheduler: str | None = None,
     chunk: int | None = None,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Callable[[float, int], None] | None = None,
+    max_seconds: float | None = None,
 ) -> MonteCarloResult:
-    """Run the scenario's comparison and return its result.
+    """Run the scenario's Monte Carlo comparison and return its result.
 
     ``workers`` > 0 or a ``scheduler`` address sends chunks of blocks to Dask; ``chunk`` is
-    the runs per task (rounded up to whole blocks). The same seed gives the same numbers on
-    every executor and chunking (timings aside).
+    the runs per task (rounded up to whole blocks). ``progress(done, total)`` is told the runs
+    done (fractional within a block) every few seconds. A run count whose per-run results do
+    not fit in memory is refused at once; with ``max_seconds``, the first block is timed and a
+    run count whose estimate exceeds it is refused (``RunBudgetError``). Fuzzy filters with a
+    ``tune`` block must be tuned first: ``trackkit.eval.compare`` does both.
     """
     from trackkit.eval.executors import execute
-    from trackkit.eval.tuning import tune_scenario
 
     if runs is not None and runs < 1:
         raise ValueError(f"runs = {runs}; expected at least 1")
     if seed is not None and seed < 0:
         raise ValueError(f"seed = {seed}; expected a non-negative integer")
     s = with_run(scenario, runs, seed)
+    untuned = [f.name for f in s.filters if f.tune is not None]
+    if untuned:
+        raise ValueError(f"filters {untuned} have a tune block and are not tuned yet; run the "
+                         "scenario with trackkit.eval.compare, which tunes them first")
+    check_memory(s)
     plan_of(s)  # compile (and so validate models) before any work is sent out
-    s, tuning = tune_scenario(s)  # fuzzy systems are tuned once, before the runs
-    nblocks = -(-s.run.runs // s.run.block)
-    per_task = max(1, -(-(chunk or s.run.block) // s.run.block))
+    total, size = s.run.runs, s.run.block
+    nblocks = -(-total // size)
+    per_task = max(1, -(-(chunk or size) // size))
     if chunk is None and (workers or scheduler):
         per_task = max(1, nblocks // (4 * max(workers or 1, 1)))
-    tasks = [list(range(i, min(nblocks, i + per_task))) for i in range(0, nblocks, per_task)]
-    sizes = [sum(min(s.run.runs, (b + 1) * s.run.block) - b * s.run.block for b in t)
-             for t in tasks]
-    parts = execute(run_blocks, s, tasks, sizes, workers=workers, scheduler=scheduler,
-                    progress=progress)
-    result = combine(s, [p for chunk_parts in parts for p in chunk_parts])
-    result.tuning = tuning
-    return result
+    parts: list[BlockResult] = []
+    first = 0
+    if max_seconds is not None and nblocks > 1:
+        # time one block here before committing to the rest
+        t0 = time.perf_counter()
+        parts += run_blocks(s, [0], None if progress is None else
+                            (lambda d: progress(d, total)))
+        check_time(total, parts[0].runs, time.perf_counter() - t0, max_seconds, workers or 1)
+        first = 1
+    done = sum(p.runs for p in parts)
+    tasks = _tasks(total, size, per_task, first)
+    chunks = execute(run_blocks, s, tasks, lambda t: _task_runs(total, size, t),
+                     total - done, workers=workers, scheduler=scheduler,
+                     progress=None if progress is None else (lambda d, _: progress(done + d,
+                                                                                   total)))
+    return combine(s, parts + [p for chunk_parts in chunks for p in chunk_parts])

@@ -17,8 +17,9 @@ moving sensors).
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -28,8 +29,9 @@ from trackkit.belief import Gaussian
 from trackkit.filters.fuzzy import PARAM_BOUNDS, FuzzyAdaptive, dom_cost
 from trackkit.optimize import GA, ICA, PSO
 from trackkit.optimize.base import Optimizer, repeat
-from trackkit.scenario.build import Plan
+from trackkit.scenario.build import Plan, compile_scenario
 from trackkit.scenario.schema import FilterSpec, RunSpec, Scenario, TuneSpec
+from trackkit.sim.simulate import simulate_block
 
 Array = NDArray[np.float64]
 
@@ -96,8 +98,13 @@ def dom_costs(template: FuzzyAdaptive, params: Array, plan: Plan, index: int, z:
     return np.where(np.isfinite(cost), cost, np.inf).reshape(P, K)
 
 
-def tune_filter(scenario: Scenario, index: int) -> TuningResult:
-    """Tune filter ``index`` of the scenario (an OF* filter with a ``tune`` block).
+Progress = Callable[[int, int], None]
+
+
+def tune_filter(scenario: Scenario, index: int, progress: Progress | None = None
+                ) -> TuningResult:
+    """Tune filter ``index`` of the scenario (an OF* filter with a ``tune`` block);
+    ``progress(done, total)`` counts the optimiser's generations.
 
     With ``tune.on`` the result is that of the same-named filter of the bundled scenario
     ``on`` (tuned there, once per process): the thesis reuses the fuzzy system tuned with
@@ -117,8 +124,8 @@ def tune_filter(scenario: Scenario, index: int) -> TuningResult:
         if source.filters[names.index(spec.name)].tune.on is not None:
             raise ValueError(f"filter {spec.name!r}: tune.on = {spec.tune.on!r} refers on "
                              "again; expected a scenario that tunes the filter itself")
-        return _tuned(_key(source), names.index(spec.name))
-    return _tuned(_key(scenario), index)
+        return _tuned(_key(source), names.index(spec.name), progress)
+    return _tuned(_key(scenario), index, progress)
 
 
 def _key(scenario: Scenario) -> str:
@@ -129,48 +136,73 @@ def _key(scenario: Scenario) -> str:
     return Scenario.model_validate(data).model_dump_json()
 
 
-@lru_cache(maxsize=16)
-def _tuned(scenario_json: str, index: int) -> TuningResult:
-    import time
+_CACHE: dict[tuple[str, int], TuningResult] = {}
+_CACHE_SIZE = 64  # a test session holds a few dozen tunings; each costs up to 90 s
 
-    from trackkit.eval.montecarlo import plan_of, simulate_block, with_run
 
+def generations(spec: TuneSpec) -> int:
+    """Cost evaluations of one tuning: the initial population and each iteration."""
+    return spec.iterations + 1
+
+
+def _tuned(scenario_json: str, index: int, progress: Progress | None = None) -> TuningResult:
+    """The tuning of filter ``index``, computed once per process per scenario."""
+    key = (scenario_json, index)
+    if key in _CACHE:
+        return _CACHE[key]
     scenario = Scenario.model_validate_json(scenario_json)
     t = scenario.filters[index].tune
-    plan = plan_of(scenario)
-    data = simulate_block(plan_of(with_run(scenario, t.realisations, t.seed)), 0,
-                          t.realisations)
+    plan = compile_scenario(scenario)
+    data = simulate_block(plan, 0, t.realisations, seed=t.seed)
     mean0, P0 = plan.priors[index]
     x0 = (data.truth[0] + data.prior_offset @ np.linalg.cholesky(P0).T) if mean0 is None \
         else np.broadcast_to(mean0, (t.realisations, plan.n)).copy()
     template = plan.filters[index]
     alpha = scenario.report.dom_alpha
+    calls = 0
 
     def cost(X: Array) -> Array:
+        nonlocal calls
         B, N, d = X.shape
-        return dom_costs(template, X.reshape(B * N, d), plan, index, data.z, x0,
-                         alpha).mean(-1).reshape(B, N)
+        out = dom_costs(template, X.reshape(B * N, d), plan, index, data.z, x0,
+                        alpha).mean(-1).reshape(B, N)
+        calls += 1
+        if progress is not None:
+            progress(min(calls, generations(t)), generations(t))
+        return out
 
     seeds = np.random.SeedSequence(t.seed).spawn(t.runs)
     t0 = time.perf_counter()
     stats = repeat(_optimizer(t), cost, PARAM_BOUNDS, seeds)
     res = stats["results"]
-    return TuningResult(optimizer=t.optimizer, runs=t.runs, population=t.population,
-                        iterations=t.iterations, best=stats["best"], mean=stats["mean"],
-                        worst=stats["worst"], history=res.history, params=stats["best_x"],
-                        costs=res.best_f, seconds=time.perf_counter() - t0)
+    result = TuningResult(optimizer=t.optimizer, runs=t.runs, population=t.population,
+                          iterations=t.iterations, best=stats["best"], mean=stats["mean"],
+                          worst=stats["worst"], history=res.history, params=stats["best_x"],
+                          costs=res.best_f, seconds=time.perf_counter() - t0)
+    if len(_CACHE) >= _CACHE_SIZE:
+        _CACHE.pop(next(iter(_CACHE)))
+    _CACHE[key] = result
+    return result
 
 
-def tune_scenario(scenario: Scenario) -> tuple[Scenario, dict[str, TuningResult]]:
+def tune_scenario(scenario: Scenario, progress: Progress | None = None
+                  ) -> tuple[Scenario, dict[str, TuningResult]]:
     """Tune every filter with a ``tune`` block; return the scenario with the tuned
     parameters written into those filters' ``options.params`` (and their ``tune`` blocks
-    removed), and the tuning results by filter name."""
+    removed), and the tuning results by filter name. ``progress(done, total)`` counts
+    optimiser generations over all the filters to tune."""
     results = {}
     data = scenario.model_dump()
-    for i, spec in enumerate(scenario.filters):
-        if spec.tune is None:
-            continue
-        res = tune_filter(scenario, i)
+    todo = [i for i, spec in enumerate(scenario.filters) if spec.tune is not None]
+    total = sum(generations(scenario.filters[i].tune) for i in todo)
+    done = 0
+    for i in todo:
+        spec = scenario.filters[i]
+        tell = None if progress is None else (lambda d, _, base=done: progress(base + d, total))
+        res = tune_filter(scenario, i, tell)
+        done += generations(spec.tune)
+        if progress is not None:
+            progress(done, total)
         results[spec.name] = res
         data["filters"][i]["options"]["params"] = [float(v) for v in res.params]
         data["filters"][i]["tune"] = None

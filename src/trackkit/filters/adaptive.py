@@ -25,6 +25,7 @@ from trackkit.belief import Gaussian, Innovation
 from trackkit.filters.base import (
     Filter,
     check_belief,
+    check_dt,
     check_measurement,
     keep_prior_where_missing,
     missing_rows,
@@ -350,7 +351,7 @@ class MCEKF(_Linearised):
     def init(self, g: Gaussian) -> Gaussian:
         """The initial belief: the checked Gaussian prior (the MC-EKF keeps no memory)."""
         x, P = check_belief(g, None, f"{self.name}.init prior")
-        return Gaussian(x, P)
+        return Gaussian._make((x, P))
 
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
         x, P, z = self._inputs(belief, z, sensor)
@@ -456,12 +457,13 @@ class AMCEKF(Filter):
                               np.zeros(batch + (self.window, 0)), np.zeros(batch, np.int64))
 
     def estimate(self, belief: AdaptiveBelief) -> Gaussian:
-        return Gaussian(belief.mean, belief.cov)
+        return Gaussian._make((belief.mean, belief.cov))
 
     def predict(self, belief: AdaptiveBelief, motion, dt: ArrayLike) -> AdaptiveBelief:
         """``x- = f(x)``, ``P- = F P F^T + q_scale Q0(x, dt)``."""
         b = self.init(belief)
         x, P = check_belief(b, _dim_x(motion), f"{self.name}.predict belief")
+        check_dt(dt, f"{self.name}.predict")
         if self.adapt_q:
             F = np.asarray(motion.jacobian(x, dt))
             Q = b.q_scale[..., None, None] * np.asarray(motion.noise(x, dt))
@@ -563,12 +565,13 @@ class AEKF(Filter):
                               np.zeros(batch, np.int64))
 
     def estimate(self, belief: SageHusaBelief) -> Gaussian:
-        return Gaussian(belief.mean, belief.cov)
+        return Gaussian._make((belief.mean, belief.cov))
 
     def predict(self, belief: SageHusaBelief, motion, dt: ArrayLike) -> SageHusaBelief:
         """``x- = f(x)``, ``P- = F P F^T + Q`` (Q the estimate when ``adapt_q``)."""
         b = self.init(belief)
         x, P = check_belief(b, _dim_x(motion), f"{self.name}.predict belief")
+        check_dt(dt, f"{self.name}.predict")
         if not self.adapt_q:
             g = _predict(x, P, motion, dt)
             return b._replace(mean=g.mean, cov=g.cov)

@@ -111,6 +111,21 @@ def check_belief(b: Gaussian, n: int | None, where: str) -> tuple[Array, Array]:
     return x, P
 
 
+def check_dt(dt: ArrayLike, where: str) -> None:
+    """A prediction's time step: finite and not negative (seconds), scalar or per batch row.
+    (A negative step would be retrodiction, which these predictions are not.)"""
+    if type(dt) is float or type(dt) is int:
+        if not 0 <= dt < math.inf:
+            raise ValueError(f"{where}: dt = {dt!r}; expected a finite time step >= 0 (s)")
+        return
+    d = np.asarray(dt, dtype=float)
+    bad = ~((d >= 0) & (d < math.inf))
+    if bad.any():
+        first = float(d[bad].ravel()[0])
+        raise ValueError(f"{where}: dt has {int(bad.sum())} bad entries (e.g. {first!r}); "
+                         "expected finite time steps >= 0 (s)")
+
+
 def check_measurement(z: ArrayLike, m: int, where: str,
                       batch: tuple[int, ...] = ()) -> Array:
     """z as a float array of shape ``(..., m)`` whose batch axes broadcast with ``batch``."""
@@ -129,6 +144,11 @@ def check_measurement(z: ArrayLike, m: int, where: str,
                 f"{where}: z has shape {z.shape} but the belief's batch shape is {batch}; "
                 f"expected z of shape {batch + (m,)} (or broadcastable to it)"
             ) from None
+    total = sum(z.ravel().tolist()) if z.size <= _SMALL else np.add.reduce(z, axis=None)
+    if math.isinf(total) or (math.isnan(total) and np.isinf(z).any()):
+        bad = float(z[np.isinf(z)][0])
+        raise ValueError(f"{where}: z has an infinite entry ({bad}); expected finite values, "
+                         "or nan to mark a missing measurement")
     return z
 
 
@@ -142,7 +162,7 @@ def missing_rows(z: Array) -> Array | None:
 def output(x: Array, P: Array, symmetric: bool = False) -> Gaussian:
     """Package a filter result: symmetric covariance (``symmetric``: already exactly so),
     registered as produced."""
-    return Gaussian(x, register(P if symmetric else symmetrize(P)))
+    return Gaussian._make((x, register(P if symmetric else symmetrize(P))))
 
 
 def keep_prior_where_missing(
@@ -157,7 +177,7 @@ def keep_prior_where_missing(
     x = np.where(miss[..., None], x0, post.mean)
     P = np.where(miss[..., None, None], P0, post.cov)
     r = np.where(miss[..., None], np.nan, innov.residual)
-    return Gaussian(x, register(P)), Innovation(r, innov.cov)
+    return Gaussian._make((x, register(P))), Innovation(r, innov.cov)
 
 
 class Filter:

@@ -270,7 +270,7 @@ class FuzzyAdaptive(Filter):
                            np.zeros(batch, np.int64), empty, empty)
 
     def estimate(self, belief: FuzzyBelief) -> Gaussian:
-        return Gaussian(belief.mean, belief.cov)
+        return Gaussian._make((belief.mean, belief.cov))
 
     # --- predict and update ----------------------------------------------------------------
 
@@ -284,7 +284,7 @@ class FuzzyAdaptive(Filter):
                 Q = np.array(np.broadcast_to(Qm, b.mean.shape[:-1] + Qm.shape[-2:]))
                 Q0 = _diag(Q).copy()
             motion = with_noise(motion, Q)
-        g = self.base.predict(Gaussian(b.mean, b.cov), motion, dt)
+        g = self.base.predict(Gaussian._make((b.mean, b.cov)), motion, dt)
         return b._replace(mean=g.mean, cov=g.cov, Q=Q, Q0=Q0)
 
     def update(self, belief: FuzzyBelief, z: ArrayLike,
@@ -293,7 +293,8 @@ class FuzzyAdaptive(Filter):
         m = sensor.dim_z
         R0 = np.asarray(sensor.noise, dtype=float)
         R = b.R if b.R.shape[-1] else R0
-        post, innov = self.base.update(Gaussian(b.mean, b.cov), z, with_noise(sensor, R))
+        post, innov = self.base.update(Gaussian._make((b.mean, b.cov)), z,
+                                       with_noise(sensor, R))
         batch = post.mean.shape[:-1]
         miss = missing_rows(np.asarray(z, dtype=float))
         keep = np.ones(batch, bool) if miss is None else ~np.broadcast_to(miss, batch)

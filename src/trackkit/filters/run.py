@@ -46,5 +46,5 @@ def run_filter(
             g = f.estimate(b)
             means.append(g.mean)
             covs.append(g.cov)
-    hist = Gaussian(np.stack(means), np.stack(covs)) if history and means else None
+    hist = Gaussian._make((np.stack(means), np.stack(covs))) if history and means else None
     return b, hist

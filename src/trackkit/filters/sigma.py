@@ -22,6 +22,7 @@ from trackkit.belief import Gaussian, Innovation
 from trackkit.filters.base import (
     Filter,
     check_belief,
+    check_dt,
     check_measurement,
     keep_prior_where_missing,
     missing_rows,
@@ -181,6 +182,7 @@ class _SigmaPointFilter(Filter):
     def _predict(self, belief: Gaussian, motion, dt: ArrayLike, with_cross: bool):
         n = getattr(motion, "dim_x", None)
         x, P = check_belief(belief, n, f"{self.name}.predict belief")
+        check_dt(dt, f"{self.name}.predict")
         n = x.shape[-1]
         rule = self._rule(n)
         X, batch, x2 = _points(rule, x, P, f"{self.name}.predict belief.cov")

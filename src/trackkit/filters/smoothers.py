@@ -43,9 +43,10 @@ def smooth(f, filtered: Gaussian, motion, dt: ArrayLike | Sequence[float]) -> Ga
     xs, Ps = np.empty_like(x), np.empty_like(P)
     xs[-1], Ps[-1] = x[-1], P[-1]
     for k in range(T - 2, -1, -1):
-        pred, C = f.predict_with_cross(Gaussian(x[k], register(P[k])), motions[k], dts[k])
+        pred, C = f.predict_with_cross(Gaussian._make((x[k], register(P[k]))), motions[k],
+                                        dts[k])
         G = np.swapaxes(solve_psd(pred.cov, np.swapaxes(C, -1, -2), "predicted covariance"),
                         -1, -2)
         xs[k] = x[k] + (G @ (xs[k + 1] - pred.mean)[..., None])[..., 0]
         Ps[k] = symmetrize(P[k] + G @ (Ps[k + 1] - pred.cov) @ np.swapaxes(G, -1, -2))
-    return Gaussian(xs, register(Ps))
+    return Gaussian._make((xs, register(Ps)))

@@ -1,10 +1,12 @@
 """Write a comparison's report files into an output directory, all or nothing.
 
-Files: ``results.json`` (the summary document), ``metrics.parquet`` (per-step metrics of every
-filter), the PNG figures and ``report.html``. Everything is written into a sibling temporary
-directory first; only when every file is complete does it move into place (a directory rename
-when ``out_dir`` is new; otherwise file by file with ``results.json`` last, under an
-``INCOMPLETE`` marker that is removed at the end). A failure leaves ``out_dir`` as it was.
+Files: ``results.json`` (the summary document: numbers that depend only on the scenario and
+the seed, so equal seeds give byte-identical files), ``timings.json`` (wall-clock times, which
+do not), ``metrics.parquet`` (per-step metrics of every filter), the PNG figures and
+``report.html``. Everything is written into a temporary directory inside ``out_dir`` first (so
+nothing is ever written outside it); only when every file is complete are they moved into
+place, ``results.json`` last, under an ``INCOMPLETE`` marker that is removed at the end. A
+failure leaves ``out_dir`` as it was (and removes it again if this call created it).
 """
 
 from __future__ import annotations
@@ -24,18 +26,39 @@ import pyarrow.parquet as pq
 from trackkit.eval.results import MonteCarloResult
 from trackkit.report import plots
 from trackkit.report.html import render_html
+from trackkit.report.tables import averaging_window
 
 __all__ = [
-    "RESULTS_JSON", "METRICS_PARQUET", "REPORT_HTML", "INCOMPLETE", "TRACKKIT_FILES",
-    "results_document", "write_results_json", "metrics_table", "write_metrics_parquet",
-    "write_report",
+    "RESULTS_JSON", "TIMINGS_JSON", "METRICS_PARQUET", "REPORT_HTML", "INCOMPLETE",
+    "TRACKKIT_FILES", "results_document", "timings_document", "write_results_json",
+    "write_timings_json", "metrics_table", "write_metrics_parquet", "write_report",
 ]
 
 RESULTS_JSON = "results.json"
+TIMINGS_JSON = "timings.json"
 METRICS_PARQUET = "metrics.parquet"
 REPORT_HTML = "report.html"
 INCOMPLETE = "INCOMPLETE"
-TRACKKIT_FILES = (METRICS_PARQUET, *plots.PLOT_FILES.values(), REPORT_HTML, RESULTS_JSON)
+TRACKKIT_FILES = (METRICS_PARQUET, *plots.PLOT_FILES.values(), REPORT_HTML, TIMINGS_JSON,
+                  RESULTS_JSON)
+#: the units of the quantities that are the same for every scenario (the error groups' units
+#: come from the result)
+_FIXED_UNITS = {
+    "dt": "s",
+    "window": "s (from_s, to_s); steps (first_step, steps)",
+    "anees": "1 (dimensionless; about the state dimension n when consistent)",
+    "anis": "1 (dimensionless; about the measurement dimension m when consistent)",
+    "nees_in_bounds": "fraction of the window's steps, 0 to 1",
+    "diverged": "runs",
+}
+_MATCHING_UNITS = {
+    "J1": "SI unit of each measurement channel (rad for angles)",
+    "J2": "SI unit of each measurement channel (rad for angles)",
+    "J3": "SI unit of each state component (m, m/s, ...)",
+    "J4": "dom_alpha times the RMS of the DOM diagonal (SI measurement variance)",
+    "tuning": "best, mean and worst: the J4 cost of the tuning realisation; params: the "
+              "fuzzy system's parameters (normalised, dimensionless)",
+}
 
 
 def _finite_or_none(obj: Any) -> Any:
@@ -47,17 +70,66 @@ def _finite_or_none(obj: Any) -> Any:
     return obj
 
 
+def _units(result: MonteCarloResult, doc: dict) -> dict:
+    units: dict[str, Any] = {
+        "rmse": dict(result.groups),
+        "pcrlb": {g: result.groups.get(g, "") for g in doc.get("pcrlb", {})},
+        **_FIXED_UNITS,
+    }
+    present = {"J1", "tuning"} & set(doc)
+    for per_filter in doc.get("J", {}).values():
+        present |= set(per_filter)
+    units.update({k: v for k, v in _MATCHING_UNITS.items() if k in present})
+    return units
+
+
 def results_document(result: MonteCarloResult) -> dict:
-    """``result.to_json_dict()`` with non-finite numbers (no bound, no NIS) as null."""
-    return _finite_or_none(result.to_json_dict())
+    """The ``results.json`` document: ``result.to_json_dict()`` without the wall-clock
+    timings (they go to ``timings.json``), with the averaging ``window`` and the ``units`` of
+    every quantity added, and non-finite numbers (no bound, no NIS) as null.
+
+    Values are SI (angles in radians, as ``units`` says); the tables show degrees."""
+    doc = result.to_json_dict()
+    for entry in doc.get("filters", {}).values():
+        entry.pop("seconds_per_step", None)
+    for entry in doc.get("tuning", {}).values():
+        entry.pop("seconds", None)
+    head = {k: doc.pop(k) for k in ("scenario", "runs", "seed", "steps", "dt") if k in doc}
+    ordered = {**head, "window": averaging_window(result), "units": _units(result, doc), **doc}
+    return _finite_or_none(ordered)
+
+
+def timings_document(result: MonteCarloResult) -> dict:
+    """The ``timings.json`` document: wall-clock time per run-step of each filter and the
+    seconds each fuzzy system took to tune (they vary from run to run, unlike results.json)."""
+    doc: dict[str, Any] = {
+        "scenario": result.scenario, "runs": result.runs, "seed": result.seed,
+        "units": {"seconds_per_step": "s of filter time (predict and update) per run and step",
+                  "tuning_seconds": "s of wall-clock time to tune the filter's fuzzy system"},
+        "seconds_per_step": {name: float(f.seconds_per_step)
+                             for name, f in result.filters.items()},
+    }
+    if result.tuning:
+        doc["tuning_seconds"] = {name: float(getattr(t, "seconds", math.nan))
+                                 for name, t in result.tuning.items()}
+    return _finite_or_none(doc)
+
+
+def _write_json(doc: dict, path: str | Path) -> Path:
+    path = Path(path)
+    text = json.dumps(doc, indent=2, allow_nan=False)
+    path.write_text(text + "\n", encoding="utf-8")
+    return path
 
 
 def write_results_json(result: MonteCarloResult, path: str | Path) -> Path:
-    """Write ``results.json`` (strict JSON, UTF-8, indented)."""
-    path = Path(path)
-    text = json.dumps(results_document(result), indent=2, allow_nan=False)
-    path.write_text(text + "\n", encoding="utf-8")
-    return path
+    """Write ``results.json`` (strict JSON, UTF-8, indented; see :func:`results_document`)."""
+    return _write_json(results_document(result), path)
+
+
+def write_timings_json(result: MonteCarloResult, path: str | Path) -> Path:
+    """Write ``timings.json`` (see :func:`timings_document`)."""
+    return _write_json(timings_document(result), path)
 
 
 def _column(values: Any, steps: int, name: str) -> np.ndarray:
@@ -128,14 +200,12 @@ def _write_all(result: MonteCarloResult, folder: Path) -> dict[str, Path]:
     page = render_html(result, figures)
     written["html"] = folder / REPORT_HTML
     written["html"].write_text(page, encoding="utf-8")
+    written["timings"] = write_timings_json(result, folder / TIMINGS_JSON)
     written["results"] = write_results_json(result, folder / RESULTS_JSON)
     return written
 
 
 def _move_into_place(tmp: Path, out: Path, written: dict[str, Path]) -> dict[str, Path]:
-    if not out.exists():
-        os.rename(tmp, out)
-        return {k: out / p.name for k, p in written.items()}
     marker = out / INCOMPLETE
     marker.write_text("trackkit is replacing the report files in this directory; if this file "
                       "remains, the write was interrupted and the files here are not one "
@@ -154,6 +224,25 @@ def _move_into_place(tmp: Path, out: Path, written: dict[str, Path]) -> dict[str
     return final
 
 
+def _make_dirs(out: Path) -> list[Path]:
+    """``mkdir -p out``; returns the directories it created, outermost first."""
+    missing = []
+    p = out
+    while not p.exists():
+        missing.append(p)
+        p = p.parent
+    out.mkdir(parents=True, exist_ok=True)
+    return missing[::-1]
+
+
+def _remove_if_empty(created: list[Path]) -> None:
+    for d in reversed(created):
+        try:
+            d.rmdir()
+        except OSError:  # not empty (someone else's files) or already gone: leave it
+            return
+
+
 def write_report(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Path]:
     """Write all report files of ``result`` into ``out_dir`` atomically (see module doc).
 
@@ -161,13 +250,15 @@ def write_report(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Pat
     are replaced (or removed when this run does not produce them). Returns name -> path."""
     out = Path(out_dir).resolve()
     if out.exists() and not out.is_dir():
-        raise ValueError(f"output directory {str(out)!r} exists and is not a directory")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.{uuid.uuid4().hex[:12]}.tmp"
-    tmp.mkdir()  # not mkdtemp: the directory renamed into place keeps the usual permissions
+        raise ValueError(f"output directory {str(out_dir)!r} exists and is not a directory")
+    created = _make_dirs(out)
+    # inside out_dir, not beside it: a run writes nowhere but the directory it was given
+    tmp = out / f".trackkit-tmp.{uuid.uuid4().hex[:12]}"
     try:
+        tmp.mkdir()
         written = _write_all(result, tmp)
         return _move_into_place(tmp, out, written)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        _remove_if_empty(created)
         raise

@@ -1,6 +1,6 @@
 """One self-contained HTML page: scenario, summary table, seed 000's J1-J4 and tuning tables
-(when the result has them), notes and the PNGs inlined as base64 data URIs, with inline CSS
-and no scripts, so it opens in a browser with no network."""
+(when the result has them), notes, the PNGs inlined as base64 data URIs and the glossary of
+the metrics, with inline CSS and no scripts, so it opens in a browser with no network."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pathlib import Path
 
 from trackkit import __version__
 from trackkit.eval.results import MonteCarloResult
+from trackkit.report.glossary import glossary_html
 from trackkit.report.tables import html_table, matching_html_tables
 
 __all__ = ["data_uri", "render_html"]
@@ -48,6 +49,8 @@ h3 { font-size: 1.05em; margin-bottom: 0.2em; }
 figure { margin: 1.5em 0; }
 figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
 figcaption { color: #555; font-size: 0.9em; }
+dl.glossary dt { font-weight: bold; margin-top: 0.6em; }
+dl.glossary dd { margin-left: 1.5em; color: #333; }
 """
 
 
@@ -91,5 +94,6 @@ def render_html(result: MonteCarloResult, images: Mapping[str, str | Path | byte
         caption = _CAPTIONS.get(name, name)
         parts.append(f'<figure><img src="{data_uri(png)}" alt="{esc(name)}">'
                      f"<figcaption>{esc(caption)}</figcaption></figure>")
+    parts += ["<h2>Glossary</h2>", glossary_html()]
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)

@@ -26,7 +26,7 @@ from rich.text import Text
 from trackkit.eval.results import MonteCarloResult
 
 __all__ = [
-    "display_unit", "Summary", "summary", "rich_table", "html_table", "short",
+    "averaging_window", "display_unit", "Summary", "summary", "rich_table", "html_table", "short",
     "channel_labels", "state_labels", "matching_values", "matching_summary", "tuning_summary",
     "matching_summaries", "summary_rich_table", "summary_html_table", "matching_rich_tables",
     "matching_html_tables",
@@ -102,10 +102,24 @@ def summary(result: MonteCarloResult) -> Summary:
         row += ["1.00"] * len(bounded) + ["", "", "", "", ""]
         rows.append(row)
 
-    t0 = float(result.times[result.start]) if 0 <= result.start < len(result.times) else 0.0
+    w = averaging_window(result)
+    span = (f"t = {w['from_s']:g} to {w['to_s']:g} s ({w['steps']} steps)"
+            if w["from_s"] is not None else "no steps")
     caption = (f"{result.scenario}: {result.runs} runs, seed {result.seed}, {result.steps} steps "
-               f"of {result.dt:g} s; averages over t >= {t0:g} s")
+               f"of {result.dt:g} s; averages over {span}")
     return Summary(headers, rows, caption)
+
+
+def averaging_window(result: MonteCarloResult) -> dict:
+    """The steps behind the time averages: ``from_s`` and ``to_s`` (seconds from the scenario
+    start, both steps included; None when the window is empty), ``first_step`` and
+    ``steps``."""
+    times = np.asarray(result.times, dtype=float).reshape(-1)
+    start = max(0, int(result.start))
+    inside = times[start:]
+    return {"from_s": float(inside[0]) if inside.size else None,
+            "to_s": float(inside[-1]) if inside.size else None,
+            "first_step": start, "steps": int(inside.size)}
 
 
 def _natural_width(s: Summary) -> int:

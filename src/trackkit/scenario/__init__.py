@@ -1,7 +1,8 @@
 """Scenarios: TOML files validated against ``trackkit.scenario.schema``.
 
 ``load("bo-cv")`` reads a bundled scenario by name, ``load("my.toml")`` a file; errors name the
-file, the field, the bad value and what is allowed.
+file, the field, the bad value and what is allowed. ``dumps(scenario)`` writes a scenario, with
+every default filled in, as TOML that ``load`` reads back to an equal scenario.
 """
 
 from __future__ import annotations
@@ -9,12 +10,14 @@ from __future__ import annotations
 import tomllib
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 from pydantic import ValidationError
 
-from trackkit.scenario.schema import KNOT, Scenario
+from trackkit.scenario.schema import KNOT, PLAIN_NAME, Scenario
+from trackkit.scenario.toml_writer import dumps
 
-__all__ = ["Scenario", "ScenarioError", "load", "bundled", "DEFAULT", "KNOT"]
+__all__ = ["Scenario", "ScenarioError", "load", "parse", "dumps", "bundled", "DEFAULT", "KNOT"]
 
 DEFAULT = "bo-cv"
 
@@ -32,51 +35,90 @@ def bundled() -> dict[str, str]:
     out = {}
     for f in sorted(_bundled_dir().iterdir(), key=lambda p: p.name):
         if f.name.endswith(".toml"):
-            data = tomllib.loads(f.read_text())
+            data = tomllib.loads(f.read_text(encoding="utf-8"))
             out[f.name[:-5]] = str(data.get("description", "")).split("\n")[0]
     return out
 
 
-def _format(err: ValidationError, source: str) -> str:
-    lines = [f"{source}: {err.error_count()} problem(s)"]
+def _problem(loc: str, value: Any, message: str) -> str:
+    """One line of a report: the field, its value and what is wrong."""
+    shown = repr(value)
+    if isinstance(value, dict) and len(shown) > 80:
+        shown = "{...}"  # a whole table: the message says what in it is wrong
+    if len(shown) > 80:
+        shown = shown[:77] + "..."
+    return f"  {loc or '(top level)'} = {shown}: {message}"
+
+
+def _format(problems: list[tuple[str, Any, str]], source: str) -> str:
+    return "\n".join([f"{source}: {len(problems)} problem(s)"]
+                     + [_problem(*p) for p in problems])
+
+
+def _pydantic_problems(err: ValidationError) -> list[tuple[str, Any, str]]:
+    out = []
     for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = e["msg"].removeprefix("Value error, ")
+        loc = ".".join(str(p) for p in e["loc"])
+        msg, value = e["msg"].removeprefix("Value error, "), e.get("input")
         if e["type"] == "extra_forbidden":
             msg = "unknown field (not allowed here)"
-        value = e.get("input")
-        shown = repr(value) if not isinstance(value, dict) else "{...}"
         if e["type"] == "missing":
-            shown, msg = "(missing)", "required field"
-        if len(shown) > 80:
-            shown = shown[:77] + "..."
-        lines.append(f"  {loc} = {shown}: {msg}")
-    return "\n".join(lines)
+            out.append((loc, _Missing(), "required field"))
+            continue
+        out.append((loc, value, msg))
+    return out
+
+
+class _Missing:
+    def __repr__(self) -> str:
+        return "(missing)"
 
 
 def parse(data: dict, source: str = "<scenario>") -> Scenario:
-    """Validate a scenario given as a dict (e.g. parsed TOML)."""
+    """Validate a scenario given as a dict (e.g. parsed TOML): the schema, then the numbers
+    (``trackkit.scenario.build.numeric_problems``): every problem is a ScenarioError naming
+    ``source``, the field, the value and what is expected."""
+    from trackkit.scenario.build import numeric_problems
+
     try:
-        return Scenario.model_validate(data)
+        scenario = Scenario.model_validate(data)
     except ValidationError as err:
-        raise ScenarioError(_format(err, source)) from None
+        raise ScenarioError(_format(_pydantic_problems(err), source)) from None
+    problems = numeric_problems(scenario)
+    if problems:
+        raise ScenarioError(_format(problems, source))
+    return scenario
+
+
+def _read(p: Path) -> str:
+    """The text of a scenario file, or a ScenarioError that names the path and the problem."""
+    if p.is_dir():
+        raise ScenarioError(f"{p}: is a directory; expected a scenario .toml file")
+    if not p.is_file():
+        raise ScenarioError(f"{p}: no such scenario file")
+    raw = p.read_bytes()
+    try:
+        return raw.decode("utf-8-sig")  # tolerate the BOM some Windows editors write
+    except UnicodeDecodeError as err:
+        line = raw[:err.start].count(b"\n") + 1
+        raise ScenarioError(
+            f"{p}: not UTF-8 text (byte 0x{raw[err.start]:02x} on line {line}); a scenario "
+            "is a TOML file, which must be saved as UTF-8") from None
 
 
 def load(name_or_path: str | Path) -> Scenario:
     """Load a bundled scenario by name or a TOML file by path."""
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
-        if not p.is_file():
-            raise ScenarioError(f"{p}: no such scenario file")
-        text, source = p.read_text(), str(p)
+        text, source = _read(p), str(p)
     else:
         f = _bundled_dir() / f"{name_or_path}.toml"
-        if not f.is_file():
+        if not (PLAIN_NAME.fullmatch(str(name_or_path)) and f.is_file()):
             raise ScenarioError(
                 f"no bundled scenario named {str(name_or_path)!r}; expected one of "
                 f"{sorted(bundled())} or a path to a .toml file"
             )
-        text, source = f.read_text(), f"{name_or_path} (bundled)"
+        text, source = f.read_text(encoding="utf-8"), f"{name_or_path} (bundled)"
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:

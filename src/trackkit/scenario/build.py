@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from trackkit import filters as tkf
 from trackkit import models
+from trackkit.scenario.options import make_filter
 from trackkit.scenario.schema import (
-    FUZZY_TYPES,
     KNOT,
     FilterSpec,
     Kinematics,
@@ -25,7 +26,8 @@ from trackkit.sim.kinematics import LegPlan, propagate
 
 Array = NDArray[np.float64]
 
-__all__ = ["Plan", "compile_scenario", "build_motion", "build_filter", "build_sensor"]
+__all__ = ["Plan", "compile_scenario", "build_motion", "build_filter", "build_sensor",
+           "numeric_problems", "COV_LIMIT", "PRECISION_LIMIT"]
 
 
 def build_motion(spec: MotionSpec, dim: int, extras: int = 0, dt: float = 1.0):
@@ -56,44 +58,15 @@ def build_motion(spec: MotionSpec, dim: int, extras: int = 0, dt: float = 1.0):
     return models.Augmented(base, extras, spec.q_extra) if extras else base
 
 
-_FILTERS = {"KF": tkf.KF, "EKF": tkf.EKF, "IEKF": tkf.IEKF, "UKF": tkf.UKF, "CKF": tkf.CKF,
-            "EKF2": tkf.EKF, "MCEKF": tkf.MCEKF, "AMCEKF": tkf.AMCEKF, "AEKF": tkf.AEKF}
-
-
 def build_filter(spec: FilterSpec):
-    """The filter named by ``spec.type`` with ``spec.options`` (names as the constructors').
+    """The filter named by ``spec.type`` with ``spec.options``, as the table of
+    ``trackkit.scenario.options`` says (the options were validated with the scenario).
 
     A fuzzy-adaptive type (OFKF, OFEKF, OFUKF) wraps a KF, EKF or UKF; ``q_inputs`` is given
     flat, ``[i1, l1, i2, l2, ...]``. Without ``params`` (a filter still to be tuned) it gets
     the untuned default system.
     """
-    fuzzy = spec.type in FUZZY_TYPES
-    cls = tkf.FuzzyAdaptive if fuzzy else _FILTERS[spec.type]
-    options = {k: tuple(v) if isinstance(v, list) else v for k, v in spec.options.items()}
-    if fuzzy:
-        options["base"] = _FILTERS[FUZZY_TYPES[spec.type]]()
-        pairs = options.get("q_inputs")
-        if pairs is not None:
-            if len(pairs) % 2:
-                raise ValueError(f"filter {spec.name!r}: q_inputs has {len(pairs)} values; "
-                                 "expected pairs [i1, l1, i2, l2, ...]")
-            options["q_inputs"] = tuple((int(pairs[j]), int(pairs[j + 1]))
-                                        for j in range(0, len(pairs), 2))
-    if spec.type == "EKF2":
-        options.setdefault("order", 2)
-    for name in ("iterations", "order", "window", "max_halvings"):
-        if options.get(name) is not None:
-            options[name] = int(options[name])
-    try:
-        return cls(**options)
-    except TypeError:
-        import inspect
-
-        allowed = [p for p in inspect.signature(cls).parameters if p != "self"]
-        raise ValueError(
-            f"filter {spec.name!r} ({spec.type}): options {sorted(options)} not accepted; "
-            f"allowed: {allowed or 'none'}"
-        ) from None
+    return make_filter(spec.type, spec.options)
 
 
 def build_sensor(spec: SensorSpec, position: Array, velocity: Array, sigma: list[float]):
@@ -131,6 +104,19 @@ def channels(spec: SensorSpec, dim: int) -> int:
     if spec.model == "Position":
         return len(spec.r_diag_si) if spec.r_diag_si is not None else dim
     return len(_CHANNELS[spec.model])
+
+
+def _channel_field(spec: SensorSpec, dim: int) -> list[str]:
+    """The scenario field that sets each channel's noise."""
+    if spec.r_diag_si is not None:
+        return ["r_diag_si"] * channels(spec, dim)
+    if spec.snr_db is not None:
+        return ["snr_db"] * channels(spec, dim)
+    if spec.model == "Position":
+        return ["sigma_m"] * channels(spec, dim)
+    by_kind = {"bearing": "sigma_deg", "elevation": "sigma_deg", "range": "sigma_m",
+               "frequency": "sigma_hz", "delay": "sigma_s"}
+    return [by_kind[c] for c in _CHANNELS[spec.model]]
 
 
 def _unit_sigma(spec: SensorSpec, dim: int) -> list[float] | None:
@@ -225,9 +211,10 @@ def _stack(sensors: list):
     return sensors[0] if len(sensors) == 1 else models.Stack(tuple(sensors))
 
 
-def compile_scenario(s: Scenario) -> Plan:
-    """Convert units once, build models, observers' tracks and the per-step sensors."""
-    dim, T = s.dim, s.time.steps
+def _tracks(s: Scenario, T: int) -> tuple[Array, Array, Any, Array, Array]:
+    """Times, initial true state, truth's motion model, observers' tracks and the
+    noise-free truth over the first T steps."""
+    dim = s.dim
     extras = len(s.target.extras)
     times = np.arange(T + 1) * s.time.step_s
     if s.target.state is not None:
@@ -249,6 +236,13 @@ def compile_scenario(s: Scenario) -> Plan:
         nominal = np.concatenate(
             [propagate(x0[: 2 * dim], times, legs_si(s.target.legs), dim),
              np.broadcast_to(x0[2 * dim:], (T + 1, extras))], -1)
+    return times, x0, truth_motion, obs, nominal
+
+
+def _sigmas(s: Scenario, obs: Array, nominal: Array) -> list[list[float]]:
+    """Per observer, the SI noise standard deviation of each channel (an SNR averages the
+    measurement's power over all the steps of ``nominal``)."""
+    dim, T = s.dim, len(nominal) - 1
     sigmas = []
     for i, o in enumerate(s.observers):
         sig = _unit_sigma(o.sensor, dim)
@@ -260,8 +254,19 @@ def compile_scenario(s: Scenario) -> Plan:
                 for k in range(1, T + 1)
             ])
             power = np.mean(z**2, axis=0)
-            sig = [float(np.sqrt(pw / 10 ** (o.sensor.snr_db / 10))) for pw in power]
+            sig = [float(np.sqrt(pw / np.power(10.0, o.sensor.snr_db / 10)))
+                   for pw in power]
         sigmas.append(sig)
+    return sigmas
+
+
+def compile_scenario(s: Scenario) -> Plan:
+    """Convert units once, build models, observers' tracks and the per-step sensors."""
+    dim, T = s.dim, s.time.steps
+    extras = len(s.target.extras)
+    dt = s.time.step_s
+    times, x0, truth_motion, obs, nominal = _tracks(s, T)
+    sigmas = _sigmas(s, obs, nominal)
     sensors = [
         _stack([build_sensor(o.sensor, obs[i, k, :dim], obs[i, k, dim:], sigmas[i])
                 for i, o in enumerate(s.observers)])
@@ -286,3 +291,225 @@ def compile_scenario(s: Scenario) -> Plan:
         priors=priors, prior_cov=_prior(s.prior)[1], p_detect=min(pds), filter_r0=r0,
         nominal=nominal,
     )
+
+
+# --- numbers a run cannot carry, found when the scenario is read --------------------------
+
+#: Largest covariance entry (SI units squared) that P0, Q, R and the first prediction may
+#: have. The filters multiply two covariance-sized quantities (``A A^T`` in the Joseph form,
+#: ``a d - b b`` in a 2 x 2 inverse), so each must stay below sqrt(1.8e308) = 1.3e154, the
+#: square root of the largest double; 1e150 leaves a factor 1e4 for the growth of P over a
+#: run. No physical covariance comes near it (1e150 m^2 is a spread of 1e75 m).
+COV_LIMIT = 1e150
+
+#: Largest ratio of a channel's predicted measurement variance ``(H P- H^T)_jj`` at the
+#: first step to its noise variance ``R_jj``. The update leaves about ``R_jj`` of that
+#: variance, computed as a difference of numbers of size ``(H P- H^T)_jj``, so its relative
+#: rounding error is about eps * ratio (eps = 2.2e-16): 2e-4 at 1e12. Filters fail near a
+#: ratio of 1/eps = 4.5e15 (the bo-cv UKF at sigma_deg = 1e-8, cv-position at sigma_m =
+#: 1e-6, where the posterior covariance stops being positive definite); the factor 1e4 of
+#: margin covers later steps, whose geometry or process noise can make the ratio larger.
+#: In standard deviations: the noise may be up to 1e6 times smaller than the prior spread.
+PRECISION_LIMIT = 1e12
+
+_CHANNEL_UNITS = {"bearing": "rad", "elevation": "rad", "range": "m", "frequency": "Hz",
+                  "delay": "s", "position": "m"}
+
+
+def _channel_kinds(spec: SensorSpec, dim: int) -> list[str]:
+    if spec.model == "Position":
+        return ["position"] * channels(spec, dim)
+    return _CHANNELS[spec.model]
+
+
+def _motion_field(spec: MotionSpec) -> str:
+    """The field that scales a motion model's process noise."""
+    if spec.q_diag is not None:
+        return "q_diag"
+    return "sigma" if spec.model == "Singer" else "q"
+
+
+def _g(v: float) -> str:
+    return f"{v:.3g}"
+
+
+def numeric_problems(s: Scenario) -> list[tuple[str, Any, str]]:
+    """Values that pass the schema but that a run in double precision cannot carry, as
+    ``(field, value, message)``: covariances beyond :data:`COV_LIMIT`, a first update sharper
+    than :data:`PRECISION_LIMIT`, and the sizes only the built models can check (``q_diag``,
+    ``r_diag_si`` and ``r0_diag_si`` against the state and the channels). Only the first
+    step is built (all steps with an ``snr_db``, whose noise averages over them), and no
+    floating-point warning escapes: overflow shows as a value out of range."""
+    problems: dict[str, tuple[Any, str]] = {}  # by field: each named once
+
+    def add(loc: str, value: Any, message: str) -> None:
+        problems.setdefault(loc, (value, message))
+
+    with np.errstate(all="ignore"):
+        _check(s, add)
+    return [(loc, value, message) for loc, (value, message) in problems.items()]
+
+
+def _too_big(M: Any) -> float | None:
+    """The largest magnitude of M when it is not finite or beyond COV_LIMIT."""
+    M = np.asarray(M, dtype=float)
+    top = float(np.max(np.abs(M))) if M.size else 0.0
+    return top if not (top <= COV_LIMIT) else None
+
+
+def _check(s: Scenario, add: Callable[[str, Any, str], None]) -> None:
+    dim, dt = s.dim, s.time.step_s
+    extras = len(s.target.extras)
+    snr = any(o.sensor.snr_db is not None for o in s.observers)
+    try:
+        _, x0, truth_motion, obs, nominal = _tracks(s, s.time.steps if snr else 1)
+    except ValueError as err:
+        add("target.motion", _motion_value(s.target.motion), str(err))
+        return
+
+    def motion_noise(spec: MotionSpec, where: str, motion: Any, x: Array) -> Array | None:
+        """Q, or None (and the problem named) when it is out of range."""
+        Q = np.asarray(motion.noise(x, dt), dtype=float)
+        top = _too_big(Q)
+        if top is not None:
+            field = _motion_field(spec)
+            value = getattr(spec, field)
+            hint = f"entries up to {COV_LIMIT:.0e}"
+            if field in ("q", "sigma") and math.isfinite(top):
+                scale = COV_LIMIT / top
+                hint = (f"{field} <= about "
+                        f"{_g(value * (scale if field == 'q' else math.sqrt(scale)))}")
+            add(f"{where}.{field}", value,
+                f"the process noise covariance over one step ({_g(dt)} s) reaches {_g(top)} "
+                f"(SI units squared); expected {hint}, so that products of two covariances "
+                "stay below the largest double (1.8e308)")
+            return None
+        return Q
+
+    motion_noise(s.target.motion, "target.motion", truth_motion, x0)
+    for i, o in enumerate(s.observers):
+        try:
+            _unit_sigma(o.sensor, dim)
+        except ValueError as err:  # r_diag_si of the wrong length
+            add(f"observers.{i}.sensor.r_diag_si", o.sensor.r_diag_si, str(err))
+            return
+    sigmas = _sigmas(s, obs, nominal)
+    fields, kinds = [], []
+    noise_ok = True
+    for i, (o, sig) in enumerate(zip(s.observers, sigmas, strict=True)):
+        names = _channel_field(o.sensor, dim)
+        for j, var in enumerate(np.square(np.asarray(sig, dtype=float))):
+            if not (1 / COV_LIMIT <= var <= COV_LIMIT):
+                noise_ok = False
+                add(f"observers.{i}.sensor.{names[j]}", getattr(o.sensor, names[j]),
+                    f"the noise variance of the {_channel_kinds(o.sensor, dim)[j]} is "
+                    f"{_g(var)} (SI units squared); expected {1 / COV_LIMIT:.0e} to "
+                    f"{COV_LIMIT:.0e}, what products of two variances can carry in double "
+                    "precision")
+        fields += [f"observers.{i}.sensor.{n}" for n in names]
+        kinds += _channel_kinds(o.sensor, dim)
+    if not noise_ok:
+        return  # the sensors cannot even be built
+    sensor = _stack([build_sensor(o.sensor, obs[i, 1, :dim], obs[i, 1, dim:], sigmas[i])
+                     for i, o in enumerate(s.observers)])
+    for i, f in enumerate(s.filters):
+        spec, where = (f.motion, f"filters.{i}.motion") if f.motion else (
+            s.target.motion, "target.motion")
+        try:
+            motion = build_motion(spec, dim, extras, dt)
+        except ValueError as err:
+            add(where, _motion_value(spec), str(err))
+            continue
+        prior = f.prior or s.prior
+        ploc = f"filters.{i}.prior" if f.prior else "prior"
+        ploc += ".std" if prior.std is not None else ".cov"
+        mean, P0 = _prior(prior)
+        variances = np.diagonal(P0)
+        if not np.all((variances >= 1 / COV_LIMIT) & (variances <= COV_LIMIT)):
+            add(ploc, prior.std if prior.std is not None else prior.cov,
+                f"the prior variances reach {_g(variances.min())} to {_g(variances.max())} "
+                f"(SI units squared); expected {1 / COV_LIMIT:.0e} to {COV_LIMIT:.0e}, what "
+                "products of two variances can carry in double precision")
+            continue
+        x = x0 if mean is None else mean
+        Q = motion_noise(spec, where, motion, x)
+        if Q is None:
+            continue
+        R = np.asarray(sensor.noise, dtype=float)
+        chan_fields = fields
+        if f.r0_diag_si is not None:
+            if len(f.r0_diag_si) != R.shape[-1]:
+                add(f"filters.{i}.r0_diag_si", f.r0_diag_si,
+                    f"filter {f.name!r}: r0_diag_si has {len(f.r0_diag_si)} values; expected "
+                    f"{R.shape[-1]} (the measurement's channels)")
+                continue
+            R = np.diag(np.asarray(f.r0_diag_si, dtype=float))
+            chan_fields = [f"filters.{i}.r0_diag_si"] * R.shape[-1]
+            if _too_big(R) is not None:
+                add(chan_fields[0], f.r0_diag_si, f"filter {f.name!r}: r0_diag_si reaches "
+                    f"{_g(R.max())}; expected values up to {COV_LIMIT:.0e}")
+                continue
+        F = np.asarray(motion.jacobian(x, dt), dtype=float)
+        H = np.asarray(sensor.jacobian(motion.f(x, dt)), dtype=float)
+        Pp = F @ P0 @ F.T + Q
+        hph = np.diagonal(H @ Pp @ H.T)
+        hqh = np.diagonal(H @ Q @ H.T)
+        r = np.diagonal(R)
+        if _too_big(Pp) is not None:
+            add(ploc, prior.std if prior.std is not None else prior.cov,
+                f"the first predicted covariance of filter {f.name!r} reaches "
+                f"{_g(np.abs(Pp).max())}; expected entries up to {COV_LIMIT:.0e}")
+            continue
+        if not (np.all(np.isfinite(hph)) and np.all(np.isfinite(r))):
+            continue  # a degenerate geometry (target on the sensor): not a number's fault
+        for j in np.flatnonzero(hph > PRECISION_LIMIT * r):
+            _too_sharp(s, f, add, kinds[j], chan_fields[j], where, spec, float(hph[j]),
+                       float(hqh[j]), float(r[j]))
+
+
+def _motion_value(spec: MotionSpec) -> Any:
+    return getattr(spec, _motion_field(spec))
+
+
+def _too_sharp(s: Scenario, f: FilterSpec, add: Callable[[str, Any, str], None], kind: str,
+               field: str, where: str, spec: MotionSpec, hph: float, hqh: float,
+               r: float) -> None:
+    """Name the field behind a first update sharper than PRECISION_LIMIT: the process noise
+    when it makes most of the predicted spread, else the measurement noise."""
+    unit = _CHANNEL_UNITS[kind]
+    ratio = math.sqrt(hph / r)
+    spread = (f"the first predicted {kind} of filter {f.name!r} spreads {_g(math.sqrt(hph))} "
+              f"{unit}, {_g(ratio)} times the noise's {_g(math.sqrt(r))} {unit}")
+    why = (f"beyond {math.sqrt(PRECISION_LIMIT):.0e} times the update's covariance loses its "
+           "precision in double arithmetic")
+    if hqh > hph / 2:
+        mfield = _motion_field(spec)
+        value = getattr(spec, mfield)
+        hint = "smaller values"
+        if mfield in ("q", "sigma"):
+            scale = PRECISION_LIMIT * r / hqh
+            top = value * (scale if mfield == "q" else math.sqrt(scale))
+            hint = f"{mfield} <= about {_g(top)}"
+        add(f"{where}.{mfield}", value, f"{spread}, mostly from this process noise; {why}; "
+            f"expected {hint}")
+        return
+    name = field.rsplit(".", 1)[1]
+    value = _field_value(s, field)
+    need = math.sqrt(hph / PRECISION_LIMIT)  # the smallest noise std, SI
+    if name == "sigma_deg":
+        hint = f"sigma_deg >= {_g(math.degrees(need))}"
+    elif name in ("sigma_m", "sigma_hz", "sigma_s"):
+        hint = f"{name} >= {_g(need)}"
+    elif name == "snr_db":
+        hint = f"snr_db <= {_g(value + 10 * math.log10(r * PRECISION_LIMIT / hph))}"
+    else:
+        hint = f"{kind} variances >= {_g(need ** 2)}"
+    prior = f"filters.{s.filters.index(f)}.prior" if f.prior else "prior"
+    add(field, value, f"{spread}; {why}; expected {hint} (or a tighter {prior})")
+
+
+def _field_value(s: Scenario, loc: str) -> Any:
+    obj: Any = s
+    for part in loc.split("."):
+        obj = obj[int(part)] if part.isdigit() else getattr(obj, part)
+    return obj

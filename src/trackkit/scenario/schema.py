@@ -2,15 +2,29 @@
 
 Units are declared in field names at the edge (``_m``, ``_s``, ``_kn``, ``_deg``, ``_deg_s``,
 ``_mps``, ``_hz``) and converted to SI once, by the ``si`` helpers here; lists of state values
-(``state``, prior ``mean`` and ``std``) are SI in trackkit's state ordering.
+(``state``, prior ``mean`` and ``std``) are SI in trackkit's state ordering. Every field has a
+description (and, without a unit suffix, a ``unit``): ``trackkit.scenario.reference``
+generates ``docs/scenario-reference.md`` from them.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+import re
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from trackkit.scenario.options import FILTER_TYPES, FUZZY_TYPES, check_options, make_filter
 
 KNOT = 1852.0 / 3600.0  # m/s
 KMH = 1000.0 / 3600.0  # m/s
@@ -18,6 +32,22 @@ KMH = 1000.0 / 3600.0  # m/s
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+#: a scenario name is the report's folder name under trackkit-out/: one plain file name
+PLAIN_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
+
+
+def raise_at(loc: tuple[str | int, ...], value: Any, message: str) -> None:
+    """Raise a validation error at ``loc`` below the model being validated, so that the
+    message names the exact field (``filters.2.options.alpha``), not the enclosing table."""
+    error = PydanticCustomError("scenario", "{message}", {"message": message})
+    raise ValidationError.from_exception_data(
+        "Scenario", [InitErrorDetails(type=error, loc=loc, input=value)])
+
+
+def _unit(unit: str) -> dict[str, str]:
+    """The unit of a field whose name carries no unit suffix (for the reference)."""
+    return {"unit": unit}
 
 
 class _Strict(BaseModel):
@@ -27,8 +57,8 @@ class _Strict(BaseModel):
 class TimeSpec(_Strict):
     """Scenario time: ``duration_s`` and ``step_s``; measurements at every step after 0."""
 
-    duration_s: PositiveFloat
-    step_s: PositiveFloat
+    duration_s: PositiveFloat = Field(description="length of the scenario")
+    step_s: PositiveFloat = Field(description="time between measurements (the filters' step)")
 
     @model_validator(mode="after")
     def _whole_steps(self) -> TimeSpec:
@@ -50,14 +80,18 @@ class Kinematics(_Strict):
     (nautical course, clockwise from north) or as components; ``z_m`` and ``vz_mps`` for 3-D.
     """
 
-    x_m: Finite = 0.0
-    y_m: Finite = 0.0
-    z_m: Finite | None = None
-    course_deg: Finite | None = None
-    speed_kn: NonNegFloat | None = None
-    vx_mps: Finite | None = None
-    vy_mps: Finite | None = None
-    vz_mps: Finite | None = None
+    x_m: Finite = Field(0.0, description="east position")
+    y_m: Finite = Field(0.0, description="north position")
+    z_m: Finite | None = Field(None, description="height (up; negative below the surface), "
+                               "dim = 3 only")
+    course_deg: Finite | None = Field(None, description="course, clockwise from north (with "
+                                      "speed_kn)")
+    speed_kn: NonNegFloat | None = Field(None, description="speed over ground (with "
+                                         "course_deg)")
+    vx_mps: Finite | None = Field(None, description="east velocity (instead of course and "
+                                  "speed)")
+    vy_mps: Finite | None = Field(None, description="north velocity")
+    vz_mps: Finite | None = Field(None, description="vertical velocity, dim = 3 only")
 
     @model_validator(mode="after")
     def _one_velocity(self) -> Kinematics:
@@ -83,14 +117,18 @@ class Leg(_Strict):
     ``turn_rate_deg_s`` (positive to starboard, i.e. clockwise) until ``end_s``; or a
     tangential ``acceleration_mps2`` until ``end_s``."""
 
-    start_s: NonNegFloat
-    end_s: NonNegFloat | None = None
-    course_deg: Finite | None = None
-    speed_kn: NonNegFloat | None = None
-    turn_rate_deg_s: Finite | None = None
-    acceleration_mps2: Finite | None = None
-    #: a new velocity by components from ``start_s`` (a piecewise velocity schedule; 3-D)
-    velocity_mps: list[Finite] | None = None
+    start_s: NonNegFloat = Field(description="when the leg starts")
+    end_s: NonNegFloat | None = Field(None, description="when a turn or acceleration leg ends")
+    course_deg: Finite | None = Field(None, description="new course from start_s, clockwise "
+                                      "from north")
+    speed_kn: NonNegFloat | None = Field(None, description="new speed from start_s")
+    turn_rate_deg_s: Finite | None = Field(None, description="constant turn from start_s to "
+                                           "end_s, positive to starboard (clockwise)")
+    acceleration_mps2: Finite | None = Field(None, description="tangential acceleration "
+                                             "from start_s to end_s")
+    velocity_mps: list[Finite] | None = Field(
+        None, description="new velocity by components (dim values) from start_s: a "
+        "piecewise velocity schedule")
 
     @model_validator(mode="after")
     def _one_kind(self) -> Leg:
@@ -115,18 +153,27 @@ class MotionSpec(_Strict):
     """A motion model by name with its parameters (SI)."""
 
     model: Literal["ConstantVelocity", "ConstantAcceleration", "Singer", "CoordinatedTurn",
-                   "Linear"]
-    q: NonNegFloat = 0.0
-    #: Q given per step as a diagonal (SI, state order) instead of from the spectral
-    #: density q: the additive "Q = q I" of seed 000 (ConstantVelocity and Linear)
-    q_diag: list[NonNegFloat] | None = None
-    #: the transition matrix of a ``Linear`` model (any state, e.g. seed 000's chapter 3)
-    F: list[list[Finite]] | None = None
-    q_omega: NonNegFloat = 1e-6
-    #: random-walk density of the constant extras (e.g. f0), for filters' models
-    q_extra: NonNegFloat = 0.0
-    tau: PositiveFloat = 20.0
-    sigma: NonNegFloat = 1.0
+                   "Linear"] = Field(description="the motion model (trackkit.models)")
+    q: NonNegFloat = Field(0.0, description="spectral density of the white process noise: of "
+                           "the acceleration (ConstantVelocity, CoordinatedTurn) or of the "
+                           "jerk (ConstantAcceleration; m^2/s^5)", json_schema_extra=_unit(
+                               "m^2/s^3"))
+    q_diag: list[NonNegFloat] | None = Field(
+        None, description="Q per step as a diagonal, in state order, instead of from q: the "
+        "additive Q = q I of seed 000 (ConstantVelocity and Linear)",
+        json_schema_extra=_unit("SI squared"))
+    F: list[list[Finite]] | None = Field(
+        None, description="the transition matrix per step of a Linear model (any state, e.g. "
+        "seed 000's chapter 3)", json_schema_extra=_unit("SI"))
+    q_omega: NonNegFloat = Field(1e-6, description="spectral density of the turn rate "
+                                 "(CoordinatedTurn)", json_schema_extra=_unit("rad^2/s^3"))
+    q_extra: NonNegFloat = Field(0.0, description="random-walk density of the constant "
+                                 "extras (e.g. f0), for filters' models",
+                                 json_schema_extra=_unit("SI^2/s"))
+    tau: PositiveFloat = Field(20.0, description="manoeuvre time constant (Singer)",
+                               json_schema_extra=_unit("s"))
+    sigma: NonNegFloat = Field(1.0, description="standard deviation of the acceleration "
+                               "(Singer)", json_schema_extra=_unit("m/s^2"))
 
     @model_validator(mode="after")
     def _linear(self) -> MotionSpec:
@@ -148,12 +195,22 @@ class MotionSpec(_Strict):
 
 
 class Target(_Strict):
-    initial: Kinematics = Field(default_factory=Kinematics)
-    state: list[Finite] | None = None
-    motion: MotionSpec = Field(default_factory=lambda: MotionSpec(model="ConstantVelocity"))
-    legs: list[Leg] = Field(default_factory=list)
-    #: constant extra state components appended after the kinematics (e.g. f0 for DBT)
-    extras: list[Finite] = Field(default_factory=list)
+    """The target's truth: initial kinematics (or a full initial state), its motion model and
+    process noise, scripted manoeuvres and constant extra state components."""
+
+    initial: Kinematics = Field(default_factory=Kinematics,
+                                description="initial position and velocity")
+    state: list[Finite] | None = Field(
+        None, description="the full initial state in state order, instead of initial "
+        "(required with motion model Linear)", json_schema_extra=_unit("SI"))
+    motion: MotionSpec = Field(default_factory=lambda: MotionSpec(model="ConstantVelocity"),
+                               description="the truth's motion model and process noise (also "
+                               "the filters' unless a filter has its own)")
+    legs: list[Leg] = Field(default_factory=list, description="scripted manoeuvres")
+    extras: list[Finite] = Field(
+        default_factory=list, description="constant extra state components appended after "
+        "the kinematics (e.g. the tone frequency f0 for Doppler-bearing tracking)",
+        json_schema_extra=_unit("SI"))
 
 
 class SensorSpec(_Strict):
@@ -162,21 +219,37 @@ class SensorSpec(_Strict):
     over the nominal truth / 10^(snr/10))."""
 
     model: Literal["Bearing", "RangeBearing", "Position", "AzimuthElevation",
-                   "BearingFrequency", "MultipathDelay"]
-    sigma_deg: PositiveFloat | None = None
-    sigma_m: PositiveFloat | None = None
-    sigma_hz: PositiveFloat | None = None
-    sigma_s: PositiveFloat | None = None
-    #: the noise covariance's diagonal per channel in SI units squared (m^2, rad^2, s^2);
-    #: for Position it also sets the dimension (H = [I 0], e.g. seed 000's chapter 3)
-    r_diag_si: list[PositiveFloat] | None = None
-    snr_db: Finite | None = None
-    convention: Literal["nautical", "math"] = "nautical"
-    c_mps: PositiveFloat = 1500.0
-    h_surface_m: PositiveFloat | None = None
-    h_bottom_m: PositiveFloat | None = None
-    #: probability that a scan has a measurement (1 = always); missing ones are nan
-    p_detect: Annotated[float, Field(gt=0, le=1)] = 1.0
+                   "BearingFrequency", "MultipathDelay"] = Field(
+        description="the measurement: bearing; range and bearing; position; azimuth and "
+        "elevation; bearing and received frequency; surface and bottom multipath delays")
+    sigma_deg: PositiveFloat | None = Field(None, description="standard deviation of the "
+                                            "bearing (and elevation) noise")
+    sigma_m: PositiveFloat | None = Field(None, description="standard deviation of the range "
+                                          "(or each position component) noise")
+    sigma_hz: PositiveFloat | None = Field(None, description="standard deviation of the "
+                                           "frequency noise")
+    sigma_s: PositiveFloat | None = Field(None, description="standard deviation of each "
+                                          "delay's noise")
+    r_diag_si: list[PositiveFloat] | None = Field(
+        None, description="the noise covariance's diagonal per channel (m^2, rad^2, Hz^2, "
+        "s^2) instead of the sigmas; for Position it also sets the dimension (H = [I 0], "
+        "e.g. seed 000's chapter 3)", json_schema_extra=_unit("SI squared"))
+    snr_db: Finite | None = Field(None, description="signal-to-noise ratio instead of the "
+                                  "sigmas: noise variance per channel = mean square of the "
+                                  "noise-free measurement over the nominal truth / "
+                                  "10^(snr_db / 10)")
+    convention: Literal["nautical", "math"] = Field(
+        "nautical", description="angles clockwise from north (nautical) or counter-clockwise "
+        "from east (math)")
+    c_mps: PositiveFloat = Field(1500.0, description="speed of sound (BearingFrequency, "
+                                 "MultipathDelay)")
+    h_surface_m: PositiveFloat | None = Field(None, description="depth of the sensor below "
+                                              "the surface (MultipathDelay)")
+    h_bottom_m: PositiveFloat | None = Field(None, description="height of the sensor above "
+                                             "the bottom (MultipathDelay)")
+    p_detect: Annotated[float, Field(gt=0, le=1)] = Field(
+        1.0, description="probability that a scan has a measurement (1 = always); missing "
+        "ones are nan")
 
     @model_validator(mode="after")
     def _noise_given(self) -> SensorSpec:
@@ -200,9 +273,12 @@ class SensorSpec(_Strict):
 
 
 class Observer(_Strict):
-    initial: Kinematics = Field(default_factory=Kinematics)
-    legs: list[Leg] = Field(default_factory=list)
-    sensor: SensorSpec
+    """A sensor platform: its initial kinematics, its manoeuvres and its sensor."""
+
+    initial: Kinematics = Field(default_factory=Kinematics,
+                                description="initial position and velocity")
+    legs: list[Leg] = Field(default_factory=list, description="scripted manoeuvres")
+    sensor: SensorSpec = Field(description="what it measures and how noisily")
 
 
 class PriorSpec(_Strict):
@@ -211,9 +287,15 @@ class PriorSpec(_Strict):
     truth plus a draw from N(0, P0) (a consistent prior); with ``mean``, every run starts
     from that mean."""
 
-    std: list[PositiveFloat] | None = None
-    cov: list[list[Finite]] | None = None
-    mean: list[Finite] | None = None
+    std: list[PositiveFloat] | None = Field(
+        None, description="standard deviations in state order: P0 = diag(std^2)",
+        json_schema_extra=_unit("SI"))
+    cov: list[list[Finite]] | None = Field(
+        None, description="P0 in full (symmetric positive definite), instead of std",
+        json_schema_extra=_unit("SI squared"))
+    mean: list[Finite] | None = Field(
+        None, description="the prior mean of every run; without it, each run's is the truth "
+        "plus a draw from N(0, P0)", json_schema_extra=_unit("SI"))
 
     @model_validator(mode="after")
     def _one_cov(self) -> PriorSpec:
@@ -245,37 +327,63 @@ class TuneSpec(_Strict):
     filter is never scored on the data it was tuned on; the best run's parameters are used.
     ``on``: reuse the tuning of the same-named filter of that bundled scenario instead."""
 
-    optimizer: Literal["GA", "PSO", "ICA"] = "ICA"
-    population: Annotated[int, Field(ge=2)] = 50
-    iterations: Annotated[int, Field(ge=1)] = 30
-    runs: Annotated[int, Field(ge=1)] = 15
-    seed: Annotated[int, Field(ge=0)] = 1
-    realisations: Annotated[int, Field(ge=1)] = 1
-    on: str | None = None
+    optimizer: Literal["GA", "PSO", "ICA"] = Field(
+        "ICA", description="genetic algorithm, particle swarm or imperialist competitive "
+        "algorithm")
+    population: Annotated[int, Field(ge=2)] = Field(50, description="candidates per "
+                                                    "generation")
+    iterations: Annotated[int, Field(ge=1)] = Field(30, description="generations")
+    runs: Annotated[int, Field(ge=1)] = Field(15, description="independent optimiser runs; "
+                                              "the best is kept")
+    seed: Annotated[int, Field(ge=0)] = Field(1, description="seed of the tuning data and "
+                                              "the optimiser (apart from run.seed)")
+    realisations: Annotated[int, Field(ge=1)] = Field(1, description="simulated runs of the "
+                                                      "scenario the cost averages over")
+    on: str | None = Field(None, description="reuse the tuning of the same-named filter of "
+                           "this bundled scenario instead")
 
 
-FUZZY_TYPES = {"OFKF": "KF", "OFEKF": "EKF", "OFUKF": "UKF"}
+FilterTypeName = Literal[tuple(FILTER_TYPES)]  # type: ignore[valid-type]
 
 
 class FilterSpec(_Strict):
-    name: str = Field(min_length=1)
-    type: Literal["KF", "EKF", "EKF2", "IEKF", "UKF", "CKF", "MCEKF", "AMCEKF", "AEKF",
-                  "OFKF", "OFEKF", "OFUKF"]
-    options: dict[str, float | int | bool | str | list[float] | None] = Field(
-        default_factory=dict)
-    motion: MotionSpec | None = None  # default: the target's motion model
-    prior: PriorSpec | None = None  # default: the scenario's prior
-    #: the R the filter believes (diagonal, SI units squared) instead of the true R
-    r0_diag_si: list[PositiveFloat] | None = None
-    #: tune the fuzzy system (OF* filters without a ``params`` option)
-    tune: TuneSpec | None = None
+    """A filter to compare: its type, its options (see the table of each type's options),
+    and optionally its own motion model, prior, believed R and fuzzy-system tuning."""
+
+    name: str = Field(min_length=1, description="the filter's name in tables and plots "
+                      "(unique in the scenario)")
+    type: FilterTypeName = Field(description="the filter (see Filter types below)")
+    options: dict[str, Any] = Field(default_factory=dict, description="the type's options "
+                                    "(see Filter types below); omitted ones take their "
+                                    "defaults")
+    motion: MotionSpec | None = Field(None, description="the filter's motion model; default: "
+                                      "the target's")
+    prior: PriorSpec | None = Field(None, description="the filter's prior; default: the "
+                                    "scenario's")
+    r0_diag_si: list[PositiveFloat] | None = Field(
+        None, description="the R the filter believes (diagonal per channel) instead of the "
+        "true R", json_schema_extra=_unit("SI squared"))
+    tune: TuneSpec | None = Field(None, description="tune the fuzzy system off-line "
+                                  "(fuzzy-adaptive types without options.params)")
+
+    @field_validator("options")
+    @classmethod
+    def _valid_options(cls, options: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
+        type_ = info.data.get("type")
+        if type_ is None:  # the type itself is wrong: that is the error to report
+            return options
+        out, problems = check_options(type_, options)
+        if problems:
+            who = f"filter {info.data.get('name')!r} ({type_})"
+            line_errors = [InitErrorDetails(
+                type=PydanticCustomError("scenario", "{message}",
+                                         {"message": f"{who}: {message}"}),
+                loc=(name,), input=value) for name, value, message in problems]
+            raise ValidationError.from_exception_data("FilterSpec", line_errors)
+        return out
 
     @model_validator(mode="after")
-    def _known_options(self) -> FilterSpec:
-        import inspect
-
-        from trackkit import filters
-
+    def _buildable(self) -> FilterSpec:
         fuzzy = self.type in FUZZY_TYPES
         if fuzzy and (self.tune is None) == ("params" not in self.options):
             raise ValueError(f"filter {self.name!r} ({self.type}) needs exactly one of tune "
@@ -283,47 +391,69 @@ class FilterSpec(_Strict):
         if self.tune is not None and not fuzzy:
             raise ValueError(f"filter {self.name!r} ({self.type}): tune is only for the "
                              f"fuzzy-adaptive filters {sorted(FUZZY_TYPES)}")
-        cls = filters.FuzzyAdaptive if fuzzy else getattr(
-            filters, "EKF" if self.type == "EKF2" else self.type)
-        allowed = [p for p in inspect.signature(cls).parameters if p not in ("self", "base")]
-        unknown = sorted(set(self.options) - set(allowed))
-        if unknown:
-            raise ValueError(f"filter {self.name!r} ({self.type}) has no option "
-                             f"{', '.join(unknown)}; allowed: {allowed or 'none'}")
+        try:  # what one option alone cannot say: ceiling > floor, the fuzzy params' order
+            make_filter(self.type, self.options)
+        except ValueError as err:
+            raise_at(("options",), self.options, f"filter {self.name!r} ({self.type}): {err}")
         return self
 
 
 class RunSpec(_Strict):
-    runs: Annotated[int, Field(ge=1)] = 100
-    seed: Annotated[int, Field(ge=0)] = 0
-    #: runs per simulation block: the unit of work that makes results independent of
-    #: how runs are split over executors
-    block: Annotated[int, Field(ge=1)] = 250
+    """The Monte Carlo runs."""
+
+    runs: Annotated[int, Field(ge=1)] = Field(100, description="Monte Carlo runs")
+    seed: Annotated[int, Field(ge=0)] = Field(0, description="master seed; run i draws from "
+                                              "its own child of SeedSequence(seed)")
+    block: Annotated[int, Field(ge=1)] = Field(
+        250, description="runs per simulation block: the unit of work that makes results "
+        "independent of how runs are split over executors")
 
 
 class ReportSpec(_Strict):
+    """What the report shows."""
+
     groups: list[Literal["position", "velocity", "speed", "course", "x", "y", "z", "vx",
                          "vy", "vz", "x1", "x2", "x3", "frequency", "bearing"]] = Field(
-        default_factory=lambda: ["position", "velocity"])
-    average_from_s: NonNegFloat = 0.0
-    #: report seed 000's J1-J4 and the per-step R, S, C, DOM of run 0 (trackkit.eval.matching)
-    matching: bool = False
-    #: the alpha of J4 = alpha sum_i RMS(DOM(i,i)) (seed 000: 1000 in chapter 3, 5000 after)
-    dom_alpha: PositiveFloat = 1000.0
+        default_factory=lambda: ["position", "velocity"],
+        description="the error groups of the RMSE tables and plots (x1, x2, x3: the states "
+        "of a Linear target)")
+    average_from_s: NonNegFloat = Field(0.0, description="RMSE, ANEES and ANIS are averaged "
+                                        "from this time on (after convergence)")
+    matching: bool = Field(False, description="report seed 000's J1-J4 and the per-step R, "
+                           "S, C, DOM of run 0 (trackkit.eval.matching)")
+    dom_alpha: PositiveFloat = Field(1000.0, description="the alpha of J4 = alpha sum_i "
+                                     "RMS(DOM(i,i)) (seed 000: 1000 in chapter 3, 5000 after)")
 
 
 class Scenario(_Strict):
-    name: str = Field(min_length=1)
-    description: str = ""
-    dim: Literal[2, 3] = 2
-    time: TimeSpec
-    target: Target
-    observers: list[Observer] = Field(min_length=1)
-    prior: PriorSpec
-    filters: list[FilterSpec] = Field(min_length=1)
-    run: RunSpec = Field(default_factory=RunSpec)
-    report: ReportSpec = Field(default_factory=ReportSpec)
-    notes: list[str] = Field(default_factory=list)
+    """A scenario: the truth, the observers and their sensors, the filters to compare, the
+    Monte Carlo runs and the report."""
+
+    name: str = Field(max_length=255, description="the scenario's name; the report goes to "
+                      "trackkit-out/NAME, so a plain file name: letters, digits, '.', '_', "
+                      "'-', not starting with '.'")
+    description: str = Field("", description="one line for `trackkit list` and the report")
+    dim: Literal[2, 3] = Field(2, description="2-D ([x, y, vx, vy]) or 3-D ([x, y, z, vx, vy, "
+                               "vz]) kinematics")
+    time: TimeSpec = Field(description="duration and step")
+    target: Target = Field(description="the target's truth")
+    observers: list[Observer] = Field(min_length=1, description="the sensor platforms (their "
+                                      "measurements are stacked)")
+    prior: PriorSpec = Field(description="the filters' prior")
+    filters: list[FilterSpec] = Field(min_length=1, description="the filters compared")
+    run: RunSpec = Field(default_factory=RunSpec, description="the Monte Carlo runs")
+    report: ReportSpec = Field(default_factory=ReportSpec, description="what the report shows")
+    notes: list[str] = Field(default_factory=list, description="notes printed with the "
+                             "results (sources, choices, readings of a paper)")
+
+    @field_validator("name")
+    @classmethod
+    def _plain_name(cls, name: str) -> str:
+        if not PLAIN_NAME.fullmatch(name):
+            raise ValueError("expected a plain file name (letters, digits, '.', '_', '-', not "
+                             "starting with '.'): the report is written to "
+                             "trackkit-out/NAME")
+        return name
 
     @model_validator(mode="after")
     def _consistent(self) -> Scenario:
@@ -356,6 +486,12 @@ class Scenario(_Strict):
                     len(f.motion.F) != n):
                 raise ValueError(f"filters[{i}].motion.F is {len(f.motion.F)} x "
                                  f"{len(f.motion.F)}; expected {n} x {n}")
+            kappa = f.options.get("kappa")
+            if f.type == "UKF" and kappa is not None and not kappa > -n:
+                # lambda = alpha^2 (n + kappa) - n: the sigma points need n + lambda > 0
+                raise_at(("filters", i, "options", "kappa"), kappa,
+                         f"filter {f.name!r} (UKF): expected a number > -n = {-n} (n = {n}, "
+                         "the state length), so that n + lambda = alpha^2 (n + kappa) > 0")
         platforms = [("target", self.target.legs)] + [
             (f"observers[{i}]", o.legs) for i, o in enumerate(self.observers)]
         for where, legs in platforms:

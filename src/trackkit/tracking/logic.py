@@ -11,7 +11,7 @@ over the whole batch, called once per scan:
 
     logic = ScoreLogic.from_sprt(alpha=1e-6, beta=1e-3, pd=0.9, clutter_density=1e-8,
                                  new_target_density=1e-9)
-    s = logic.step(logic.init(k), hit, log_lik)   # log_lik: ln N(nu; 0, S) of the hits
+    s = logic.step(logic.init(k), hit, log_lik)   # log_lik: ln N(nu; 0, S), a Gate's loglik
 
 The statuses are ``TrackStatus`` codes; ``confirmed`` is sticky (a confirmed track stays
 confirmed until deleted) and ``DELETED`` is absorbing. ``select`` and ``concatenate`` keep
@@ -35,7 +35,6 @@ __all__ = [
     "ScoreState",
     "ScoreLogic",
     "sprt_thresholds",
-    "gaussian_log_likelihood",
     "confirmed",
     "tentative",
     "to_delete",
@@ -264,22 +263,6 @@ def sprt_thresholds(alpha: float, beta: float) -> tuple[float, float]:
             "T_delete and the test decides nothing)"
         )
     return float(np.log((1.0 - beta) / alpha)), float(np.log(beta / (1.0 - alpha)))
-
-
-def gaussian_log_likelihood(residual: ArrayLike, cov: ArrayLike) -> Array:
-    """``ln N(nu; 0, S) = -(nu^T S^-1 nu + ln det(2 pi S)) / 2`` per batch row, the hit term of
-    the track score (``residual`` ``(..., m)``, ``cov`` ``(..., m, m)``)."""
-    nu = np.asarray(residual, dtype=float)
-    S = np.asarray(cov, dtype=float)
-    if nu.ndim < 1 or S.shape[-2:] != (nu.shape[-1],) * 2:
-        raise ValueError(
-            f"residual {nu.shape} and cov {S.shape}; expected (..., m) and (..., m, m)"
-        )
-    L = np.linalg.cholesky(S)
-    w = np.linalg.solve(L, nu[..., None])[..., 0]
-    half_logdet = np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
-    m = nu.shape[-1]
-    return -0.5 * (np.einsum("...i,...i->...", w, w) + m * np.log(2 * np.pi)) - half_logdet
 
 
 class ScoreState(NamedTuple):
