@@ -27,6 +27,7 @@ Two paths give the same pairs, bit for bit:
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -92,6 +93,7 @@ class MeasurementPrediction(NamedTuple):
     K: Array
 
 
+@lru_cache(maxsize=64)  # chi2.ppf costs more than a small scan's gate
 def gate_threshold(p_gate: float, m: int) -> float:
     """gamma = chi2.ppf(P_G, m): the squared distance that holds a fraction P_G of the
     target's detections."""

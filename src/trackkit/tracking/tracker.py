@@ -29,17 +29,18 @@ from scipy.optimize import linear_sum_assignment
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
+from trackkit.filters.base import register
+from trackkit.filters.kalman import EKF, KF
 from trackkit.models.sensors import Position, RangeBearing
 from trackkit.tracking.association import (
     JPDA_MAX_EVENTS,
-    clusters,
     distance_costs,
     gnn,
     jpda,
     loglik_costs,
     seed004_costs,
 )
-from trackkit.tracking.gating import GATE_PROBABILITY, Gate, gate
+from trackkit.tracking.gating import GATE_PROBABILITY, Gate, gate, predict_measurement
 from trackkit.tracking.initiate import convert_range_bearing, single_point, two_point
 from trackkit.tracking.logic import (
     HistoryLogic,
@@ -60,6 +61,7 @@ Index = NDArray[np.intp]
 __all__ = ["GNN", "JPDA", "SinglePoint", "TwoPoint", "Tracks", "StepInfo", "Tracker"]
 
 _NO_PAIR = 1e300  # the cost of a pair of plots too far apart to be one target
+_FIRST_ORDER = (KF, EKF)  # filters whose zhat and S are h(x-) and H P H^T + R
 
 
 # --- the strategies -----------------------------------------------------------------------
@@ -69,8 +71,9 @@ _NO_PAIR = 1e300  # the cost of a pair of plots too far apart to be one target
 class GNN:
     """Global nearest neighbour: the least-cost assignment, per cluster of tracks that share
     gated detections. ``cost``: "loglik" (negative log-likelihood ratio against clutter and
-    a miss: the most probable joint event), "distance" (Mahalanobis d^2, a miss costing the
-    gate threshold) or "seed004" (``K1 (1 - exp(-K2 d^2))``, 004.md 2.6)."""
+    a miss: the most probable joint event), "distance" (the Mahalanobis distance d, a miss
+    costing the gate's edge sqrt(gamma), as Stone Soup's ``DistanceHypothesiser``) or
+    "seed004" (``K1 (1 - exp(-K2 d^2))``, 004.md 2.6)."""
 
     cost: Literal["loglik", "distance", "seed004"] = "loglik"
     k1: float = 1.0
@@ -135,8 +138,9 @@ class TwoPoint:
 
 
 class StepInfo(NamedTuple):
-    """What happened in the last scan: the gated pairs, which tracks were hit, the clusters
-    whose JPDA marginals were approximated, tracks started and deleted (their IDs)."""
+    """What happened in the last scan: the gated pairs, which tracks were hit, JPDA's
+    clusters and those whose marginals were approximated (0 for GNN), tracks started and
+    deleted (their IDs)."""
 
     pairs: int
     hit: NDArray[np.bool_]
@@ -241,7 +245,11 @@ class Tracker:
 
     def measurement_prediction(self, belief: Any, sensor: Any) -> tuple[Array, Array]:
         """``zhat (T, m)`` and ``S (T, m, m)`` of the filter: its update at ``z0 = h(x-)``
-        gives the residual ``z0 - zhat`` and S."""
+        gives the residual ``z0 - zhat`` and S. For the first-order KF and EKF that is
+        ``h(x-)`` and ``H P H^T + R``, computed directly (no update)."""
+        if type(self.filter) in _FIRST_ORDER and getattr(self.filter, "order", 1) == 1:
+            mp = predict_measurement(belief, sensor)
+            return mp.zhat, mp.S
         z0 = np.asarray(sensor.h(self.estimate(belief).mean), dtype=float)
         _, innov = self.filter.update(belief, z0, sensor)
         zhat = z0 - innov.residual
@@ -314,6 +322,10 @@ class Tracker:
             born = np.concatenate([born, np.full(k, float(scan.time))])
         step_info = StepInfo(info["pairs"], hit, info["clusters"], info["approximated"],
                              started, deleted)
+        if isinstance(getattr(belief, "cov", None), np.ndarray):
+            # gathered, mixed and initiated rows are covariances of the filter's making (or
+            # PSD by construction): spare the next predict its full check of a user's input
+            register(belief.cov)
         return Tracks(belief, ids, state, born, float(scan.time), counter, waiting, step_info)
 
     def _gnn(self, belief: Any, g: Gate, z: Array, sensor: Any, info: dict):
@@ -321,11 +333,9 @@ class Tracker:
         if a.cost == "loglik":
             costs = loglik_costs(g, self.pd, self.clutter_density, self.p_gate)
         elif a.cost == "distance":
-            costs = distance_costs(g, g.threshold)
+            costs = distance_costs(g)
         else:
             costs = seed004_costs(g, a.k1, a.k2)
-        cl = clusters(g)
-        info["clusters"] = cl.count
         assignment = gnn(g, costs)
         hit = assignment.det >= 0
         z_assigned = np.full((g.n_tracks, z.shape[1]), np.nan)
