@@ -93,6 +93,13 @@ CASES = {
     # a run count whose per-run results cannot fit in memory: refused before any compute
     "runs-cannot-fit": Case(["run", "cv-position", "--runs", "1000000000000", "--out", "o"], 2,
                             ["runs = 1000000000000", "GiB", "at most"], after=set()),
+    # a run count that the first block's timing says would take longer than --max-hours
+    "runs-cannot-finish": Case(["run", "cv-position", "--runs", "100000", "--max-hours",
+                                "0.0001", "--out", "o"], 2,
+                               ["runs = 100000", "would take about", "--max-hours"],
+                               after=set()),
+    "max-hours-not-positive": Case(["run", "cv-position", "--max-hours", "0"], 2,
+                                   ["--max-hours", "positive"], after=set()),
     "show-format": Case(["show", "bo-cv", "--format", "yaml"], 2, ["--format", "yaml"],
                         after=set()),
     "scheduler-not-an-address": Case(

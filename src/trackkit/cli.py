@@ -1,25 +1,59 @@
-"""The ``trackkit`` command: list, show and run the bundled (or your own) scenarios.
+"""The ``trackkit`` command: list, show and run the bundled (or your own) scenarios, and track
+recorded data.
 
     trackkit list
-    trackkit show bo-cv
+    trackkit show bo-cv [--format toml|json]
     trackkit run [NAME|FILE] [--runs N] [--seed S] [--out DIR] [--workers K] [--scheduler ADDR]
+    trackkit track FILE [--format ais|opensky|detections] [--as-radar] [radar, tracker and
+                   input options] [--on-bad skip|stop] [--out DIR]
 
-Bad input (a scenario error, a bad option value) exits with code 2 and one red error message,
-no traceback, before anything is written; report files appear only when complete.
+Exit codes: 0 done; 1 a system error (disk full, a Dask scheduler that does not answer, an
+unexpected failure); 2 bad input (a scenario error, a bad option value, an output directory
+that cannot be created or written, or one that another run is writing into); 130
+interrupted (Ctrl-C). Every failure is one message in words, no traceback
+(``TRACKKIT_DEBUG=1`` keeps the traceback). The output directory is created, proven writable
+and locked before anything is computed; report files appear only when complete.
 """
 
 from __future__ import annotations
 
-import json
 import os
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from pathlib import Path
-from typing import Annotated, Any
+import signal
+import sys
 
-import typer
-from rich.console import Console
-from rich.progress import (
+
+def _interrupted_while_starting(signum: int, frame: object) -> None:
+    # Ctrl-C while the modules below import: nothing has been written and nothing is held, so
+    # leave at once; a KeyboardInterrupt here would surface as a traceback from deep inside an
+    # import (or as pydantic's "Error calling __set_name__")
+    os.write(2, b"interrupted\n")
+    os._exit(130)
+
+
+def _started_as_command() -> bool:
+    return __name__ == "__main__" or os.path.basename(sys.argv[0] or "").startswith("trackkit")
+
+
+try:
+    _previous_sigint = signal.signal(signal.SIGINT, _interrupted_while_starting)
+except ValueError:  # imported outside the main thread: signals are not ours to handle
+    _previous_sigint = None
+
+import json  # noqa: E402
+import math  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
+from enum import StrEnum  # noqa: E402
+from pathlib import Path  # noqa: E402
+from types import SimpleNamespace, TracebackType  # noqa: E402
+from typing import Annotated, Any  # noqa: E402
+
+import click  # noqa: E402
+import typer  # noqa: E402
+from rich.console import Console  # noqa: E402
+from rich.progress import (  # noqa: E402
     BarColumn,
     MofNCompleteColumn,
     Progress,
@@ -27,13 +61,17 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
-from rich.syntax import Syntax
-from rich.table import Table
-from rich.text import Text
+from rich.syntax import Syntax  # noqa: E402
+from rich.table import Table  # noqa: E402
+from rich.text import Text  # noqa: E402
 
-__all__ = ["app", "main"]
+__all__ = ["app", "main", "LOCK_FILE"]
 
 DEFAULT_OUT = Path("trackkit-out")
+#: in the output directory while a run writes into it; holds the run's process id
+LOCK_FILE = ".trackkit.lock"
+#: a lock file without a readable pid younger than this may be one being written right now
+_LOCK_GRACE_S = 10.0
 
 app = typer.Typer(
     name="trackkit",
@@ -42,6 +80,9 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+#: process-wide flags of main(): whether it runs the command, whether "interrupted" was said
+_state = SimpleNamespace(main=False, announced=False, interrupt=False)
 
 
 # --- the stages the CLI drives (imported lazily; tests replace these functions) ------------
@@ -65,10 +106,16 @@ def _load(name_or_path: str) -> Any:
     return load(name_or_path)
 
 
-def _run(scenario: Any, **kwargs: Any) -> Any:
-    from trackkit.eval.montecarlo import run_scenario
+def _dumps(scenario: Any) -> str:
+    from trackkit.scenario import dumps
 
-    return run_scenario(scenario, **kwargs)
+    return dumps(scenario)
+
+
+def _run(scenario: Any, **kwargs: Any) -> Any:
+    from trackkit.eval.compare import compare
+
+    return compare(scenario, **kwargs)
 
 
 def _write(result: Any, out: Path) -> dict[str, Path]:
@@ -77,28 +124,30 @@ def _write(result: Any, out: Path) -> dict[str, Path]:
     return write_report(result, out)
 
 
-# --- helpers ----------------------------------------------------------------------------------
+# --- errors in words --------------------------------------------------------------------------
 
 
 def _stderr() -> Console:
     return Console(stderr=True)
 
 
-@contextmanager
-def _user_errors() -> Iterator[None]:
-    """Bad input (ValueError, incl. ScenarioError) -> exit 2; an OS error -> exit 1; both as
-    a red message without traceback (set ``TRACKKIT_DEBUG=1`` to get the traceback)."""
-    try:
-        yield
-    except KeyboardInterrupt:
-        _fail("interrupted; no report was written", 130)
-    except (ValueError, OSError) as err:
-        if os.environ.get("TRACKKIT_DEBUG"):
-            raise
-        if isinstance(err, ValueError):
-            _fail(str(err), 2)
-        where = f": {err.filename}" if getattr(err, "filename", None) else ""
-        _fail(f"{getattr(err, 'strerror', None) or err}{where}", 1)
+def _is_interrupt(err: BaseException | None) -> bool:
+    """A KeyboardInterrupt, or an error raised because of one (Python wraps an interrupt
+    inside ``__set_name__`` in a RuntimeError, e.g. while pydantic builds a model class)."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return True
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return False
+
+
+def _say_interrupted(message: str = "interrupted") -> None:
+    if _state.main:  # a second Ctrl-C must not break the message into a traceback
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _state.announced = True
+    _stderr().print(Text(message, style="yellow"), soft_wrap=True)
 
 
 def _fail(message: str, code: int) -> None:
@@ -108,12 +157,213 @@ def _fail(message: str, code: int) -> None:
     raise typer.Exit(code)
 
 
+def _describe(err: BaseException) -> tuple[str, int]:
+    """The message and exit code of an error a user can provoke."""
+    if isinstance(err, UnicodeError):  # a ValueError, but its text names no file
+        return f"cannot read text: {err}", 2
+    if isinstance(err, ValueError):
+        return str(err), 2
+    if isinstance(err, MemoryError):
+        return ("out of memory; try fewer runs (--runs) or a smaller run.block in the "
+                "scenario"), 1
+    if isinstance(err, OSError):
+        where = f": {err.filename}" if getattr(err, "filename", None) else ""
+        return f"{err.strerror or err}{where}", 1
+    return (f"unexpected {type(err).__name__}: {err} (this is a trackkit bug; "
+            "TRACKKIT_DEBUG=1 shows the traceback)"), 1
+
+
+@contextmanager
+def _user_errors(state: SimpleNamespace | None = None) -> Iterator[SimpleNamespace]:
+    """Any failure inside becomes one red message and an exit code (see the module doc):
+    Ctrl-C -> 130, bad input (ValueError, incl. ScenarioError) -> 2, an OS error or anything
+    else -> 1. ``TRACKKIT_DEBUG=1`` re-raises (except Ctrl-C) to keep the traceback. The
+    yielded namespace's ``interrupted`` is the message a Ctrl-C prints."""
+    state = state or SimpleNamespace(interrupted="interrupted")
+    try:
+        yield state
+    except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
+        raise
+    except BaseException as err:
+        if _is_interrupt(err):
+            _say_interrupted(state.interrupted)
+            raise typer.Exit(130) from None
+        if not isinstance(err, Exception) or os.environ.get("TRACKKIT_DEBUG"):
+            raise
+        message, code = _describe(err)
+        _fail(message, code)
+
+
+# --- the output directory: checked, created and locked before any compute -------------------
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    if os.name == "nt":  # os.kill(pid, 0) would terminate it there; assume it is running
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def _read_pid(lock: Path) -> int | None:
+    try:
+        return int(lock.read_text(encoding="ascii").strip())
+    except (OSError, ValueError, UnicodeError):
+        return None
+
+
+@contextmanager
+def _directory_guard(path: Path) -> Iterator[None]:
+    """Serialise lock takeovers between trackkit processes (flock on the directory), so that
+    two runs finding the same stale lock cannot both take it over. A no-op without flock."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the flock
+
+
+class OutputDir:
+    """The output directory of one run: created (parents too) and locked on entry, so that a
+    path that cannot be written fails before the Monte Carlo, and two runs cannot write into
+    one directory. The lock file ``LOCK_FILE`` is created with O_EXCL and holds the pid; a
+    lock whose process has died is taken over (``note`` says so). On exit the lock is
+    released, and after a failure the directories this run created are removed if empty."""
+
+    def __init__(self, path: Path, label: str) -> None:
+        self.path = path
+        self.label = label  # how the user named it, for messages
+        self.lock = path / LOCK_FILE
+        self.created: list[Path] = []
+        self.note: str | None = None
+        self._locked = False
+
+    def __enter__(self) -> OutputDir:
+        self.created = self._create()
+        try:
+            self.note = self._acquire()
+        except BaseException:
+            self._remove_created()
+            raise
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, err: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self._release()
+        if kind is not None:
+            self._remove_created()
+
+    def _create(self) -> list[Path]:
+        p = self.path
+        if p.is_dir():
+            return []
+        if p.exists():
+            raise ValueError(f"{self.label} exists and is not a directory; expected a "
+                             "directory for the report files (or a path to create one at)")
+        missing, q = [], p
+        while not q.exists() and q.parent != q:
+            missing.append(q)
+            q = q.parent
+        if not q.is_dir():
+            raise ValueError(f"{self.label}: cannot create the output directory, because "
+                             f"{q} is a file, not a directory")
+        try:
+            p.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise ValueError(f"{self.label}: cannot create the output directory "
+                             f"({err.strerror or err}, in {q}); choose a directory you can "
+                             "write to") from None
+        return missing[::-1]
+
+    def _acquire(self) -> str | None:
+        note = None
+        with _directory_guard(self.path):
+            for _ in range(2):
+                try:
+                    fd = os.open(self.lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+                except FileExistsError:
+                    note = self._stale_or_busy()
+                    self.lock.unlink(missing_ok=True)
+                    continue
+                except OSError as err:
+                    raise ValueError(f"{self.label}: cannot write into the output directory "
+                                     f"({err.strerror or err})") from None
+                with os.fdopen(fd, "w", encoding="ascii") as f:
+                    f.write(f"{os.getpid()}\n")
+                self._locked = True
+                return note
+        raise ValueError(f"{self.label}: could not take the lock {self.lock}")
+
+    def _stale_or_busy(self) -> str:
+        """The note on taking over a stale lock; raises if the lock is held."""
+        pid = _read_pid(self.lock)
+        try:
+            age = time.time() - self.lock.stat().st_mtime
+        except OSError:
+            age = 0.0
+        held = _pid_alive(pid) if pid is not None else age < _LOCK_GRACE_S
+        if held:
+            who = f"pid {pid}" if pid is not None else "a process that is starting"
+            raise ValueError(
+                f"{self.label} is in use by another trackkit run ({who}; lock file "
+                f"{self.lock}); wait for it to finish or choose another --out. If no "
+                f"trackkit run is using it, delete {self.lock}")
+        who = f"pid {pid}, no longer running" if pid is not None else "no readable pid"
+        return f"took over the stale lock {self.lock} ({who})"
+
+    def _release(self) -> None:
+        if self._locked and _read_pid(self.lock) == os.getpid():
+            self.lock.unlink(missing_ok=True)
+        self._locked = False
+
+    def _remove_created(self) -> None:
+        for d in reversed(self.created):
+            try:
+                d.rmdir()
+            except OSError:  # not empty or gone: leave it
+                return
+
+
+def _output_dir(out: Path | None, name: str) -> tuple[Path, str]:
+    """The run's output directory and how to name it in messages. The default
+    ``trackkit-out/NAME`` must be a directory inside ``trackkit-out``."""
+    if out is not None:
+        return out, f"--out {out}"
+    target = DEFAULT_OUT / name
+    base = DEFAULT_OUT.resolve()
+    inside = target.resolve()
+    plain = bool(name) and name not in (".", "..") and Path(name).name == name and (
+        "\\" not in name)
+    if not plain or inside.parent != base:
+        raise ValueError(f"scenario name {name!r} cannot name a directory inside "
+                         f"{DEFAULT_OUT}/ (expected a plain name such as 'my-scenario'); "
+                         "rename the scenario or pass --out DIR")
+    return target, f"the output directory {target}"
+
+
+# --- progress ---------------------------------------------------------------------------------
+
+
 def _progress_bar(console: Console) -> Progress:
     return Progress(
         TextColumn("{task.description}", style="bold", markup=False),
         BarColumn(),
         MofNCompleteColumn(),
-        TextColumn("runs"),
+        TextColumn("{task.fields[unit]}"),
         TimeElapsedColumn(),
         TextColumn("eta"),
         TimeRemainingColumn(),
@@ -122,27 +372,58 @@ def _progress_bar(console: Console) -> Progress:
 
 
 def _run_with_progress(scenario: Any, total: int, **kwargs: Any) -> Any:
+    """The comparison with a progress bar of runs (``progress(done, total)``, ``done`` a
+    float that moves within a block) and, when fuzzy systems are tuned first, one of
+    optimiser generations (``tuning_progress(done, total)``)."""
     console = _stderr()
     with _progress_bar(console) as bar:
-        task = bar.add_task(str(getattr(scenario, "name", "runs")), total=total)
+        runs = bar.add_task(str(getattr(scenario, "name", "runs")), total=total, unit="runs")
+        tuning: list[Any] = []
+        final = [total]
 
-        def progress(done: int, of: int) -> None:
-            bar.update(task, completed=done, total=of)
+        def progress(done: float, of: int) -> None:
+            _deliver_interrupt()
+            final[0] = of
+            bar.update(runs, completed=done, total=of)
 
-        result = _run(scenario, progress=progress, **kwargs)
-        bar.update(task, completed=bar.tasks[0].total)
+        def tuning_progress(done: int, of: int) -> None:
+            _deliver_interrupt()
+            if not tuning:
+                tuning.append(bar.add_task("tuning", total=of, unit="generations"))
+            bar.update(tuning[0], completed=done, total=of)
+
+        result = _run(scenario, progress=progress, tuning_progress=tuning_progress, **kwargs)
+        _deliver_interrupt()
+        bar.update(runs, completed=final[0], total=final[0])
     return result
 
 
-def _dump(scenario: Any) -> str:
-    try:
-        data = scenario.model_dump(mode="json")
-    except TypeError:
-        data = scenario.model_dump()
-    return json.dumps(data, indent=2, default=str)
-
-
 # --- commands ---------------------------------------------------------------------------------
+
+
+class Format(StrEnum):
+    toml = "toml"
+    json = "json"
+
+
+SCENARIO_HELP = "Bundled scenario name (see trackkit list) or TOML file."
+
+
+def _positive_hours(value: float) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"{value}; expected a positive number of hours")
+    return value
+
+
+def _at_least(lowest: int) -> Any:
+    """An option callback: the message names the value given (typer's own range check
+    says only what the bound is)."""
+    def check(value: int | None) -> int | None:
+        if value is not None and value < lowest:
+            raise typer.BadParameter(f"{value}; expected an integer >= {lowest}")
+        return value
+
+    return check
 
 
 @app.command("list")
@@ -151,64 +432,81 @@ def list_scenarios() -> None:
     with _user_errors():
         scenarios = _bundled()
         default = _default_name()
-    table = Table("scenario", "description", title="bundled scenarios", title_justify="left")
-    for name, description in scenarios.items():
-        label = Text(name, style="bold")
-        if name == default:
-            label.append(" (default)", style="dim")
-        table.add_row(label, Text(description))
-    Console().print(table)
+        table = Table("scenario", "description", title="bundled scenarios",
+                      title_justify="left")
+        for name, description in scenarios.items():
+            label = Text(name, style="bold")
+            if name == default:
+                label.append(" (default)", style="dim")
+            table.add_row(label, Text(description))
+        Console().print(table)
 
 
 @app.command()
 def show(
-    scenario: Annotated[
-        str | None, typer.Argument(help="Bundled scenario name or TOML file [default: the "
-                                        "bundled default].")
-    ] = None,
+    scenario: Annotated[str | None, typer.Argument(
+        help=SCENARIO_HELP, show_default="the bundled default")] = None,
+    fmt: Annotated[Format, typer.Option(
+        "--format", "-f", help="TOML (what trackkit run reads) or JSON.")] = Format.toml,
 ) -> None:
-    """Print a scenario with every default filled in."""
+    """Print a scenario with every default filled in (save it, edit it, run it)."""
     with _user_errors():
         sc = _load(scenario or _default_name())
-        to_toml: Callable[[], str] | None = getattr(sc, "to_toml", None)
-        text, lexer = (to_toml(), "toml") if to_toml is not None else (_dump(sc), "json")
-    console = Console()
-    if console.is_terminal:
-        console.print(Syntax(text, lexer, theme="ansi_dark", background_color="default",
-                             word_wrap=True))
-    else:  # piped: the exact text, no wrapping, so that it can be saved and parsed
-        typer.echo(text)
+        if fmt is Format.toml:
+            text = _dumps(sc)
+        else:
+            text = json.dumps(sc.model_dump(mode="json"), indent=2)
+        console = Console()
+        if console.is_terminal:
+            console.print(Syntax(text, fmt.value, theme="ansi_dark",
+                                 background_color="default", word_wrap=True))
+        else:  # piped: the exact text, no wrapping, so that it can be saved and read back
+            typer.echo(text, nl=not text.endswith("\n"))
 
 
 @app.command()
 def run(
-    scenario: Annotated[
-        str | None, typer.Argument(help="Bundled scenario name or TOML file [default: the "
-                                        "bundled default].")
-    ] = None,
+    scenario: Annotated[str | None, typer.Argument(
+        help=SCENARIO_HELP, show_default="the bundled default")] = None,
     runs: Annotated[int | None, typer.Option(
-        "--runs", "-n", min=1, help="Monte Carlo runs [default: the scenario's].")] = None,
+        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs (at least 1).",
+        show_default="the scenario's run.runs")] = None,
     seed: Annotated[int | None, typer.Option(
-        "--seed", "-s", min=0, help="Master seed [default: the scenario's].")] = None,
-    out: Annotated[Path | None, typer.Option("--out", "-o", help="Output directory "
-                                             "[default: trackkit-out/SCENARIO].")] = None,
-    workers: Annotated[int | None, typer.Option("--workers", "-w", min=1,
-                                                help="Local Dask workers.")] = None,
-    scheduler: Annotated[str | None, typer.Option("--scheduler",
-                                                  help="Dask scheduler address.")] = None,
+        "--seed", "-s", callback=_at_least(0), help="Master seed (0 or more).",
+        show_default="the scenario's run.seed")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output directory (created if missing).",
+        show_default="trackkit-out/SCENARIO")] = None,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", "-w", callback=_at_least(1), help="Local Dask workers (at least 1).",
+        show_default="none: in this process")] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.",
+        show_default="none")] = None,
+    max_hours: Annotated[float, typer.Option(
+        "--max-hours", callback=_positive_hours, help="Refuse a run count that the first "
+        "block's timing says would take longer (hours).")] = 24.0,
 ) -> None:
-    """Run a Monte Carlo comparison; write results.json, metrics.parquet, plots, report.html."""
-    with _user_errors():
+    """Run a Monte Carlo comparison; write results.json, timings.json, metrics.parquet,
+    plots and report.html.
+
+    The same scenario, seed and block size give bit-identical numbers on one machine, on any
+    executor and any number of workers; another CPU agrees to rounding (see the README,
+    "Determinism")."""
+    with _user_errors() as state:
         sc = _load(scenario or _default_name())
-        target = out if out is not None else DEFAULT_OUT / str(sc.name)
-        if target.exists() and not target.is_dir():
-            raise ValueError(f"--out {str(target)!r} exists and is not a directory")
+        target, label = _output_dir(out, str(sc.name))
         total = runs or getattr(getattr(sc, "run", None), "runs", None) or 1
-        result = _run_with_progress(sc, total, runs=runs, seed=seed, workers=workers,
-                                    scheduler=scheduler)
-        with _stderr().status("writing the report"):
-            paths = _write(result, target)
-    _print_summary(result, paths)
+        with OutputDir(target, label) as where:
+            state.interrupted = f"interrupted; nothing was written to {target}"
+            if where.note:
+                _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
+            result = _run_with_progress(sc, total, runs=runs, seed=seed, workers=workers,
+                                        scheduler=scheduler, max_seconds=3600.0 * max_hours)
+            with _stderr().status("writing the report"):
+                paths = _write(result, where.path)
+            state.interrupted = "interrupted"
+            _print_summary(result, paths)
 
 
 def _print_summary(result: Any, paths: dict[str, Path]) -> None:
@@ -227,10 +525,570 @@ def _print_summary(result: Any, paths: dict[str, Path]) -> None:
         console.print(Text(f"report: {html}", style="green"))
 
 
-def main() -> None:
-    """Entry point (``python -m trackkit.cli``)."""
-    app()
+# --- trackkit track: recorded data ------------------------------------------------------------
 
+
+class TrackFormat(StrEnum):
+    ais = "ais"
+    opensky = "opensky"
+    detections = "detections"
+
+
+class AssociatorName(StrEnum):
+    gnn = "gnn"
+    jpda = "jpda"
+
+
+class FilterName(StrEnum):
+    ekf = "ekf"
+    ukf = "ukf"
+
+
+class OnBad(StrEnum):
+    skip = "skip"
+    stop = "stop"
+
+
+#: defaults per input: a coastal marine radar over AIS traffic, an en-route air surveillance
+#: radar over ADS-B, a generic tracker for a detections file (the plots are as recorded)
+TRACK_PROFILES: dict[str, dict[str, float]] = {
+    "ais": dict(period=3.0, sigma_range=20.0, sigma_bearing_deg=0.5, pd=0.9, clutter=10.0,
+                max_range=40e3, min_range=50.0, q=0.05, v_std=10.0, gospa_c=500.0),
+    "opensky": dict(period=10.0, sigma_range=50.0, sigma_bearing_deg=0.1, pd=0.9,
+                    clutter=10.0, max_range=400e3, min_range=500.0, q=100.0, v_std=150.0,
+                    gospa_c=2000.0),
+    "detections": dict(sigma_range=20.0, sigma_bearing_deg=0.5, sigma_pos=20.0, pd=0.9,
+                       clutter=10.0, q=1.0, v_std=50.0, gospa_c=1000.0),
+}
+_PROFILE_HELP = "ais {ais}, opensky {opensky}, detections {detections}"
+
+
+def _profile_default(key: str, unit: str = "") -> str:
+    vals = {f: (f"{p[key]:g}{unit}" if key in p else "-") for f, p in TRACK_PROFILES.items()}
+    return _PROFILE_HELP.format(**vals)
+
+
+def _number(lo: float | None = None, hi: float | None = None, *, open_lo: bool = True,
+            open_hi: bool = False) -> Any:
+    """An option callback for a float in a range; the message names the value given."""
+    def check(value: float | None) -> float | None:
+        if value is None:
+            return value
+        bad = not math.isfinite(value)
+        if lo is not None:
+            bad |= value <= lo if open_lo else value < lo
+        if hi is not None:
+            bad |= value >= hi if open_hi else value > hi
+        if bad:
+            lo_s = "" if lo is None else f"{'>' if open_lo else '>='} {lo:g}"
+            hi_s = "" if hi is None else f"{'<' if open_hi else '<='} {hi:g}"
+            raise typer.BadParameter(f"{value:g}; expected a finite number "
+                                     f"{' and '.join(s for s in (lo_s, hi_s) if s)}")
+        return value
+
+    return check
+
+
+def _header_of(path: Path) -> list[str]:
+    if path.suffix.lower() in (".parquet", ".pq"):
+        import pyarrow.parquet as pq
+
+        return list(pq.ParquetFile(path).schema_arrow.names)
+    from trackkit.io._table import _header
+
+    return _header(str(path))
+
+
+def _guess_format(path: Path, header: list[str]) -> TrackFormat:
+    """The input's kind from its columns: AIS (MMSI), OpenSky (icao24) or detections."""
+    names = {h.strip().lower() for h in header}
+    if "mmsi" in names:
+        return TrackFormat.ais
+    if "icao24" in names:
+        return TrackFormat.opensky
+    if "time" in names and ({"x", "y"} <= names or {"range", "bearing"} <= names):
+        return TrackFormat.detections
+    raise ValueError(f"{path}: cannot tell the format from the columns "
+                     f"{', '.join(map(repr, header))}; expected an MMSI column (AIS), icao24 "
+                     "(OpenSky) or time with x, y or range, bearing (detections); pass "
+                     "--format ais|opensky|detections (and --columns for other names)")
+
+
+def _mapping(text: str | None, option: str, allowed: tuple[str, ...]) -> dict[str, str | None]:
+    """``KEY=VALUE,KEY=VALUE`` (a value ``none`` is None), keys checked against ``allowed``."""
+    out: dict[str, str | None] = {}
+    if not text:
+        return out
+    for item in text.split(","):
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key or not value:
+            raise ValueError(f"{option} {text!r}: {item!r} is not KEY=VALUE; expected e.g. "
+                             f"{option} {allowed[0]}=NAME,{allowed[1]}=NAME")
+        if key not in allowed:
+            raise ValueError(f"{option}: {key!r} is not a known key; expected one of "
+                             f"{', '.join(allowed)}")
+        out[key] = None if value.lower() == "none" else value
+    return out
+
+
+def _read_input(path: Path, fmt: TrackFormat, header: list[str], columns: str | None,
+                units: str | None, on_bad: OnBad, progress: Any) -> tuple[Any, Any, bool]:
+    """(Reports or Scans, ReadReport, whether the detections are range-bearing plots)."""
+    from dataclasses import fields as dc_fields
+
+    from trackkit import io as tio
+
+    kw = dict(on_bad=on_bad.value, progress=progress, max_listed=100_000)
+    if fmt is TrackFormat.ais:
+        keys = tuple(f.name for f in dc_fields(tio.AisColumns))
+        cols = tio.AisColumns(**_mapping(columns, "--columns", keys))
+        return (*tio.read_ais_csv(path, cols, **kw), False)
+    if fmt is TrackFormat.opensky:
+        if columns:
+            raise ValueError("--columns: the OpenSky reader uses OpenSky's own column names "
+                             "(time, icao24, lat, lon, ...); use --format ais with --columns "
+                             "for another layout of position reports")
+        return (*tio.read_opensky_csv(path, **kw), False)
+    given = _mapping(columns, "--columns",
+                     ("time", "sensor", "x", "y", "z", "range", "bearing"))
+    names = {h.strip().lower(): h.strip() for h in header}
+    if not given and "range" in names and "bearing" in names and "x" not in names:
+        given = {"range": names["range"], "bearing": names["bearing"]}
+    if "sensor" not in given and "sensor" not in names:
+        given["sensor"] = None  # every plot from one sensor
+    un = tio.DetectionUnits(**_mapping(units, "--units", ("distance", "angle", "bearing",
+                                                          "time")))
+    dc = tio.DetectionColumns(**given)
+    return (*tio.read_detections(path, dc, un, **kw), dc.polar)
+
+
+def _tracker(sensor: Any, pd: float, clutter_density: float, q: float, v_std: float,
+             associator: AssociatorName, filt: FilterName) -> tuple[Any, dict[str, Any]]:
+    """The tracker of ``trackkit track``, and its description for the report."""
+    import trackkit as tk
+    from trackkit.tracking import GNN, JPDA, ScoreLogic, SinglePoint, Tracker
+
+    # one new object per hundred false plots: a track is confirmed after two or three hits
+    birth = clutter_density / 100
+    logic = ScoreLogic.from_sprt(alpha=1e-2, beta=1e-3, pd=pd, clutter_density=clutter_density,
+                                 new_target_density=birth)
+    f = tk.filters.EKF() if filt is FilterName.ekf else tk.filters.UKF()
+    tracker = Tracker(f, tk.models.ConstantVelocity(dim=2, q=q), sensor, pd=pd,
+                      clutter_density=clutter_density,
+                      associator=GNN() if associator is AssociatorName.gnn else JPDA(),
+                      logic=logic, initiator=SinglePoint(v_std=v_std))
+    unit = "per_m_rad" if hasattr(sensor, "sigma_bearing") else "per_m2"
+    desc = {"filter": filt.value.upper(), "motion": "constant velocity",
+            "q_m2_s3": q, "associator": associator.value.upper(),
+            "logic": (f"SPRT track score, alpha 0.01, beta 0.001: confirmed at a score of "
+                      f"{logic.confirm_threshold:.3g}, deleted at a drop of "
+                      f"{-logic.delete_threshold:.3g} below its maximum"),
+            "initiator": "single point, velocity 0", "initial_velocity_std_m_s": v_std,
+            "pd_assumed": pd, f"clutter_density_{unit}": clutter_density,
+            "new_target_density": birth}
+    return tracker, desc
+
+
+@app.command()
+def track(
+    file: Annotated[Path, typer.Argument(
+        help="Detections (CSV or Parquet), AIS CSV or OpenSky state-vector CSV.")],
+    fmt: Annotated[TrackFormat | None, typer.Option(
+        "--format", "-f", help="What the file holds.",
+        show_default="guessed from the columns")] = None,
+    as_radar: Annotated[bool, typer.Option(
+        "--as-radar", help="Make radar plots of the AIS/ADS-B positions (a virtual radar), "
+        "track them and score the tracks against the reported positions (GOSPA). Required "
+        "for AIS and OpenSky.")] = False,
+    columns: Annotated[str | None, typer.Option(
+        "--columns", help="Column mapping KEY=NAME,...: AIS keys time, id, lat, lon, course, "
+        "speed, time_format, course_unit, speed_unit; detections keys time, sensor, x, y, "
+        "range, bearing (NAME none: no such column).",
+        show_default="the standard layout")] = None,
+    units: Annotated[str | None, typer.Option(
+        "--units", help="Units of a detections file KEY=VALUE,...: distance m|km|nmi, angle "
+        "deg|rad, bearing nautical|math, time s|iso|unix|unix_ms.",
+        show_default="distance=m,angle=deg,bearing=nautical,time=s")] = None,
+    site_lat: Annotated[float | None, typer.Option(
+        "--site-lat", callback=_number(-90, 90, open_lo=False), help="Radar site latitude "
+        "(deg); for detections, the latitude of the origin of x, y (gives lat/lon columns "
+        "and GeoJSON).", show_default="the data's median")] = None,
+    site_lon: Annotated[float | None, typer.Option(
+        "--site-lon", callback=_number(-180, 180, open_lo=False),
+        help="Radar site longitude (deg).", show_default="the data's median")] = None,
+    period: Annotated[float | None, typer.Option(
+        "--period", callback=_number(0), help="Scan period (s).",
+        show_default=_profile_default("period"))] = None,
+    sigma_range: Annotated[float | None, typer.Option(
+        "--sigma-range", callback=_number(0), help="Range noise std (m).",
+        show_default=_profile_default("sigma_range"))] = None,
+    sigma_bearing_deg: Annotated[float | None, typer.Option(
+        "--sigma-bearing-deg", callback=_number(0), help="Bearing noise std (deg).",
+        show_default=_profile_default("sigma_bearing_deg"))] = None,
+    sigma_pos: Annotated[float | None, typer.Option(
+        "--sigma-pos", callback=_number(0), help="Position noise std of x, y detections (m).",
+        show_default=_profile_default("sigma_pos"))] = None,
+    pd: Annotated[float | None, typer.Option(
+        "--pd", callback=_number(0, 1), help="Detection probability.",
+        show_default=_profile_default("pd"))] = None,
+    clutter: Annotated[float | None, typer.Option(
+        "--clutter", callback=_number(0, open_lo=False), help="False plots per scan.",
+        show_default=_profile_default("clutter"))] = None,
+    max_range: Annotated[float | None, typer.Option(
+        "--max-range", callback=_number(0), help="Instrumented range (m).",
+        show_default=_profile_default("max_range"))] = None,
+    min_range: Annotated[float | None, typer.Option(
+        "--min-range", callback=_number(0, open_lo=False), help="Blind range (m).",
+        show_default=_profile_default("min_range"))] = None,
+    max_gap: Annotated[float | None, typer.Option(
+        "--max-gap", callback=_number(0), help="Longest gap between an object's reports "
+        "bridged by interpolation (s).", show_default="max(3 periods, 120 s)")] = None,
+    seed: Annotated[int, typer.Option(
+        "--seed", "-s", callback=_at_least(0), help="Seed of the virtual radar.")] = 0,
+    associator: Annotated[AssociatorName, typer.Option(
+        "--associator", help="Data association.")] = AssociatorName.gnn,
+    filt: Annotated[FilterName, typer.Option("--filter", help="Track filter.")] = FilterName.ekf,
+    q: Annotated[float | None, typer.Option(
+        "--q", callback=_number(0), help="Process noise of the constant-velocity model "
+        "(m^2/s^3).", show_default=_profile_default("q"))] = None,
+    v_std: Annotated[float | None, typer.Option(
+        "--v-std", callback=_number(0), help="Velocity std of a new track (m/s).",
+        show_default=_profile_default("v_std"))] = None,
+    gospa_c: Annotated[float | None, typer.Option(
+        "--gospa-c", callback=_number(0), help="GOSPA cut-off (m).",
+        show_default=_profile_default("gospa_c"))] = None,
+    on_bad: Annotated[OnBad, typer.Option(
+        "--on-bad", help="Skip bad records (counted, and listed in skipped.csv) or stop at "
+        "the first.")] = OnBad.skip,
+    until: Annotated[float | None, typer.Option(
+        "--until", callback=_number(0, open_lo=False), help="Track only the first SECONDS "
+        "of the data.", show_default="all")] = None,
+    max_scans: Annotated[int | None, typer.Option(
+        "--max-scans", callback=_at_least(1), help="Track at most N scans.",
+        show_default="all")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output directory (created if missing).",
+        show_default="trackkit-out/track-STEM")] = None,
+) -> None:
+    """Track recorded data; write tracks (Parquet, CSV, GeoJSON), pictures, results.json and
+    report.html. AIS and ADS-B need --as-radar: a virtual radar makes plots of the reported
+    positions, and the tracks are scored against those positions with GOSPA."""
+    with _user_errors() as state:
+        if not file.is_file():
+            what = "is not a file" if file.exists() else "no such file"
+            raise ValueError(f"{file}: {what}; expected a detections, AIS or OpenSky file")
+        header = _header_of(file)
+        kind = fmt or _guess_format(file, header)
+        if kind is not TrackFormat.detections and not as_radar:
+            raise ValueError(f"{file}: {kind.value} position reports are tracked through a "
+                             "virtual radar; add --as-radar (trackkit track --help lists the "
+                             "radar options)")
+        if kind is TrackFormat.detections and as_radar:
+            raise ValueError(f"{file}: --as-radar makes plots of AIS or ADS-B reports; a "
+                             "detections file holds plots already, tracked as they are (drop "
+                             "--as-radar)")
+        if (site_lat is None) != (site_lon is None):
+            raise ValueError("--site-lat and --site-lon: give both or neither")
+        if units and kind is not TrackFormat.detections:
+            raise ValueError(f"--units is for detections files; {file} is {kind.value}")
+        given = dict(period=period, sigma_range=sigma_range,
+                     sigma_bearing_deg=sigma_bearing_deg, sigma_pos=sigma_pos, pd=pd,
+                     clutter=clutter, max_range=max_range, min_range=min_range, q=q,
+                     v_std=v_std, gospa_c=gospa_c)
+        # the options given, else the input's defaults (TRACK_PROFILES)
+        opt = {**TRACK_PROFILES[kind.value],
+               **{k: float(v) for k, v in given.items() if v is not None}}
+        opt.update(max_gap=max_gap, seed=seed, site_lat=site_lat, site_lon=site_lon,
+                   until=until, max_scans=max_scans)
+
+        target, label = _output_dir(out, f"track-{file.stem}")
+        with OutputDir(target, label) as where:
+            state.interrupted = f"interrupted; nothing was written to {target}"
+            if where.note:
+                _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
+            with _progress_bar(_stderr()) as bar:
+                reading = bar.add_task("reading", total=max(file.stat().st_size, 1),
+                                       unit="bytes")
+                try:
+                    data, read, polar = _read_input(
+                        file, kind, header, columns, units, on_bad,
+                        lambda done, total: bar.update(reading, completed=done, total=total))
+                except ValueError as err:
+                    raise ValueError(str(err).replace(
+                        "[on_bad='stop'; pass on_bad='skip' to skip bad records]",
+                        "[--on-bad stop; pass --on-bad skip to skip bad records]")) from None
+                job = (_detections_job(file, data, read, polar, opt)
+                       if kind is TrackFormat.detections else _radar_job(file, data, read, opt))
+                tracker, desc = _tracker(job.sensor, opt["pd"], job.clutter_density, opt["q"],
+                                         opt["v_std"], associator, filt)
+                desc["gospa_c_m"] = opt["gospa_c"]
+                job.config["tracker"] = desc
+                tracking = bar.add_task("tracking", total=len(job.scans), unit="scans")
+                from trackkit.tracking.history import run_tracker
+
+                history, _ = run_tracker(tracker, job.scans,
+                                         progress=lambda s: bar.update(tracking, completed=s))
+            from trackkit.report.tracks import TrackReport, write_track_report
+
+            rep = TrackReport(history, title=file.name, source=str(file), fmt=kind.value,
+                              read=read, epoch=read.epoch, frame=job.frame, truth=job.truth,
+                              gospa_c=opt["gospa_c"], config=job.config,
+                              background=job.background, background_label=job.background_label,
+                              site=job.site, max_range=job.max_range, notes=job.notes)
+            with _stderr().status("writing the tracks and the report"):
+                paths = write_track_report(rep, where.path)
+            state.interrupted = "interrupted"
+            _print_track_summary(read, job, paths)
+
+
+def _notes(read: Any) -> list[str]:
+    notes = []
+    if read.out_of_order:
+        notes.append(f"{read.out_of_order} records were out of time order in the file and "
+                     "were sorted by time before tracking")
+    if read.duplicates:
+        notes.append(f"{read.duplicates} exact duplicate records were dropped (the first "
+                     "of each kept)")
+    return notes
+
+
+def _limit_scans(scans: Any, until: float | None, max_scans: int | None) -> Any:
+    """The first scans: up to ``until`` s after the first, at most ``max_scans``."""
+    import numpy as np
+
+    from trackkit.tracking.scans import Scans
+
+    n = len(scans)
+    if until is not None and n:
+        n = int(np.searchsorted(scans.times, scans.times[0] + until, side="right"))
+    if max_scans is not None:
+        n = min(n, max_scans)
+    if n == len(scans):
+        return scans
+    off = scans.offsets[:n + 1]
+    return Scans(scans.z[:off[-1]], off, scans.times[:n], scans.sensor[:n])
+
+
+def _radar_job(file: Path, reports: Any, read: Any, opt: dict[str, Any]) -> SimpleNamespace:
+    """The virtual radar's plots of AIS or ADS-B reports, and the truth to score against."""
+    import numpy as np
+
+    from trackkit.report.tracks import ground_geodetic
+    from trackkit.sim.virtual_radar import VirtualRadar, virtual_radar
+
+    if len(reports) == 0:
+        raise ValueError(f"{file}: no usable position reports ({read.n_skipped} skipped); "
+                         "nothing to track")
+    frame = reports.frame  # at the data's median position
+    if opt["site_lat"] is None:
+        site = (0.0, 0.0)
+    else:
+        x, y, _ = frame.to_enu(opt["site_lat"], opt["site_lon"], 0.0)
+        site = (float(x), float(y))
+    radar = VirtualRadar(site=site, period=opt["period"], sigma_range=opt["sigma_range"],
+                         sigma_bearing=math.radians(opt["sigma_bearing_deg"]), pd=opt["pd"],
+                         clutter=opt["clutter"], max_range=opt["max_range"],
+                         min_range=opt["min_range"], max_gap=opt["max_gap"])
+    until = None if opt["until"] is None else float(reports.time[0]) + opt["until"]
+    run = virtual_radar(reports, radar, opt["seed"], until=until, max_scans=opt["max_scans"])
+    lat, lon = ground_geodetic(frame, np.array([site[0]]), np.array([site[1]]))
+    # the reported positions the radar could see, for the picture
+    t_end = float(run.scans.times[-1])
+    near = (np.hypot(reports.x - site[0], reports.y - site[1]) <= radar.max_range) & (
+        reports.time <= t_end)
+    n_plots = int(run.scans.z.shape[0])
+    config = {"virtual radar": {
+        "site_lat_deg": round(float(lat[0]), 6), "site_lon_deg": round(float(lon[0]), 6),
+        "site_x_m": site[0], "site_y_m": site[1], "period_s": radar.period,
+        "sigma_range_m": radar.sigma_range, "sigma_bearing_deg": opt["sigma_bearing_deg"],
+        "pd": radar.pd, "clutter_per_scan": radar.clutter, "min_range_m": radar.min_range,
+        "max_range_m": radar.max_range, "max_gap_s": radar.gap,
+        "still_distance_m": radar.still_distance, "still_gap_s": radar.still_gap,
+        "seed": opt["seed"], "scans": len(run.scans), "plots": n_plots,
+        "plots_of_objects": int(np.sum(run.origin >= 0)),
+        "objects_in_file": int(len(reports.ids)), "objects_in_range": run.objects_seen}}
+    notes = _notes(read) + [
+        "The truth is the reported positions (AIS or ADS-B), interpolated linearly to the "
+        "scan times; they carry their own errors (GNSS, tens of metres), so GOSPA has a "
+        "floor of that size. The radar is 2-D: range is horizontal distance in the local "
+        "frame, and every plot of a scan carries the scan's time.",
+        f"Objects in range: {run.objects_seen} of {len(reports.ids)} in the file (an object "
+        "outside the range, or with a single report, is not seen)."]
+    if opt["until"] is not None or opt["max_scans"] is not None:
+        notes.append(f"Limited to {len(run.scans)} scans (--until / --max-scans).")
+    return SimpleNamespace(
+        scans=run.scans, sensor=run.sensor, clutter_density=max(radar.clutter, 0.1)
+        / radar.volume, truth=run.truth, frame=frame, site=site, max_range=radar.max_range,
+        background=reports.position[near], background_label="reported positions",
+        config=config, notes=notes, objects=len(reports.ids), seen=run.objects_seen,
+        plots=n_plots)
+
+
+def _detections_job(file: Path, scans: Any, read: Any, polar: bool, opt: dict[str, Any]
+                    ) -> SimpleNamespace:
+    """A detections file's plots, tracked as they are (no truth)."""
+    import numpy as np
+
+    import trackkit as tk
+    from trackkit.io import EnuFrame
+
+    if len(scans) == 0:
+        raise ValueError(f"{file}: no usable detections ({read.n_skipped} skipped); nothing "
+                         "to track")
+    if scans.dim_z != 2:
+        raise ValueError(f"{file}: detections with {scans.dim_z} coordinates; the tracker "
+                         "takes 2-D plots (x, y or range, bearing)")
+    scans = _limit_scans(scans, opt["until"], opt["max_scans"])
+    z = scans.z
+    if polar:  # range, bearing (rad, nautical, as the reader gives them) from x, y = 0, 0
+        sensor = tk.models.RangeBearing(origin=(0.0, 0.0), sigma_range=opt["sigma_range"],
+                                        sigma_bearing=math.radians(opt["sigma_bearing_deg"]))
+        volume = max(float(z[:, 0].max()), 1.0) * 2 * math.pi if len(z) else 2 * math.pi
+        points = np.stack([z[:, 0] * np.sin(z[:, 1]), z[:, 0] * np.cos(z[:, 1])], axis=-1)
+        site: tuple[float, float] | None = (0.0, 0.0)
+    else:
+        sensor = tk.models.Position(dim=2, sigma=opt["sigma_pos"])
+        volume = float(max(np.ptp(z[:, 0]), 1.0) * max(np.ptp(z[:, 1]), 1.0)) if len(z) else 1.0
+        points = z
+        site = None
+    clutter = opt["clutter"]
+    frame = (EnuFrame(opt["site_lat"], opt["site_lon"]) if opt["site_lat"] is not None
+             else None)
+    plots: dict[str, Any] = {"scans": len(scans), "plots": int(z.shape[0]),
+                             "kind": "range, bearing" if polar else "x, y"}
+    if polar:
+        plots.update(sigma_range_m=opt["sigma_range"],
+                     sigma_bearing_deg=opt["sigma_bearing_deg"])
+    else:
+        plots["sigma_pos_m"] = opt["sigma_pos"]
+    plots.update(clutter_per_scan_assumed=clutter, measurement_volume=volume)
+    config = {"plots": plots}
+    notes = _notes(read)
+    if frame is None:
+        notes.append("No --site-lat/--site-lon: positions stay in the file's x, y (no "
+                     "lat/lon columns, no GeoJSON).")
+    return SimpleNamespace(
+        scans=scans, sensor=sensor, clutter_density=max(clutter, 0.1) / volume, truth=None,
+        frame=frame, site=site, max_range=None, background=points, background_label="plots",
+        config=config, notes=notes, objects=None, seen=None, plots=int(z.shape[0]))
+
+
+def _print_track_summary(read: Any, job: SimpleNamespace, paths: dict[str, Path]) -> None:
+    console = Console()
+    console.print(Text(read.summary()), soft_wrap=True)
+    if "skipped" in paths:
+        console.print(Text(f"  the skipped records are listed in {paths['skipped']}"),
+                      soft_wrap=True)
+    elif not read.n_skipped:
+        console.print(Text("  no records skipped"))
+    doc = json.loads(paths["results"].read_text(encoding="utf-8"))
+    res = doc["results"]
+    radar = doc["config"].get("virtual radar")
+    if radar is not None:
+        console.print(Text(
+            f"virtual radar at {radar['site_lat_deg']:.5f}, {radar['site_lon_deg']:.5f}: "
+            f"{radar['scans']} scans of {radar['period_s']:g} s, {radar['plots']} plots "
+            f"({radar['plots_of_objects']} of objects, the rest clutter); "
+            f"{radar['objects_in_range']} of {radar['objects_in_file']} objects in range"),
+            soft_wrap=True)
+    else:
+        console.print(Text(f"{job.plots} plots in {len(job.scans)} scans"))
+    console.print(Text(f"tracks: {res['tracks_confirmed']} confirmed of "
+                       f"{res['tracks_started']} started"), soft_wrap=True)
+    g = res.get("gospa")
+    if g is not None:
+        t = res["tracks"]
+        console.print(Text(
+            f"mean GOSPA {g['mean']:.4g} m (c = {g['c']:g} m; per scan on average "
+            f"{g['objects_per_scan']:.1f} objects, {g['missed_per_scan']:.2f} missed, "
+            f"{g['false_per_scan']:.2f} false tracks; localisation part "
+            f"{g['localisation']:.4g} m^2); {t['truths_confirmed']} of {t['truths']} objects "
+            f"tracked, {t['breaks']} track breaks, position RMSE {t['rmse']:.3g} m"),
+            soft_wrap=True)
+    html = paths.get("html")
+    console.print(Text(f"wrote {len(paths)} files to {html.parent if html else ''}",
+                       style="green"), soft_wrap=True)
+    if html is not None:
+        console.print(Text(f"report: {html}", style="green"), soft_wrap=True)
+
+
+# --- the entry point --------------------------------------------------------------------------
+
+
+def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                      lineno: int, file: Any = None, line: str | None = None) -> None:
+    # a user sees what happened, not numpy's source path and line
+    _stderr().print(Text(f"warning: {message}", style="yellow"), soft_wrap=True)
+
+
+def _unraisable(info: Any) -> None:
+    # Ctrl-C inside a finaliser is swallowed by Python ("Exception ignored in ..."), and an
+    # interrupt raised here again would be swallowed with it: remember it, and the next
+    # progress report raises it in the main thread, where main() turns it into one line
+    if isinstance(info.exc_value, KeyboardInterrupt):
+        _state.interrupt = True
+    elif os.environ.get("TRACKKIT_DEBUG"):
+        sys.__unraisablehook__(info)
+
+
+def _deliver_interrupt() -> None:
+    """Raise a Ctrl-C that arrived inside a finaliser (see ``_unraisable``)."""
+    if _state.interrupt:
+        _state.interrupt = False
+        raise KeyboardInterrupt
+
+
+def _terminate(signum: int, frame: object) -> None:
+    # SIGTERM: unwind like Ctrl-C, so that the lock and temporary files are removed
+    raise KeyboardInterrupt
+
+
+def _forget_handled_interrupt() -> None:
+    # CPython (3.11) marks a KeyboardInterrupt that escapes any exec() of a string (dataclass,
+    # namedtuple and pydantic class construction use them) as "unhandled" in a global flag,
+    # even when it is caught later, and then ends the process by SIGINT instead of our exit
+    # code; every exec() of a string starts by clearing that flag
+    exec("None")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``trackkit`` command (and ``python -m trackkit.cli``)."""
+    _state.main, _state.announced = True, False
+    try:
+        _run_main(argv)
+    finally:
+        _forget_handled_interrupt()
+
+
+def _run_main(argv: list[str] | None) -> None:
+    try:
+        try:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            signal.signal(signal.SIGTERM, _terminate)
+        except ValueError:  # not the main thread
+            pass
+        sys.unraisablehook = _unraisable
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning
+            app(args=argv, prog_name="trackkit")
+    except SystemExit as done:
+        if done.code == 130 and not _state.announced:
+            _say_interrupted()
+        raise
+    except BaseException as err:
+        if _is_interrupt(err):
+            _say_interrupted()
+            sys.exit(130)
+        if os.environ.get("TRACKKIT_DEBUG") or not isinstance(err, Exception):
+            raise
+        message, code = _describe(err)
+        _stderr().print(Text(f"error: {message}", style="red"), soft_wrap=True)
+        sys.exit(code)
+
+
+if _previous_sigint is not None and not _started_as_command():
+    signal.signal(signal.SIGINT, _previous_sigint)  # imported as a library: hand Ctrl-C back
 
 if __name__ == "__main__":
     main()

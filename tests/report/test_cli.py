@@ -108,12 +108,14 @@ def test_help_shows_the_defaults(command, defaults):
 def test_run_writes_everything(fake, tmp_path):
     out = tmp_path / "out"
     res = runner.invoke(cli.app, ["run", "other", "--runs", "4", "--seed", "3", "--out",
-                                  str(out), "--workers", "2", "--scheduler", "tcp://h:8786"])
+                                  str(out), "--workers", "2", "--scheduler", "tcp://h:8786",
+                                  "--max-hours", "2"])
     assert res.exit_code == 0, res.output
     assert fake.load == ["other"]
     (kwargs,) = fake.run
     assert {k: v for k, v in kwargs.items() if "progress" not in k} == {
-        "runs": 4, "seed": 3, "workers": 2, "scheduler": "tcp://h:8786"}
+        "runs": 4, "seed": 3, "workers": 2, "scheduler": "tcp://h:8786",
+        "max_seconds": 7200.0}
     assert {p.name for p in out.iterdir()} == ALL_FILES
     doc = json.loads((out / "results.json").read_text())
     check_results_json(doc)

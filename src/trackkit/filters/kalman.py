@@ -16,199 +16,40 @@ from trackkit.belief import Gaussian, Innovation
 from trackkit.filters.base import (
     Filter,
     check_belief,
+    check_dt,
     check_measurement,
     keep_prior_where_missing,
     missing_rows,
     output,
     register,
 )
-from trackkit.linalg import (
-    _mirror,
-    _triu,
-    mm,
-    mmT,
-    quadratic_form,
-    solve_psd,
-    symmetrize,
+from trackkit.filters.kalman_fast import (
+    _condition_batch,
+    _condition_one,
+    _predict_cov,
+    sandwich,
 )
+from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
 
 __all__ = ["KF", "EKF", "IEKF"]
 
 Array = NDArray[np.float64]
 _F64 = np.dtype(np.float64)
 
-#: the Kronecker (upper-triangle GEMM) prediction is used up to this state size: its matrix
-#: has n^2 (n + 1) / 2 entries
-_KRON_MAX_N = 6
-
-# Caches of small constant matrices. Those keyed by id hold the keyed arrays themselves (so
-# an id cannot be reused while its entry exists) and take only read-only arrays (a model's
-# or sensor's cached matrices); the others are keyed by value. All stay small (a few models
-# and step sizes) and are simply cleared when they grow.
-# (F bytes, Q bytes) -> (K_u, K_u^T, Q_u), see _predict_matrices
-_PREDICT_CACHE: dict[tuple[bytes, bytes], tuple[Array, Array, Array]] = {}
-# (id(F), id(Q)) -> (F, Q, K_u, Q_u, twin): the unbatched prediction without checks
-_SAME: dict[tuple[int, int], tuple] = {}
-# (id(Q_u), N) -> (Q_u, Q_u tiled N times): + Q on a stack as one contiguous pass
-_TILED: dict[tuple[int, int], tuple[Array, Array]] = {}
-# id(H) -> (H, contiguous H^T)
-_HT: dict[int, tuple[Array, Array]] = {}
-_ZEROS: dict[int, Array] = {}
-
-
-def _kron_upper(F: Array) -> Array:
-    """Rows of ``F kron F`` for the upper triangle: ``vec_u(F P F^T) = K_u vec(P)``."""
-    return np.ascontiguousarray(np.kron(F, F)[_triu(F.shape[0]).flat])
-
-
-def _noise_upper(Q: Array) -> Array:
-    """Upper triangle(s) ``(..., T)`` of Q, averaged with the lower one where Q is not exactly
-    symmetric (what symmetrising ``F P F^T + Q`` would do)."""
-    n = Q.shape[-1]
-    if not (Q == Q.mT).all():
-        Q = symmetrize(Q)
-    return Q.reshape(Q.shape[:-2] + (n * n,))[..., _triu(n).flat]
-
-
-def _predict_matrices(F: Array, Q: Array) -> tuple[Array, Array, Array]:
-    """``(K_u, K_u^T, Q_u)`` for an unbatched F (n x n, float) and Q (K_u^T contiguous: a
-    GEMM with a transposed operand is slower); remembered (by value) when Q is unbatched
-    too (the usual case: a model's cached matrices for one step size)."""
-    if Q.ndim != 2:
-        K_u = _kron_upper(F)
-        return K_u, np.ascontiguousarray(K_u.T), _noise_upper(Q)
-    key = (F.tobytes(), Q.tobytes())
-    value = _PREDICT_CACHE.get(key)
-    if value is None:
-        K_u = _kron_upper(F)
-        value = (K_u, np.ascontiguousarray(K_u.T), _noise_upper(Q))
-        for a in value:
-            a.flags.writeable = False
-        if len(_PREDICT_CACHE) > 256:
-            _PREDICT_CACHE.clear()
-        _PREDICT_CACHE[key] = value
-    return value
-
-
-def _tiled(Q_u: Array, N: int) -> Array:
-    """``Q_u`` repeated N times (flat), remembered for a read-only ``Q_u``."""
-    hit = _TILED.get((id(Q_u), N))
-    if hit is not None and hit[0] is Q_u:
-        return hit[1]
-    tiled = np.tile(Q_u, N)
-    if Q_u.flags.writeable:
-        return tiled
-    tiled.flags.writeable = False
-    if len(_TILED) > 8:
-        _TILED.clear()
-    _TILED[(id(Q_u), N)] = (Q_u, tiled)
-    return tiled
-
-
-def _transposed(H: Array) -> Array:
-    """``H^T`` as a contiguous array (a dot with a transposed operand costs more), kept for
-    a read-only H (a sensor's cached Jacobian)."""
-    hit = _HT.get(id(H))
-    if hit is not None and hit[0] is H:
-        return hit[1]
-    if H.flags.writeable:
-        return H.T
-    if len(_HT) > 64:
-        _HT.clear()
-    HT = np.ascontiguousarray(H.T)
-    _HT[id(H)] = (H, HT)
-    return HT
-
-
-def _zeros(n: int) -> Array:
-    z = _ZEROS.get(n)
-    if z is None:
-        z = _ZEROS[n] = np.zeros((n, n))
-        z.flags.writeable = False
-    return z
-
-
-def sandwich(A: Array, P: Array) -> Array:
-    """``A P A^T`` for symmetric P ``(..., n, n)`` and A ``(k, n)`` or ``(..., k, n)``.
-
-    For an unbatched A and a stack of P, the product is one matrix multiply on the flattened
-    covariances, ``vec(A P A^T) = (A kron A) vec(P)`` (row-major vec), instead of thousands
-    of tiny ones. Only the upper triangle is computed and then mirrored, so the result is
-    exactly symmetric. For larger n, where the Kronecker matrix grows as n^4, the batch is
-    folded into the rows of two plain products (``P A^T``, then ``(A P) A^T``).
-    """
-    if A.ndim == 2 and P.ndim == 2:
-        return A @ P @ A.T
-    if A.ndim == 2:
-        n, k = P.shape[-1], A.shape[0]
-        P = np.ascontiguousarray(P)
-        if n <= _KRON_MAX_N and k == n:
-            A = np.asarray(A, dtype=float)
-            upper = P.reshape(-1, n * n).dot(_predict_matrices(A, _zeros(n))[1])
-            return _mirror(upper, n).reshape(P.shape)
-        PAt = (P.reshape(-1, n) @ A.T).reshape(P.shape[:-1] + (k,))
-        return (np.ascontiguousarray(PAt.mT).reshape(-1, n) @ A.T).reshape(
-            P.shape[:-2] + (k, k)
-        )
-    return mmT(mm(A, P), A)
-
 
 def _predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
     """``x- = f(x, dt)``, ``P- = F P F^T + Q`` with F the Jacobian of f at x.
 
-    The covariance is computed as its upper triangle and mirrored (exactly symmetric): for an
-    unbatched F by the Kronecker product on the flattened P (one GEMV or GEMM, any batch);
-    for a batch of F as ``(F P) F^T``.
+    P- is exactly symmetric. A model whose F or Q is not n x n gets the formula as written.
     """
     F = motion.jacobian(x, dt)
     Q = motion.noise(x, dt)
-    n = P.shape[-1]
-    if P.ndim == 2:  # one problem (or a covariance shared by a batch): the shortest path
-        hit = _SAME.get((id(F), id(Q)))
-        if hit is not None and hit[0] is F and hit[1] is Q:
-            K_u, Q_u, twin = hit[2], hit[3], hit[4]
-        elif (n <= _KRON_MAX_N and type(F) is np.ndarray and type(Q) is np.ndarray
-                and F.dtype is _F64 and Q.dtype is _F64 and F.shape == Q.shape == (n, n)):
-            K_u, _, Q_u = _predict_matrices(F, Q)
-            twin = _triu(n).twin
-            if not (F.flags.writeable or Q.flags.writeable):  # a model's cached matrices
-                if len(_SAME) > 64:
-                    _SAME.clear()
-                _SAME[(id(F), id(Q))] = (F, Q, K_u, Q_u, twin)
-        else:
-            K_u = None
-        if K_u is not None:
-            upper = K_u.dot(P.ravel())
-            upper += Q_u
-            return Gaussian(motion.f(x, dt), register(upper[twin].reshape(n, n)))
-    F = np.asarray(F, dtype=float)
-    Q = np.asarray(Q, dtype=float)
-    if F.shape[-2:] != (n, n) or Q.shape[-2:] != (n, n):
-        Pp = sandwich(F, P) + Q  # a model with other shapes: as it comes
-        return output(motion.f(x, dt), Pp)
-    flat = _triu(n).flat
-    if F.ndim == 2 and n <= _KRON_MAX_N:
-        K_u, K_uT, Q_u = _predict_matrices(F, Q)
-        if P.ndim == 2:
-            upper = K_u.dot(P.ravel())
-        else:
-            P = np.ascontiguousarray(P)
-            upper = P.reshape(-1, n * n).dot(K_uT)
-            if Q_u.ndim == 1:  # + Q as one contiguous pass (a short broadcast row is slow)
-                flat_upper = upper.reshape(-1)
-                flat_upper += _tiled(Q_u, upper.shape[0])
-                return output(motion.f(x, dt), _mirror(upper, n).reshape(P.shape),
-                              symmetric=True)
-            upper = upper.reshape(P.shape[:-2] + (flat.size,))
-    else:
-        M = sandwich(F, P)
-        upper = M.reshape(M.shape[:-2] + (n * n,))[..., flat]
-        Q_u = _noise_upper(Q)
-    if Q_u.ndim == 1 or Q_u.shape == upper.shape:
-        upper += Q_u
-    else:
-        upper = upper + Q_u
-    return output(motion.f(x, dt), _mirror(upper, n), symmetric=True)
+    # the fast path (kalman_fast): the Kronecker GEMM up to _KRON_MAX_N states, else sandwich
+    Pp = _predict_cov(F, P, Q)
+    if Pp is not None:
+        return Gaussian._make((motion.f(x, dt), register(Pp)))  # Pp exactly symmetric
+    F, Q = np.asarray(F, dtype=float), np.asarray(Q, dtype=float)
+    return output(motion.f(x, dt), sandwich(F, P) + Q)
 
 
 def kalman_gain(P: Array, H: Array, R: Array) -> tuple[Array, Array, Array]:
@@ -225,123 +66,17 @@ def _condition(
 ) -> tuple[Array, Array, Array]:
     """Kalman update for residual r: returns ``(x+, P+, S)``, P+ exactly symmetric.
 
-    Joseph form ``P+ = (I - K H) P (I - K H)^T + K R K^T``, evaluated without forming
-    ``I - K H`` (n x n per row). With ``A = P H^T`` and ``S = H P H^T + R``:
-
-    * for the gain ``K = A U``, U the computed inverse of S (one problem; one-dimensional
-      measurements in a batch), expanding the Joseph form gives
-      ``P+ = P - A G A^T``, ``G = U + U^T - U S U^T`` (m x m). In exact arithmetic
-      ``G = S^{-1}``; an error E in U changes G only by ``-E S E^T``, which is the Joseph
-      form's second-order insensitivity to gain errors;
-    * for any gain K (batches of m >= 2 measurements), ``M = (I - K H) P = P - K A^T`` and
-      ``P+ = M - (M H^T) K^T + K R K^T = M - W K^T``, ``W = A - K S``, so
-      ``P+ = P - K A^T - W K^T`` (W vanishes for the optimal gain).
-
-    Both expressions are symmetric in exact arithmetic; only their upper triangle is
-    computed, and mirrored.
+    ``S = H P H^T + R``, ``K = P H^T S^{-1}``, ``x+ = x + K r`` and the Joseph form
+    ``P+ = (I - K H) P (I - K H)^T + K R K^T``.
     """
     if type(H) is not np.ndarray or H.dtype is not _F64:
         H = np.asarray(H, dtype=float)
     if type(R) is not np.ndarray or R.dtype is not _F64:
         R = np.asarray(R, dtype=float)
+    # the fast paths (kalman_fast) evaluate the Joseph form without forming I - K H
     if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and r.ndim == 1:
         return _condition_one(x, P, r, H, R)
     return _condition_batch(x, P, r, H, R)
-
-
-def _condition_one(x: Array, P: Array, r: Array, H: Array, R: Array):
-    """``_condition`` for one problem: ndarray.dot on contiguous operands (the cheapest call
-    for tiny arrays), the m x m algebra in Python floats for m <= 2."""
-    AT = H.dot(P)  # A^T = H P (P symmetric)
-    m, n = AT.shape
-    if m == 2:  # S symmetrised as symmetrize() would, and inverted explicitly
-        a, b, c, d = AT.dot(_transposed(H)).ravel().tolist()
-        r00, r01, r10, r11 = R.ravel().tolist()
-        a, b, d = a + r00, ((b + r01) + (c + r10)) * 0.5, d + r11
-        det = a * d - b * b
-        if not (a > 0 and det > 0):
-            raise ValueError("innovation covariance is not positive definite: "
-                             f"S = {[[a, b], [b, d]]}")
-        u0, u1, u2 = d / det, -b / det, a / det  # U = [[u0, u1], [u1, u2]]
-        v0, v1 = u0 * a + u1 * b, u0 * b + u1 * d  # first row of U S
-        v2, v3 = u1 * a + u2 * b, u1 * b + u2 * d  # second row
-        g0 = 2.0 * u0 - (v0 * u0 + v1 * u1)  # G = 2 U - U S U
-        g1 = 2.0 * u1 - (v0 * u1 + v1 * u2)
-        g2 = 2.0 * u2 - (v2 * u1 + v3 * u2)
-        r0, r1 = r.tolist()
-        SWG = np.array((a, b, b, d, u0 * r0 + u1 * r1, u1 * r0 + u2 * r1, g0, g1, g1, g2))
-        S = SWG[:4].reshape(2, 2)
-        out = SWG[4:].reshape(3, 2).dot(AT)  # rows: (K r)^T = (U r)^T A^T, then G A^T
-        Kr, GAT = out[0], out[1:]
-    elif m == 1:
-        S = AT.dot(H.T)
-        S += R
-        s = float(S[0, 0])
-        if not s > 0:
-            raise ValueError(f"innovation covariance is not positive definite: S = {s!r}")
-        u = 1.0 / s
-        Kr = AT[0] * (u * float(r[0]))
-        GAT = AT * (2.0 * u - u * s * u)
-    else:
-        S = symmetrize(AT.dot(H.T) + R)
-        U = solve_psd(S, np.eye(m))
-        Kr = AT.T.dot(U.dot(r))
-        GAT = (U + U.T - U.dot(S).dot(U.T)).dot(AT)
-    M = P - AT.T.dot(GAT)  # P - A G A^T
-    return x + Kr, M.ravel()[_triu(n).full_twin].reshape(n, n), S
-
-
-def _flat(a: Array, batch: tuple[int, ...], N: int, core: tuple[int, ...]) -> Array:
-    """``a`` broadcast to ``batch + core`` and reshaped to ``(N,) + core``."""
-    if a.shape[: a.ndim - len(core)] != batch:
-        a = np.broadcast_to(a, batch + core)
-    return a.reshape((N,) + core)
-
-
-def _condition_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
-    n, m = P.shape[-1], H.shape[-2]
-    batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], r.shape[:-1], H.shape[:-2],
-                                R.shape[:-2])
-    N = math.prod(batch)
-    P2 = _flat(P, batch, N, (n, n))
-    x2, r2 = _flat(x, batch, N, (n,)), _flat(r, batch, N, (m,))
-    tri = _triu(n)
-    i, j = tri.i, tri.j
-    Pu = P2.reshape(N, n * n)[:, tri.flat]
-    if m == 1:
-        h = H[..., 0, :] if H.ndim == 2 else _flat(H, batch, N, (1, n))[:, 0]
-        if h.ndim == 1:
-            A = P2.reshape(N * n, n).dot(h).reshape(N, n)
-            s = A.dot(h)
-        else:
-            A = np.einsum("nij,nj->ni", P2, h)
-            s = np.einsum("ni,ni->n", A, h)
-        s += R[..., 0, 0] if R.ndim == 2 else _flat(R, batch, N, (1, 1))[:, 0, 0]
-        if not (s > 0).all():
-            solve_psd(s.reshape(batch + (1, 1)), np.ones(batch + (1, 1)))  # raises
-        u = 1.0 / s
-        g = u * s
-        g *= u
-        g -= u
-        g -= u  # g = u s u - 2 u = -G
-        xn = x2 + A * (u * r2[:, 0])[:, None]  # K r, K = A u
-        Pu += g[:, None] * (A[:, i] * A[:, j])
-        S = s.reshape(N, 1, 1)
-    else:
-        H2 = H if H.ndim == 2 else _flat(H, batch, N, (m, n))
-        R2 = R if R.ndim == 2 else _flat(R, batch, N, (m, m))
-        if H2.ndim == 2:  # one GEMM over the flattened batch
-            A = P2.reshape(N * n, n).dot(H2.T).reshape(N, n, m)
-        else:
-            A = mmT(P2, H2)
-        S = symmetrize(mm(H2, A) + R2)
-        K = solve_psd(S, A.mT).mT
-        xn = x2 + np.einsum("nij,nj->ni", K, r2)
-        W = A - mm(K, S)
-        Pu -= (K[:, i, :] * A[:, j, :]).sum(-1)
-        Pu -= (W[:, i, :] * K[:, j, :]).sum(-1)
-    return (xn.reshape(batch + (n,)), _mirror(Pu, n).reshape(batch + (n, n)),
-            S.reshape(batch + (m, m)))
 
 
 def _second_order_terms(Hs: Array, P: Array) -> tuple[Array, Array]:
@@ -374,11 +109,13 @@ class _Linearised(Filter):
         """``x- = f(x, dt)``; ``P- = F P F^T + Q``."""
         x, P = check_belief(belief, getattr(motion, "dim_x", None),
                             f"{self.name}.predict belief")
+        check_dt(dt, f"{self.name}.predict")
         return _predict(x, P, motion, dt)
 
     def predict_with_cross(self, belief: Gaussian, motion, dt: ArrayLike):
         """Prediction and the cross-covariance ``Cov(x_k, x_{k+1}) = P F^T`` (for RTS)."""
         x, P = check_belief(belief, _dim_x(motion), f"{self.name}.predict belief")
+        check_dt(dt, f"{self.name}.predict")
         F = np.asarray(motion.jacobian(x, dt))
         return _predict(x, P, motion, dt), mmT(P, F)
 
@@ -399,6 +136,7 @@ class KF(_Linearised):
                             "nonlinear (use EKF, IEKF, UKF or CKF)")
         x, P = check_belief(belief, getattr(motion, "dim_x", None),
                             f"{self.name}.predict belief")
+        check_dt(dt, f"{self.name}.predict")
         return _predict(x, P, motion, dt)
 
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
@@ -408,7 +146,8 @@ class KF(_Linearised):
                             "nonlinear (use EKF, IEKF, UKF or CKF)")
         x, P = check_belief(belief, None, f"{self.name}.update belief")
         if not (type(z) is np.ndarray and z.dtype is _F64 and z.shape == (sensor.dim_z,)
-                and x.ndim == 1):  # (one problem, one float z: nothing to convert or check)
+                and x.ndim == 1 and math.isfinite(sum(z.tolist()))):
+            # (the lean path: one problem, one finite float z, nothing to convert or check)
             z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
         zhat, H = _linearize(sensor, x)
         miss = missing_rows(z)
@@ -421,7 +160,7 @@ class KF(_Linearised):
             xn, Pn, S = _condition_one(x, P, r, H, R)
         else:
             xn, Pn, S = _condition(x, P, r, H, R)
-        post, innov = Gaussian(xn, register(Pn)), Innovation(r, S)  # Pn exactly symmetric
+        post, innov = Gaussian._make((xn, register(Pn))), Innovation(r, S)  # Pn exactly symmetric
         if miss is None:
             return post, innov
         return keep_prior_where_missing(miss, (x, P), post, innov)

@@ -1,0 +1,623 @@
+"""The outputs of ``trackkit track``: tracks as Parquet, CSV and GeoJSON, the track picture,
+GOSPA against time, ``results.json`` and one self-contained ``report.html``.
+
+    rep = TrackReport(history, title="SolentAIS...", read=read_report, frame=reports.frame,
+                      epoch=reports.epoch, truth=run.truth, gospa_c=500.0,
+                      config={"virtual radar": {...}, "tracker": {...}},
+                      background=run.truth.x, site=(0.0, 0.0), max_range=40e3)
+    paths = write_track_report(rep, "out/")       # atomic, like report.files.write_report
+
+Rows of ``tracks.parquet`` / ``tracks.csv``: one per live track per scan (tentative and
+confirmed): ``id, scan, time`` (s from the epoch), ``time_utc`` (when the epoch is known;
+a UTC timestamp in Parquet, ISO 8601 text with a ``Z`` in CSV), the state ``x, y, vx, vy``
+(m, m/s, x east, y north in the local frame; extra components as ``state_4...``), the
+covariance diagonal ``var_x, var_y, var_vx, var_vy`` (m^2, m^2/s^2), ``status``
+("tentative" or "confirmed") and ``lat, lon`` (deg, WGS-84, when the frame is known: the
+ground point of the 2-D track, see :func:`ground_geodetic`; an aircraft's x, y far from the
+frame's origin are those of the point under it only to altitude x distance / earth radius,
+600 m for 10 km up at 400 km, so its lat, lon are off by as much). Floats
+round-trip exactly in both files (Parquet is binary, the CSV writer prints the shortest
+decimal that reads back as the same double).
+
+``tracks.geojson`` (RFC 7946; needs the frame): a FeatureCollection with one LineString per
+confirmed track (a Point for a track confirmed at a single scan), coordinates
+``[lon, lat]`` of its confirmed positions in time order, properties ``id``, ``kind``
+("track"), ``start_s``, ``end_s``, ``start_utc``, ``end_utc``, ``points`` and ``times_s``; and
+a Point for the radar site (``kind`` "radar site") when there is one.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import os
+import shutil
+import uuid
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from trackkit import __version__
+from trackkit.eval.multitarget import Frames, gospa_steps, track_counts, track_summary
+from trackkit.io.frames import EnuFrame
+from trackkit.io.records import ReadReport
+from trackkit.report.html import _CSS, data_uri
+from trackkit.tracking.history import TrackHistory
+from trackkit.tracking.logic import TrackStatus
+
+__all__ = [
+    "TRACK_FILES", "TrackReport", "history_table", "write_tracks_parquet", "write_tracks_csv",
+    "tracks_geojson", "write_tracks_geojson", "track_figure", "gospa_figure",
+    "track_metrics", "results_document", "render_track_html", "write_track_report",
+    "write_skipped_csv", "ground_geodetic",
+]
+
+Array = NDArray[np.float64]
+
+TRACKS_PARQUET = "tracks.parquet"
+TRACKS_CSV = "tracks.csv"
+TRACKS_GEOJSON = "tracks.geojson"
+TRACKS_PNG = "tracks.png"
+GOSPA_PNG = "gospa.png"
+SKIPPED_CSV = "skipped.csv"
+REPORT_HTML = "report.html"
+RESULTS_JSON = "results.json"
+INCOMPLETE = "INCOMPLETE"
+#: every file a track report may write; one of an earlier run that this run does not write
+#: (no truth: no gospa.png) is removed, so the directory holds one consistent result
+TRACK_FILES = (TRACKS_PARQUET, TRACKS_CSV, TRACKS_GEOJSON, TRACKS_PNG, GOSPA_PNG, SKIPPED_CSV,
+               REPORT_HTML, RESULTS_JSON)
+_STATUS = {int(s): s.name.lower() for s in TrackStatus}
+_STATE_NAMES = ("x", "y", "vx", "vy")
+_DPI = 110
+
+
+def ground_geodetic(frame: EnuFrame, x: Array, y: Array) -> tuple[Array, Array]:
+    """Latitude and longitude (deg) of the points at east ``x``, north ``y`` (m) of ``frame``
+    on the ellipsoid (altitude 0). A track is 2-D, so this is its ground point; the up
+    coordinate that puts it there (about -(x^2 + y^2) / 2 R, the earth's curvature) is found
+    by two corrections along the frame's up axis, exact to millimetres within 500 km."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    z = -(x * x + y * y) / (2 * 6371e3)
+    for _ in range(2):
+        lat, lon, alt = frame.to_geodetic(x, y, z)
+        z = z - alt
+    lat, lon, _ = frame.to_geodetic(x, y, z)
+    return lat, lon
+
+
+# --- the tables -------------------------------------------------------------------------------
+
+
+def _utc(epoch: np.datetime64, t: Array) -> NDArray[np.datetime64]:
+    return epoch.astype("datetime64[ns]") + np.round(np.asarray(t) * 1e9).astype(
+        "timedelta64[ns]")
+
+
+def _iso(t: NDArray[np.datetime64]) -> NDArray[np.str_]:
+    return np.char.add(np.datetime_as_string(t, unit="ms"), "Z")
+
+
+def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
+                  frame: EnuFrame | None = None) -> pa.Table:
+    """The history as one row per track per scan (see the module docstring); the schema
+    metadata ``trackkit`` (JSON) holds the epoch and the frame's reference point."""
+    h = history
+    per_scan = np.diff(h.offsets)
+    scan = np.repeat(np.arange(h.times.size, dtype=np.int64), per_scan)
+    t = h.times[scan]
+    n = h.mean.shape[1]
+    names = [_STATE_NAMES[k] if k < 4 else f"state_{k}" for k in range(n)]
+    cols: dict[str, Any] = {"id": np.asarray(h.ids, np.int64), "scan": scan, "time": t}
+    if epoch is not None:
+        cols["time_utc"] = pa.array(_utc(epoch, t)).cast(pa.timestamp("ns", tz="UTC"))
+    for k, name in enumerate(names):
+        cols[name] = np.asarray(h.mean[:, k], float)
+    for k, name in enumerate(names):
+        cols[f"var_{name}"] = np.asarray(h.var[:, k], float)
+    cols["status"] = pa.array([_STATUS.get(int(s), str(int(s))) for s in h.status],
+                              pa.string())
+    if frame is not None:
+        cols["lat"], cols["lon"] = ground_geodetic(frame, h.mean[:, 0], h.mean[:, 1])
+    meta = {"epoch": None if epoch is None else str(epoch.astype("datetime64[ns]")),
+            "frame": None if frame is None else [frame.lat0, frame.lon0, frame.alt0],
+            "units": {"time": "s from epoch", "x": "m east", "y": "m north", "vx": "m/s",
+                      "vy": "m/s", "var_x": "m^2", "var_y": "m^2", "var_vx": "m^2/s^2",
+                      "var_vy": "m^2/s^2", "lat": "deg", "lon": "deg"}}
+    table = pa.table({k: v if isinstance(v, pa.Array) else pa.array(v) for k, v in cols.items()})
+    return table.replace_schema_metadata({"trackkit": json.dumps(meta)})
+
+
+def write_tracks_parquet(table: pa.Table, path: str | Path) -> Path:
+    """Write :func:`history_table` as Parquet."""
+    path = Path(path)
+    pq.write_table(table, path)
+    return path
+
+
+def write_tracks_csv(table: pa.Table, path: str | Path) -> Path:
+    """Write :func:`history_table` as CSV (``time_utc`` as ISO 8601 text with ``Z``)."""
+    path = Path(path)
+    if "time_utc" in table.column_names:
+        i = table.column_names.index("time_utc")
+        ns = table.column(i).cast(pa.int64()).to_numpy().astype("datetime64[ns]")
+        table = table.set_column(i, "time_utc", pa.array(_iso(ns).tolist(), pa.string()))
+    _write_csv(table.replace_schema_metadata(None), path)
+    return path
+
+
+def _write_csv(table: pa.Table, path: Path) -> None:
+    """CSV with a plain header line (pyarrow quotes every column name; ours need no quotes)
+    and values quoted only where needed."""
+    with open(path, "wb") as fh:
+        fh.write((",".join(table.column_names) + "\n").encode("utf-8"))
+        pacsv.write_csv(table, fh, pacsv.WriteOptions(include_header=False,
+                                                      quoting_style="needed"))
+
+
+def write_skipped_csv(read: ReadReport, path: str | Path) -> Path:
+    """The skipped records: ``line, column, reason, value, expected`` (``line`` a CSV line,
+    the header being line 1, or a Parquet row); a record skipped but not listed (beyond the
+    reader's ``max_listed``) has its line only."""
+    path = Path(path)
+    listed = {b.line: b for b in read.bad}
+    rows = []
+    for line in read.skipped_lines.tolist():
+        b = listed.get(int(line))
+        rows.append((int(line), b.column, b.reason, b.value, b.expected) if b is not None
+                    else (int(line), "", "(not listed)", "", ""))
+    seen = {r[0] for r in rows}
+    # a record that stopped the read (--on-bad stop) is listed without a skipped line
+    rows += [(b.line, b.column, b.reason, b.value, b.expected) for b in read.bad
+             if b.line not in seen]
+    rows.sort(key=lambda r: r[0])
+    unit = read.bad[0].unit if read.bad else "line"
+    table = pa.table({unit: pa.array([r[0] for r in rows], pa.int64()),
+                      "column": pa.array([r[1] for r in rows], pa.string()),
+                      "reason": pa.array([r[2] for r in rows], pa.string()),
+                      "value": pa.array([r[3] for r in rows], pa.string()),
+                      "expected": pa.array([r[4] for r in rows], pa.string())})
+    _write_csv(table, path)
+    return path
+
+
+# --- GeoJSON ----------------------------------------------------------------------------------
+
+
+def _confirmed_rows(history: TrackHistory) -> tuple[NDArray[np.int64], Array, Array]:
+    """Ids, times and positions of the confirmed rows, sorted by id then time."""
+    keep = history.status == TrackStatus.CONFIRMED
+    scan = np.repeat(np.arange(history.times.size), np.diff(history.offsets))[keep]
+    ids = history.ids[keep]
+    o = np.lexsort((scan, ids))
+    return ids[o], history.times[scan[o]], history.mean[keep][o][:, :2]
+
+
+def tracks_geojson(history: TrackHistory, frame: EnuFrame, *,
+                   epoch: np.datetime64 | None = None,
+                   site: tuple[float, float] | None = None, digits: int = 7) -> dict:
+    """The confirmed tracks as a GeoJSON FeatureCollection (module docstring); coordinates
+    rounded to ``digits`` decimals of a degree (7: about a centimetre)."""
+    ids, t, p = _confirmed_rows(history)
+    lat, lon = ground_geodetic(frame, p[:, 0], p[:, 1])
+    lon, lat = np.round(lon, digits), np.round(lat, digits)
+    features = []
+    if site is not None:
+        slat, slon = ground_geodetic(frame, np.array([site[0]]), np.array([site[1]]))
+        features.append({"type": "Feature", "properties": {"kind": "radar site"},
+                         "geometry": {"type": "Point", "coordinates": [
+                             round(float(slon[0]), digits), round(float(slat[0]), digits)]}})
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]]) if ids.size else np.zeros(0, int)
+    ends = np.r_[starts[1:], ids.size] if ids.size else starts
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        coords = np.stack([lon[a:b], lat[a:b]], axis=1).tolist()
+        geometry = ({"type": "LineString", "coordinates": coords} if b - a > 1 else
+                    {"type": "Point", "coordinates": coords[0]})
+        props: dict[str, Any] = {"id": int(ids[a]), "kind": "track", "start_s": float(t[a]),
+                                 "end_s": float(t[b - 1]), "points": b - a}
+        if epoch is not None:
+            s0, e = _iso(_utc(epoch, np.array([t[a], t[b - 1]])))
+            props["start_utc"], props["end_utc"] = str(s0), str(e)
+        props["times_s"] = [float(x) for x in t[a:b]]
+        features.append({"type": "Feature", "properties": props, "geometry": geometry})
+    return {"type": "FeatureCollection", "features": features}
+
+
+def write_tracks_geojson(doc: dict, path: str | Path) -> Path:
+    path = Path(path)
+    path.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False) + "\n",
+                    encoding="utf-8")
+    return path
+
+
+# --- metrics ----------------------------------------------------------------------------------
+
+
+def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: float = 2.0
+                  ) -> dict[str, Any]:
+    """Counts of the tracks and, with a truth, GOSPA (cut-off ``c`` m, order ``p``) of the
+    confirmed positions per scan and the track-level counts of ``track_counts``.
+
+    ``gospa.mean`` is the mean over scans of GOSPA (m); ``localisation``, ``missed`` and
+    ``false`` are the means over scans of its additive parts (p-th powers, m^p), so that
+    ``rms = (localisation + missed + false)^(1/p)``; ``missed_per_scan`` and
+    ``false_per_scan`` are the mean numbers of objects left unassigned and of confirmed
+    tracks assigned to none."""
+    conf = history.confirmed()
+    ids_conf = np.unique(conf.ids)
+    out: dict[str, Any] = {
+        "scans": int(history.times.size),
+        "tracks_started": int(np.unique(history.ids).size),
+        "tracks_confirmed": int(ids_conf.size),
+        "mean_confirmed_per_scan": float(conf.sizes.mean()) if conf.n_steps else 0.0,
+    }
+    if truth is None:
+        return out
+    g = gospa_steps(truth, conf, c, p)
+    half = c**p / 2
+    out["gospa"] = {
+        "c": float(c), "p": float(p), "mean": float(np.mean(g.distance)),
+        "rms": float(np.mean(g.distance**p) ** (1 / p)),
+        "localisation": float(np.mean(g.localisation)), "missed": float(np.mean(g.missed)),
+        "false": float(np.mean(g.false)),
+        "missed_per_scan": float(np.mean(g.missed) / half),
+        "false_per_scan": float(np.mean(g.false) / half),
+        "objects_per_scan": float(truth.sizes.mean()),
+    }
+    period = float(np.median(np.diff(history.times))) if history.times.size > 1 else 0.0
+    counts = track_counts(truth, conf, c, p=p, times=history.times, within=5 * period)
+    summary = track_summary(counts)
+    out["tracks"] = {k: (v if isinstance(v, int) else float(v)) for k, v in summary.items()}
+    out["tracks"]["confirmed_within_s"] = 5 * period
+    out["_gospa_steps"] = g  # for the figure; not written
+    return out
+
+
+# --- figures ----------------------------------------------------------------------------------
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=_DPI, format="png")
+    return path
+
+
+def track_figure(history: TrackHistory, *, background: Array | None = None,
+                 background_label: str = "reported positions",
+                 site: tuple[float, float] | None = None, max_range: float | None = None,
+                 title: str = "") -> Figure:
+    """Plan view in ENU km: ``background`` points (the reported positions or the plots) in
+    grey, every confirmed track as a coloured line, the radar site and its range ring."""
+    fig = Figure(figsize=(8.0, 7.5), layout="constrained")
+    ax = fig.add_subplot()
+    km = 1e-3
+    pts = []
+    if background is not None and len(background):
+        bg = np.asarray(background, float)
+        if bg.shape[0] > 200_000:  # enough to show the traffic; a PNG cannot show more
+            bg = bg[np.linspace(0, bg.shape[0] - 1, 200_000).astype(int)]
+        ax.scatter(bg[:, 0] * km, bg[:, 1] * km, s=1.0, c="0.7", lw=0, rasterized=True)
+        # a legend entry with a visible marker (a 1-point dot would not show)
+        ax.plot([], [], "o", color="0.7", ms=4, label=background_label)
+        pts.append(bg)
+    ids, _, p = _confirmed_rows(history)
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]]) if ids.size else np.zeros(0, int)
+    ends = np.r_[starts[1:], ids.size] if ids.size else starts
+    # one collection, not a plot call per track: hundreds of tracks draw in one pass
+    segs = [p[a:b] * km for a, b in zip(starts.tolist(), ends.tolist(), strict=True)]
+    ax.add_collection(LineCollection(segs, colors=[f"C{k % 10}" for k in range(len(segs))],
+                                     linewidths=1.0))
+    if segs:
+        ax.plot([], [], color="C0", lw=1.0, label="confirmed tracks")
+    if ids.size:
+        pts.append(p)
+    if site is not None:
+        ax.plot(site[0] * km, site[1] * km, "k^", ms=7, label="radar")
+        if max_range is not None:
+            a = np.linspace(0, 2 * np.pi, 361)
+            ax.plot((site[0] + max_range * np.sin(a)) * km, (site[1] + max_range * np.cos(a)) * km,
+                    color="0.4", lw=0.8, ls="--", label="max range")
+    if pts:
+        allp = np.concatenate(pts)
+        allp = allp[np.all(np.isfinite(allp), axis=1)]
+        if len(allp):
+            # the central 99.8 % of the points: one wild report must not shrink the picture
+            lo = np.percentile(allp, 0.1, axis=0)
+            hi = np.percentile(allp, 99.9, axis=0)
+            half = 0.55 * max(float((hi - lo).max()), 1.0)
+            mid = 0.5 * (lo + hi)
+            ax.set_xlim((mid[0] - half) * km, (mid[0] + half) * km)
+            ax.set_ylim((mid[1] - half) * km, (mid[1] + half) * km)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("east [km]")
+    ax.set_ylabel("north [km]")
+    n_tracks = int(np.unique(ids).size)
+    ax.set_title(f"{title}: {n_tracks} confirmed tracks" if title else
+                 f"{n_tracks} confirmed tracks", fontsize="medium")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncols=4, fontsize="small",
+              frameon=False)
+    return fig
+
+
+def gospa_figure(times: Array, g: Any, truth_sizes: NDArray[np.int64],
+                 track_sizes: NDArray[np.int64], c: float, *,
+                 epoch: np.datetime64 | None = None) -> Figure:
+    """GOSPA (m) against time, and below it the objects in range, the confirmed tracks and
+    the pairs assigned within the cut-off (missed = objects - assigned, false = tracks -
+    assigned)."""
+    t = np.asarray(times, float)
+    t_min = (t - t[0]) / 60.0 if t.size else t
+    fig = Figure(figsize=(8.5, 6.0), layout="constrained")
+    a1, a2 = fig.subplots(2, 1, sharex=True)
+    a1.plot(t_min, g.distance, color="C0", lw=1.0, label="GOSPA")
+    a1.axhline(float(np.mean(g.distance)), color="C0", ls="--", lw=0.8,
+               label=f"mean {np.mean(g.distance):.4g} m")
+    a1.set_ylabel("GOSPA [m]")
+    a1.set_title(f"GOSPA against the reported positions (c = {c:g} m, p = 2)",
+                 fontsize="medium")
+    a1.grid(True, alpha=0.3)
+    a1.legend(fontsize="small")
+    a2.plot(t_min, truth_sizes, color="black", lw=1.0, label="objects in range")
+    a2.plot(t_min, track_sizes, color="C1", lw=1.0, label="confirmed tracks")
+    a2.plot(t_min, g.assigned, color="C2", lw=1.0, label="assigned (within c)")
+    a2.set_ylabel("count")
+    start = f" from {np.datetime_as_string(_utc(epoch, t[:1])[0], unit='s')}Z" if (
+        epoch is not None and t.size) else ""
+    a2.set_xlabel(f"time [min]{start}")
+    a2.grid(True, alpha=0.3)
+    a2.legend(fontsize="small")
+    return fig
+
+
+# --- the report -------------------------------------------------------------------------------
+
+
+@dataclass
+class TrackReport:
+    """Everything the track report shows. ``config`` maps a section title ("virtual radar",
+    "tracker") to label -> value (text or numbers, shown as given); ``background`` are the
+    points drawn under the tracks (``background_label`` names them); ``notes`` are printed
+    in the page."""
+
+    history: TrackHistory
+    title: str
+    source: str = ""
+    fmt: str = ""
+    read: ReadReport | None = None
+    epoch: np.datetime64 | None = None
+    frame: EnuFrame | None = None
+    truth: Frames | None = None
+    gospa_c: float = 500.0
+    config: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    background: Array | None = None
+    background_label: str = "reported positions"
+    site: tuple[float, float] | None = None
+    max_range: float | None = None
+    notes: Sequence[str] = ()
+
+
+def _input_document(read: ReadReport | None, source: str, fmt: str) -> dict[str, Any]:
+    if read is None:
+        return {"file": source, "format": fmt}
+    return {"file": read.path, "format": fmt, "records_read": read.rows_read,
+            "records_kept": read.rows_kept, "records_skipped": read.n_skipped,
+            "skipped_by_reason": dict(read.skipped), "duplicates_dropped": read.duplicates,
+            "out_of_order_sorted": read.out_of_order, "not_given": dict(read.not_given),
+            "epoch_utc": None if read.epoch is None else
+            str(read.epoch.astype("datetime64[ms]")) + "Z"}
+
+
+def _finite_or_none(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite_or_none(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, np.generic):
+        return _finite_or_none(obj.item())
+    return obj
+
+
+def results_document(rep: TrackReport, metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """``results.json``: the input account, the configuration, the track counts and GOSPA."""
+    doc = {"title": rep.title, "input": _input_document(rep.read, rep.source, rep.fmt),
+           "config": {k: dict(v) for k, v in rep.config.items()},
+           "results": {k: v for k, v in metrics.items() if not k.startswith("_")},
+           "notes": list(rep.notes), "trackkit": __version__}
+    return _finite_or_none(doc)
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "n/a" if not math.isfinite(v) else f"{v:.6g}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k} {_fmt(x)}" for k, x in v.items()) or "none"
+    return str(v)
+
+
+def _table(rows: Sequence[tuple[str, Any]], caption: str = "") -> str:
+    esc = html.escape
+    body = "\n".join(f"<tr><th>{esc(str(k))}</th><td>{esc(_fmt(v))}</td></tr>" for k, v in rows)
+    cap = f"<caption>{esc(caption)}</caption>\n" if caption else ""
+    return f'<table class="summary">\n{cap}<tbody>\n{body}\n</tbody>\n</table>'
+
+
+_TRACK_LABELS = (
+    ("truths", "objects in range at some scan"),
+    ("truths_confirmed", "objects ever tracked"),
+    ("confirmed_fraction", "fraction of objects tracked"),
+    ("confirmed_within_fraction", "fraction tracked within 5 scans of appearing"),
+    ("mean_confirm_delay", "mean delay to a track (s)"),
+    ("completeness", "completeness (object-scans with a track)"),
+    ("tracks", "confirmed tracks"),
+    ("false_tracks", "false tracks (unassigned most of their life)"),
+    ("breaks", "track breaks (object picked up again by a new track)"),
+    ("truth_switches", "track changes of an object (breaks included)"),
+    ("id_switches", "ID switches (a track moving to another object)"),
+    ("mean_purity", "mean purity"),
+    ("rmse", "position RMSE of assigned tracks (m)"),
+)
+
+
+def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
+                      images: Mapping[str, Path | bytes]) -> str:
+    """The self-contained report page (inline CSS, PNGs as data URIs, no scripts)."""
+    esc = html.escape
+    parts = ["<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
+             '<meta name="viewport" content="width=device-width, initial-scale=1">',
+             f"<title>trackkit track: {esc(rep.title)}</title>",
+             f"<style>{_CSS}</style></head>", "<body>", f"<h1>{esc(rep.title)}</h1>",
+             f'<p class="meta">Tracks from {esc(rep.source)} ({esc(rep.fmt)}). Generated by '
+             f"trackkit {__version__}.</p>"]
+    inp = _input_document(rep.read, rep.source, rep.fmt)
+    labels = {"file": "file", "format": "format", "records_read": "records read",
+              "records_kept": "records kept", "records_skipped": "records skipped",
+              "skipped_by_reason": "skipped, by reason",
+              "duplicates_dropped": "exact duplicates dropped",
+              "out_of_order_sorted": "records out of time order (sorted)",
+              "not_given": "optional fields not given (kept as nan)", "epoch_utc": "t = 0 at"}
+    parts += ["<h2>Input</h2>", _table([(labels[k], v) for k, v in inp.items()
+                                       if v is not None])]
+    if rep.read is not None and rep.read.out_of_order:
+        parts.append(f"<p>{rep.read.out_of_order} records were out of time order in the file; "
+                     "they were sorted by time before tracking.</p>")
+    if rep.read is not None and rep.read.bad:
+        shown = rep.read.bad[:20]
+        parts.append(f"<p>First {len(shown)} of {rep.read.n_skipped} skipped records "
+                     f"(all in {SKIPPED_CSV}):</p>\n<ul>")
+        parts += [f"<li><code>{esc(str(b))}</code></li>" for b in shown]
+        parts.append("</ul>")
+    for section, values in rep.config.items():
+        parts += [f"<h2>{esc(section[:1].upper() + section[1:])}</h2>",
+                  _table(list(values.items()))]
+    parts.append("<h2>Results</h2>")
+    rows = [("scans", metrics["scans"]), ("tracks started", metrics["tracks_started"]),
+            ("tracks confirmed", metrics["tracks_confirmed"]),
+            ("mean confirmed tracks per scan", metrics["mean_confirmed_per_scan"])]
+    parts.append(_table(rows))
+    g = metrics.get("gospa")
+    if g is not None:
+        c = g["c"]
+        parts.append(_table([
+            ("mean GOSPA (m)", g["mean"]),
+            ("RMS GOSPA (m)", g["rms"]),
+            ("localisation part, mean (m^2)", g["localisation"]),
+            ("missed part, mean (m^2)", g["missed"]),
+            ("false part, mean (m^2)", g["false"]),
+            ("objects in range per scan", g["objects_per_scan"]),
+            ("missed objects per scan", g["missed_per_scan"]),
+            ("false tracks per scan", g["false_per_scan"]),
+        ], caption=f"GOSPA of the confirmed tracks against the reported positions, per scan, "
+                   f"c = {c:g} m, p = 2, alpha = 2: GOSPA^2 = localisation + missed + false, "
+                   f"a missed object or a false track costing c^2/2."))
+        tr = metrics.get("tracks", {})
+        parts.append(_table([(label, tr[k]) for k, label in _TRACK_LABELS if k in tr],
+                            caption=f"Track-level counts: objects and confirmed tracks paired "
+                                    f"per scan by the GOSPA assignment (within {c:g} m)."))
+    else:
+        parts.append("<p>No truth: GOSPA and the track-level counts need reported positions "
+                     "(AIS or ADS-B with --as-radar).</p>")
+    if rep.notes:
+        parts.append("<h2>Notes</h2>\n<ul>")
+        parts += [f"<li>{esc(n)}</li>" for n in rep.notes]
+        parts.append("</ul>")
+    captions = {"tracks": "Confirmed tracks (coloured) over the "
+                          f"{rep.background_label} (grey), east and north in km.",
+                "gospa": "GOSPA against time; below, the objects in range, the confirmed "
+                         "tracks and the pairs within the cut-off."}
+    if images:
+        parts.append("<h2>Figures</h2>")
+    for name, png in images.items():
+        parts.append(f'<figure><img src="{data_uri(png)}" alt="{esc(name)}">'
+                     f"<figcaption>{esc(captions.get(name, name))}</figcaption></figure>")
+    parts += ["</body>", "</html>", ""]
+    return "\n".join(parts)
+
+
+def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
+    metrics = track_metrics(rep.history, rep.truth, rep.gospa_c)
+    table = history_table(rep.history, epoch=rep.epoch, frame=rep.frame)
+    out = {"parquet": write_tracks_parquet(table, folder / TRACKS_PARQUET),
+           "csv": write_tracks_csv(table, folder / TRACKS_CSV)}
+    if rep.frame is not None:
+        out["geojson"] = write_tracks_geojson(
+            tracks_geojson(rep.history, rep.frame, epoch=rep.epoch, site=rep.site),
+            folder / TRACKS_GEOJSON)
+    if rep.read is not None and (rep.read.n_skipped or rep.read.bad):
+        out["skipped"] = write_skipped_csv(rep.read, folder / SKIPPED_CSV)
+    images: dict[str, Path] = {}
+    images["tracks"] = _save(track_figure(rep.history, background=rep.background,
+                                          background_label=rep.background_label,
+                                          site=rep.site, max_range=rep.max_range,
+                                          title=rep.title), folder / TRACKS_PNG)
+    g = metrics.get("_gospa_steps")
+    if g is not None and rep.truth is not None:
+        images["gospa"] = _save(gospa_figure(rep.history.times, g, rep.truth.sizes,
+                                             rep.history.confirmed().sizes, rep.gospa_c,
+                                             epoch=rep.epoch), folder / GOSPA_PNG)
+    out.update({f"{k}_png": v for k, v in images.items()})
+    out["html"] = folder / REPORT_HTML
+    out["html"].write_text(render_track_html(rep, metrics, images), encoding="utf-8")
+    doc = results_document(rep, metrics)
+    out["results"] = folder / RESULTS_JSON
+    out["results"].write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n",
+                              encoding="utf-8")
+    return out
+
+
+def write_track_report(rep: TrackReport, out_dir: str | Path) -> dict[str, Path]:
+    """Write every file of the track report into ``out_dir``, all or nothing: into a
+    temporary directory inside ``out_dir`` first, then moved into place under an
+    ``INCOMPLETE`` marker, ``results.json`` last (as ``report.files.write_report``). Track
+    files of an earlier run that this one does not write are removed; other files are left
+    alone. Returns name -> path."""
+    out = Path(out_dir).resolve()
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"output directory {str(out_dir)!r} exists and is not a directory")
+    created = []
+    p = out
+    while not p.exists():
+        created.append(p)
+        p = p.parent
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / f".trackkit-tmp.{uuid.uuid4().hex[:12]}"
+    try:
+        tmp.mkdir()
+        written = _write_all(rep, tmp)
+        marker = out / INCOMPLETE
+        marker.write_text("trackkit is replacing the track files in this directory; if this "
+                          "file remains, the write was interrupted and the files here are "
+                          "not one consistent result.\n", encoding="utf-8")
+        (out / RESULTS_JSON).unlink(missing_ok=True)
+        final: dict[str, Path] = {}
+        for key, path in sorted(written.items(), key=lambda kv: kv[1].name == RESULTS_JSON):
+            final[key] = out / path.name
+            os.replace(path, final[key])
+        new = {q.name for q in final.values()}
+        for stale in TRACK_FILES:
+            if stale not in new:
+                (out / stale).unlink(missing_ok=True)
+        marker.unlink()
+        tmp.rmdir()
+        return final
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        for d in created:  # innermost first; stop at one that is not empty
+            try:
+                d.rmdir()
+            except OSError:
+                break
+        raise
