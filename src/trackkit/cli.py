@@ -102,8 +102,15 @@ def _default_name() -> str:
 
 def _load(name_or_path: str) -> Any:
     from trackkit.scenario import load
+    from trackkit.scenario.multitarget import is_multitarget, load_multitarget
 
+    if is_multitarget(name_or_path):  # a [scene] table: the multi-target tracker comparison
+        return load_multitarget(name_or_path)
     return load(name_or_path)
+
+
+def _is_multitarget(scenario: Any) -> bool:
+    return hasattr(scenario, "scene") and hasattr(scenario, "trackers")
 
 
 def _dumps(scenario: Any) -> str:
@@ -430,7 +437,9 @@ def _at_least(lowest: int) -> Any:
 def list_scenarios() -> None:
     """List the bundled scenarios with one-line descriptions."""
     with _user_errors():
-        scenarios = _bundled()
+        from trackkit.scenario.multitarget import bundled_multitarget
+
+        scenarios = {**_bundled(), **bundled_multitarget()}
         default = _default_name()
         table = Table("scenario", "description", title="bundled scenarios",
                       title_justify="left")
@@ -501,12 +510,61 @@ def run(
             state.interrupted = f"interrupted; nothing was written to {target}"
             if where.note:
                 _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
+            if _is_multitarget(sc):
+                _run_multitarget(sc, where.path, runs=runs, seed=seed, workers=workers,
+                                 scheduler=scheduler)
+                state.interrupted = "interrupted"
+                return
             result = _run_with_progress(sc, total, runs=runs, seed=seed, workers=workers,
                                         scheduler=scheduler, max_seconds=3600.0 * max_hours)
             with _stderr().status("writing the report"):
                 paths = _write(result, where.path)
             state.interrupted = "interrupted"
             _print_summary(result, paths)
+
+
+def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
+    """A multi-target scenario: every tracker on the same simulated scans (Monte Carlo),
+    GOSPA, OSPA and the track counts; the report written into ``out``."""
+    import numpy as np
+    from rich.markup import escape
+
+    from trackkit.eval.tracking_run import run_multitarget
+    from trackkit.report.tracking_report import write_tracking_report
+
+    total = kwargs.get("runs") or sc.run.runs
+    with _progress_bar(_stderr()) as bar:
+        task = bar.add_task(str(sc.name), total=total, unit="runs")
+
+        def progress(done: float, of: int) -> None:
+            _deliver_interrupt()
+            bar.update(task, completed=done, total=of)
+
+        result, example = run_multitarget(sc, progress=progress, **kwargs)
+        _deliver_interrupt()
+    with _stderr().status("writing the report"):
+        paths = write_tracking_report(result, sc, example, out)
+    console = Console()
+    headers = ["tracker", "GOSPA [m]", "OSPA [m]",
+               f"confirmed within {sc.report.confirm_within_scans:g} scans",
+               "false tracks / 100 scans", "breaks", "ID switches", "RMSE [m]"]
+    table = Table(*(escape(h) for h in headers),  # "[m]" is a unit, not rich markup
+                  title=f"{sc.name}: {result.runs} runs, seed {result.seed}, c = {result.c:g} m",
+                  title_justify="left")
+    scans = result.runs * result.times.size
+    for name, r in result.trackers.items():
+        s = r.summary
+        table.add_row(name, f"{r.mean_gospa:.1f}", f"{float(np.mean(r.ospa)):.1f}",
+                      f"{100 * s['confirmed_within_fraction']:.1f}%",
+                      f"{100 * s['false_tracks'] / scans:.2f}", str(s["breaks"]),
+                      str(s["id_switches"]), f"{s['rmse']:.1f}")
+    console.print(table)
+    for note in sc.notes:
+        console.print(Text(f"note: {note}", style="yellow"))
+    html = paths.get("html")
+    console.print(Text(f"wrote {len(paths)} files to {out}", style="green"))
+    if html is not None:
+        console.print(Text(f"report: {html}", style="green"))
 
 
 def _print_summary(result: Any, paths: dict[str, Path]) -> None:

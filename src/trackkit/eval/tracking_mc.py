@@ -76,7 +76,7 @@ class TrackingResult:
     trackers: dict[str, TrackerResult]
 
 
-def _one_run(run, tracker: Tracker, c: float, within: float) -> _RunNumbers:
+def _one_run(run, tracker: Tracker, c: float, ospa_p: float, within: float) -> _RunNumbers:
     t0 = time.perf_counter()
     history, _ = run_tracker(tracker, run.scans)
     seconds = time.perf_counter() - t0
@@ -85,7 +85,7 @@ def _one_run(run, tracker: Tracker, c: float, within: float) -> _RunNumbers:
     g = gospa_steps(truth, tracks, c)
     return _RunNumbers(
         gospa=np.stack([g.distance, g.localisation, g.missed, g.false], axis=1),
-        ospa=ospa_steps(truth, tracks, c).distance,
+        ospa=ospa_steps(truth, tracks, c, ospa_p).distance,
         confirmed=np.diff(tracks.offsets),
         counts=track_counts(truth, tracks, c, times=history.times, within=within),
         approximated=int(history.approximated.sum()),
@@ -94,27 +94,28 @@ def _one_run(run, tracker: Tracker, c: float, within: float) -> _RunNumbers:
 
 
 def track_block(scene: Scene, trackers: dict[str, Tracker], runs: Sequence[int], seed: int,
-                c: float, within: float, progress: Callable[[float], None] | None = None
+                c: float, ospa_p: float, within: float,
+                progress: Callable[[float], None] | None = None
                 ) -> dict[str, list[_RunNumbers]]:
     """Simulate runs ``runs`` and evaluate every tracker on each (one executor task);
     ``progress`` is told the runs done."""
     out: dict[str, list[_RunNumbers]] = {name: [] for name in trackers}
     for i, run in enumerate(simulate_scene(scene, list(runs), seed)):
         for name, tracker in trackers.items():
-            out[name].append(_one_run(run, tracker, c, within))
+            out[name].append(_one_run(run, tracker, c, ospa_p, within))
         if progress is not None:
             progress(i + 1)
     return out
 
 
 def _task(job: tuple, blocks: list[int], progress: Callable[[float], None] | None) -> list:
-    scene, trackers, runs, block, seed, c, within = job
+    scene, trackers, runs, block, seed, c, ospa_p, within = job
     parts = []
     done = 0
     for b in blocks:
         ids = range(b * block, min(runs, (b + 1) * block))
         tell = None if progress is None else (lambda k, d=done: progress(d + k))
-        parts.append((b, track_block(scene, trackers, ids, seed, c, within, tell)))
+        parts.append((b, track_block(scene, trackers, ids, seed, c, ospa_p, within, tell)))
         done += len(ids)
     return parts
 
@@ -122,10 +123,11 @@ def _task(job: tuple, blocks: list[int], progress: Callable[[float], None] | Non
 def run_tracking(scene: Scene, trackers: dict[str, Tracker], runs: int, seed: int,
                  c: float = 500.0, within: float = np.inf, block: int = 10,
                  workers: int | None = None, scheduler: str | None = None,
-                 progress: Callable[[float, int], None] | None = None) -> TrackingResult:
+                 progress: Callable[[float, int], None] | None = None,
+                 ospa_p: float = 1.0) -> TrackingResult:
     """Every tracker of ``trackers`` on runs 0..runs-1 of ``scene``: GOSPA (c, p = 2) and
-    OSPA (c, p = 1) per scan, track counts (a truth counts as confirmed within ``within``
-    seconds of its birth), in blocks of ``block`` runs on an executor."""
+    OSPA (c, ``ospa_p``) per scan, track counts (a truth counts as confirmed within
+    ``within`` seconds of its birth), in blocks of ``block`` runs on an executor."""
     from trackkit.eval.executors import execute
 
     if not trackers:
@@ -133,7 +135,7 @@ def run_tracking(scene: Scene, trackers: dict[str, Tracker], runs: int, seed: in
     if runs < 1 or block < 1:
         raise ValueError(f"runs = {runs}, block = {block}; expected both >= 1")
     nblocks = -(-runs // block)
-    job = (scene, trackers, runs, block, seed, c, within)
+    job = (scene, trackers, runs, block, seed, c, ospa_p, within)
     tasks = [[b] for b in range(nblocks)]
     size = {b: min(runs, (b + 1) * block) - b * block for b in range(nblocks)}
     chunks = execute(_task, job, tasks, lambda t: sum(size[b] for b in t), runs,
