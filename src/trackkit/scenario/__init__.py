@@ -30,14 +30,19 @@ def _bundled_dir():
     return resources.files("trackkit.scenario") / "scenarios"
 
 
-def bundled() -> dict[str, str]:
-    """Bundled scenario names and their one-line descriptions."""
+def descriptions(folder) -> dict[str, str]:
+    """The scenario files of ``folder``: name -> the first line of its description."""
     out = {}
-    for f in sorted(_bundled_dir().iterdir(), key=lambda p: p.name):
+    for f in sorted(folder.iterdir(), key=lambda p: p.name):
         if f.name.endswith(".toml"):
             data = tomllib.loads(f.read_text(encoding="utf-8"))
             out[f.name[:-5]] = str(data.get("description", "")).split("\n")[0]
     return out
+
+
+def bundled() -> dict[str, str]:
+    """Bundled scenario names and their one-line descriptions."""
+    return descriptions(_bundled_dir())
 
 
 def _problem(loc: str, value: Any, message: str) -> str:

@@ -58,13 +58,21 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from trackkit.scenario import ScenarioError, _format, _Missing, _pydantic_problems, _read
+from trackkit.scenario import (
+    ScenarioError,
+    _format,
+    _Missing,
+    _pydantic_problems,
+    _read,
+    descriptions,
+)
 from trackkit.scenario.schema import (
     PLAIN_NAME,
     NonNegFloat,
     PositiveFloat,
     _Strict,
     _unit,
+    check_plain_name,
     raise_at,
 )
 
@@ -257,14 +265,7 @@ class MultiTargetScenario(_Strict):
     notes: list[str] = Field(default_factory=list, description="notes printed with the "
                              "results (choices and their reasons)")
 
-    @field_validator("name")
-    @classmethod
-    def _plain_name(cls, name: str) -> str:
-        if not PLAIN_NAME.fullmatch(name):
-            raise ValueError("expected a plain file name (letters, digits, '.', '_', '-', not "
-                             "starting with '.'): the report is written to "
-                             "trackkit-out/NAME")
-        return name
+    _plain_name = field_validator("name")(classmethod(lambda cls, v: check_plain_name(v)))
 
     @model_validator(mode="after")
     def _consistent(self) -> MultiTargetScenario:
@@ -298,12 +299,7 @@ def _bundled_dir():
 
 def bundled_multitarget() -> dict[str, str]:
     """Bundled multi-target scenario names and their one-line descriptions."""
-    out = {}
-    for f in sorted(_bundled_dir().iterdir(), key=lambda p: p.name):
-        if f.name.endswith(".toml"):
-            data = tomllib.loads(f.read_text(encoding="utf-8"))
-            out[f.name[:-5]] = str(data.get("description", "")).split("\n")[0]
-    return out
+    return descriptions(_bundled_dir())
 
 
 def parse_multitarget(data: dict, source: str = "<scenario>") -> MultiTargetScenario:

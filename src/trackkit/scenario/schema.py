@@ -37,6 +37,14 @@ Finite = Annotated[float, Field(allow_inf_nan=False)]
 PLAIN_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
 
 
+def check_plain_name(name: str) -> str:
+    """A scenario's ``name`` is a folder of trackkit-out/: a plain file name, nothing else."""
+    if not PLAIN_NAME.fullmatch(name):
+        raise ValueError("expected a plain file name (letters, digits, '.', '_', '-', not "
+                         "starting with '.'): the report is written to trackkit-out/NAME")
+    return name
+
+
 def raise_at(loc: tuple[str | int, ...], value: Any, message: str) -> None:
     """Raise a validation error at ``loc`` below the model being validated, so that the
     message names the exact field (``filters.2.options.alpha``), not the enclosing table."""
@@ -446,14 +454,7 @@ class Scenario(_Strict):
     notes: list[str] = Field(default_factory=list, description="notes printed with the "
                              "results (sources, choices, readings of a paper)")
 
-    @field_validator("name")
-    @classmethod
-    def _plain_name(cls, name: str) -> str:
-        if not PLAIN_NAME.fullmatch(name):
-            raise ValueError("expected a plain file name (letters, digits, '.', '_', '-', not "
-                             "starting with '.'): the report is written to "
-                             "trackkit-out/NAME")
-        return name
+    _plain_name = field_validator("name")(classmethod(lambda cls, v: check_plain_name(v)))
 
     @model_validator(mode="after")
     def _consistent(self) -> Scenario:

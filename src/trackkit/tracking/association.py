@@ -361,7 +361,8 @@ class JPDAResult(NamedTuple):
 
 
 def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = None, *,
-         max_events: int = JPDA_MAX_EVENTS, cl: Clusters | None = None) -> JPDAResult:
+         max_events: int = JPDA_MAX_EVENTS, cl: Clusters | None = None,
+         star: bool = False) -> JPDAResult:
     """Parametric JPDA marginals (Bar-Shalom): a feasible joint event theta (each detection
     to at most one track, each track at most one detection) has weight
 
@@ -372,6 +373,13 @@ def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = Non
     in its cluster in closed form, the PDA); a cluster with more than ``max_events`` events
     falls back to loopy belief propagation (Williams and Lau 2014, exact on clusters without
     cycles), reported in ``approximated``.
+
+    ``star=True`` is JPDA* (Blom and Bloem 2000), against track coalescence: the exact
+    enumeration drops every event theta in which two tracks i, k take detections j, l while
+    the swapped pairs (i, l), (k, j) are both gated and more likely,
+    ``r_il r_kj > r_ij r_kl``, and normalises over the events kept (the most probable event is
+    always kept). Single-track clusters are unchanged, and the loopy-BP fallback stays plain
+    JPDA (still reported in ``approximated``).
     """
     T = g.n_tracks
     lr = _log_ratio(g, p_d, clutter_density, p_gate)
@@ -394,7 +402,7 @@ def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = Non
     for k in range(len(pb) - 1):
         p0, p1, t0, t1 = pb[k], pb[k + 1], tb[k], tb[k + 1]
         B = _enumerate(lt[p0:p1], ld[p0:p1], lrm[p0:p1], t1 - t0, db[k + 1] - db[k],
-                       max_events)
+                       max_events, star)
         if B is None:
             lbp_pairs.append(lay.pairs[p0:p1])
             continue
@@ -419,14 +427,15 @@ def _pda(track: Index, lr: Array, T: int) -> tuple[Array, Array]:
     return np.exp(lr - lse[track]), np.exp(-lse)
 
 
-def _enumerate(lt: Index, ld: Index, lr: Array, nt: int, nd: int, max_events: int
-               ) -> Array | None:
+def _enumerate(lt: Index, ld: Index, lr: Array, nt: int, nd: int, max_events: int,
+               star: bool = False) -> Array | None:
     """Exact marginals of one cluster: ``B (nt, nd + 1)`` with ``B[i, 0] = beta_i0`` and
     ``B[i, j + 1] = beta_ij``, or None past ``max_events`` events.
 
     Events are built track by track; each step extends every event so far by the track's
     miss and by each of its detections that the event has not used (vectorised over events
-    and options).
+    and options). ``star``: JPDA* pruning (see :func:`jpda`), vectorised over events and
+    track pairs.
     """
     ev = np.full((1, nt), -1, dtype=np.intp)  # each track's detection, -1 = miss (so far)
     used = np.zeros((1, nd), dtype=bool)
@@ -445,11 +454,33 @@ def _enumerate(lt: Index, ld: Index, lr: Array, nt: int, nd: int, max_events: in
         ev = np.concatenate([ev, ext])
         used = np.concatenate([used, ext_used])
         logw = np.concatenate([logw, logw[e] + w[o]])
+    if star and nt > 1:
+        keep = _star_keep(ev, lt, ld, lr, nt, nd)
+        ev, logw = ev[keep], logw[keep]
     p = np.exp(logw - logw.max())
     p /= p.sum()
     flat = (np.arange(nt) * (nd + 1))[None, :] + ev + 1
     B = np.bincount(flat.ravel(), np.repeat(p, nt), minlength=nt * (nd + 1))
     return B.reshape(nt, nd + 1)
+
+
+def _star_keep(ev: Index, lt: Index, ld: Index, lr: Array, nt: int, nd: int
+               ) -> NDArray[np.bool_]:
+    """JPDA* (Blom and Bloem 2000): the events ``ev (E, nt)`` to keep, those in which no two
+    detected tracks i < k (detections j, l) have a gated swap more likely,
+    ``lr_il + lr_kj > lr_ij + lr_kl``."""
+    L = np.full((nt, nd + 1), -np.inf)  # column 0: the miss, never swapped
+    L[lt, ld + 1] = lr
+    i, k = np.triu_indices(nt, 1)
+    j, m = ev[:, i] + 1, ev[:, k] + 1  # (E, pairs), 0 = miss
+    both = (j > 0) & (m > 0)
+    with np.errstate(invalid="ignore"):
+        better = L[i, m] + L[k, j] > L[i, j] + L[k, m]
+    keep = ~np.any(both & better, axis=1)
+    # in exact arithmetic the most probable event has no better swap; guard against rounding
+    if not keep.any():
+        keep[:] = True
+    return keep
 
 
 def _lbp(track: Index, det: Index, lr: Array, T: int, D: int) -> tuple[Array, Array]:

@@ -91,11 +91,14 @@ class JPDA:
     propagation past ``max_events`` (reported in ``StepInfo.approximated``). A track counts
     as hit when its detection probability ``1 - beta_0`` is at least ``hit`` (MATLAB's
     ``trackerJPDA`` HitMissThreshold, default 0.2); a detection with total association
-    probability of at least ``claim`` does not start a new track."""
+    probability of at least ``claim`` does not start a new track. ``star=True`` is JPDA*
+    (Blom and Bloem 2000): the exact enumeration drops the events less likely than a swap of
+    two tracks' detections, against track coalescence (see :func:`jpda`)."""
 
     max_events: int = JPDA_MAX_EVENTS
     hit: float = 0.2
     claim: float = 0.5
+    star: bool = False
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_events, int) and self.max_events >= 1):
@@ -352,7 +355,8 @@ class Tracker:
 
     def _jpda(self, belief: Any, g: Gate, z: Array, sensor: Any, info: dict):
         a = self.associator
-        r = jpda(g, self.pd, self.clutter_density, self.p_gate, max_events=a.max_events)
+        r = jpda(g, self.pd, self.clutter_density, self.p_gate, max_events=a.max_events,
+                 star=a.star)
         info["clusters"], info["approximated"] = r.clusters.count, int(r.approximated.sum())
         prior = self.estimate(belief)
         T, n = prior.mean.shape
