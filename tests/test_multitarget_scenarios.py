@@ -177,7 +177,7 @@ def test_same_result_for_block_1_and_block_4():
     four, _ = run_multitarget(sc, runs=4, seed=5, block=4)
     _same(one, four)
     assert one.runs == 4 and one.within == 15.0 and one.c == 500.0
-    assert ex.run.run == 0 and set(ex.histories) == {"GNN", "JPDA"}
+    assert ex.run.run == 0 and set(ex.histories) == {"GNN", "JPDA", "JPDA*"}
 
 
 def test_the_driver_is_run_tracking_with_the_files_settings_and_ospa_p_counts():
@@ -222,7 +222,7 @@ def test_results_json_schema_and_units(report):
                               "confirm_within_s": 15.0}
     assert doc["scene"]["targets"] == 3
     units = doc["units"]["trackers"]
-    assert set(doc["trackers"]) == {"GNN", "JPDA"}
+    assert set(doc["trackers"]) == {"GNN", "JPDA", "JPDA*"}
     for name, entry in doc["trackers"].items():
         assert list(entry) == list(units)  # every number has its unit
         assert all(isinstance(v, int | float) or v is None for v in entry.values())
@@ -237,7 +237,7 @@ def test_results_json_schema_and_units(report):
     for key in ("gospa", "rmse", "mean_confirm_delay", "mean_purity", "id_switches"):
         assert key in units
     timings = json.loads((out / "timings.json").read_text())
-    assert set(timings["seconds_per_scan"]) == {"GNN", "JPDA"}
+    assert set(timings["seconds_per_scan"]) == {"GNN", "JPDA", "JPDA*"}
     assert "seconds" not in (out / "results.json").read_text()
 
 
@@ -247,7 +247,7 @@ def test_metrics_parquet_columns(report):
     assert t.column_names == ["tracker", "scan", "time", "truths", "gospa",
                               "gospa_localisation", "gospa_missed", "gospa_false", "ospa",
                               "confirmed"]
-    assert t.num_rows == 2 * 101
+    assert t.num_rows == 3 * 101  # three trackers x 101 scans
     assert t.schema.field("gospa").metadata[b"unit"] == b"m"
     assert t.schema.field("gospa_missed").metadata[b"unit"] == b"m^2"
     meta = json.loads(t.schema.metadata[b"trackkit"])
@@ -317,4 +317,4 @@ def test_trackkit_run_runs_a_multitarget_scenario_and_show_round_trips(tmp_path)
     assert ran.code == 0, ran.text
     assert "GOSPA [m]" in ran.out and "JPDA" in ran.out
     doc = json.loads((tmp_path / "o" / "results.json").read_text())
-    assert set(doc["trackers"]) == {"GNN", "JPDA"} and doc["runs"] == 2
+    assert set(doc["trackers"]) == {"GNN", "JPDA", "JPDA*"} and doc["runs"] == 2

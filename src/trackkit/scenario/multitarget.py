@@ -139,6 +139,9 @@ class TrackerSpec(_Strict):
     cost: Literal["loglik", "distance", "seed004"] | None = Field(
         None, description="GNN only: the assignment cost (default loglik: negative "
         "log-likelihood ratio; distance: Mahalanobis; seed004: K1 (1 - exp(-K2 d^2)))")
+    star: bool | None = Field(None, description="JPDA only: JPDA* (prune the joint events "
+                              "that a swap of two tracks' detections would make more likely, "
+                              "against track coalescence; default false)")
     logic: Literal["score", "history"] = Field("score", description="track confirmation "
                                                "and deletion: SPRT score or M-of-N history")
     alpha: OpenProbability | None = Field(None, description="score logic: probability of "
@@ -187,7 +190,7 @@ class TrackerSpec(_Strict):
 
     @model_validator(mode="after")
     def _fields_of_kind(self) -> TrackerSpec:
-        own = {"cost": self.associator == "GNN",
+        own = {"cost": self.associator == "GNN", "star": self.associator == "JPDA",
                "alpha": self.logic == "score", "beta": self.logic == "score",
                "new_target_density": self.logic == "score",
                "confirm": self.logic == "history", "delete": self.logic == "history",
@@ -195,6 +198,7 @@ class TrackerSpec(_Strict):
                "v_max_mps": self.initiator == "two-point",
                "margin_m": self.initiator == "two-point"}
         kind = {"cost": f"associator {self.associator!r}",
+                "star": f"associator {self.associator!r}",
                 "alpha": f"logic {self.logic!r}", "beta": f"logic {self.logic!r}",
                 "new_target_density": f"logic {self.logic!r}",
                 "confirm": f"logic {self.logic!r}", "delete": f"logic {self.logic!r}",
@@ -379,7 +383,7 @@ def build_tracker(spec: TrackerSpec, scene):
     if spec.associator == "GNN":
         associator = tt.GNN(cost=spec.gnn_cost)
     else:
-        associator = tt.JPDA()
+        associator = tt.JPDA(star=bool(spec.star))
     if spec.logic == "score":
         alpha, beta, beta_nt = spec.sprt
         logic = tt.ScoreLogic.from_sprt(alpha=alpha, beta=beta, pd=pd, clutter_density=lam,
