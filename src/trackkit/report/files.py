@@ -16,6 +16,7 @@ import math
 import os
 import shutil
 import uuid
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -205,7 +206,8 @@ def _write_all(result: MonteCarloResult, folder: Path) -> dict[str, Path]:
     return written
 
 
-def _move_into_place(tmp: Path, out: Path, written: dict[str, Path]) -> dict[str, Path]:
+def _move_into_place(tmp: Path, out: Path, written: dict[str, Path],
+                     owned: Iterable[str]) -> dict[str, Path]:
     marker = out / INCOMPLETE
     marker.write_text("trackkit is replacing the report files in this directory; if this file "
                       "remains, the write was interrupted and the files here are not one "
@@ -216,7 +218,7 @@ def _move_into_place(tmp: Path, out: Path, written: dict[str, Path]) -> dict[str
         final[key] = out / p.name
         os.replace(p, final[key])
     new = {p.name for p in final.values()}
-    for stale in TRACKKIT_FILES:
+    for stale in owned:
         if stale not in new:
             (out / stale).unlink(missing_ok=True)
     marker.unlink()
@@ -243,22 +245,31 @@ def _remove_if_empty(created: list[Path]) -> None:
             return
 
 
+def write_atomically(out_dir: str | Path, write_all: Callable[[Path], dict[str, Path]],
+                     owned: Iterable[str]) -> dict[str, Path]:
+    """All or nothing: ``write_all(folder)`` writes the files into a temporary folder inside
+    ``out_dir`` (never beside it: a run writes nowhere but the directory it was given); they
+    are moved into place under an ``INCOMPLETE`` marker, ``results.json`` last, and the files
+    of ``owned`` that this run did not write are removed (an earlier run's); other files are
+    left alone. On failure nothing is left behind, not even the directories it created.
+    Returns name -> path."""
+    out = Path(out_dir).resolve()
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"output directory {str(out_dir)!r} exists and is not a directory")
+    created = _make_dirs(out)
+    tmp = out / f".trackkit-tmp.{uuid.uuid4().hex[:12]}"
+    try:
+        tmp.mkdir()
+        return _move_into_place(tmp, out, write_all(tmp), owned)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _remove_if_empty(created)
+        raise
+
+
 def write_report(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Path]:
     """Write all report files of ``result`` into ``out_dir`` atomically (see module doc).
 
     Other files in an existing ``out_dir`` are left alone; trackkit files of an earlier run
     are replaced (or removed when this run does not produce them). Returns name -> path."""
-    out = Path(out_dir).resolve()
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"output directory {str(out_dir)!r} exists and is not a directory")
-    created = _make_dirs(out)
-    # inside out_dir, not beside it: a run writes nowhere but the directory it was given
-    tmp = out / f".trackkit-tmp.{uuid.uuid4().hex[:12]}"
-    try:
-        tmp.mkdir()
-        written = _write_all(result, tmp)
-        return _move_into_place(tmp, out, written)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        _remove_if_empty(created)
-        raise
+    return write_atomically(out_dir, lambda folder: _write_all(result, folder), TRACKKIT_FILES)

@@ -60,6 +60,23 @@ def data_uri(png: str | Path | bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(raw).decode("ascii")
 
 
+def notes_and_figures(notes: list[str], images: Mapping[str, str | Path | bytes],
+                      captions: Mapping[str, str]) -> list[str]:
+    """The "Notes" list and the "Figures" (inlined PNGs with their captions) of a page."""
+    esc = html.escape
+    parts = []
+    if notes:
+        parts.append("<h2>Notes</h2>\n<ul>")
+        parts += [f"<li>{esc(n)}</li>" for n in notes]
+        parts.append("</ul>")
+    if images:
+        parts.append("<h2>Figures</h2>")
+    for name, png in images.items():
+        parts.append(f'<figure><img src="{data_uri(png)}" alt="{esc(name)}">'
+                     f"<figcaption>{esc(captions.get(name, name))}</figcaption></figure>")
+    return parts
+
+
 def render_html(result: MonteCarloResult, images: Mapping[str, str | Path | bytes]) -> str:
     """The report page for ``result`` with ``images`` (figure name -> PNG path or bytes)."""
     esc = html.escape
@@ -84,16 +101,7 @@ def render_html(result: MonteCarloResult, images: Mapping[str, str | Path | byte
         parts.append("<h2>Seed 000 metrics and tuning</h2>")
     for title, table in extra:
         parts += [f"<h3>{esc(title)}</h3>", table]
-    if result.notes:
-        parts.append("<h2>Notes</h2>\n<ul>")
-        parts += [f"<li>{esc(n)}</li>" for n in result.notes]
-        parts.append("</ul>")
-    if images:
-        parts.append("<h2>Figures</h2>")
-    for name, png in images.items():
-        caption = _CAPTIONS.get(name, name)
-        parts.append(f'<figure><img src="{data_uri(png)}" alt="{esc(name)}">'
-                     f"<figcaption>{esc(caption)}</figcaption></figure>")
+    parts += notes_and_figures(result.notes, images, _CAPTIONS)
     parts += ["<h2>Glossary</h2>", glossary_html()]
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)

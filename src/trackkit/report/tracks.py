@@ -31,9 +31,6 @@ from __future__ import annotations
 import html
 import json
 import math
-import os
-import shutil
-import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,7 +49,8 @@ from trackkit import __version__
 from trackkit.eval.multitarget import Frames, gospa_steps, track_counts, track_summary
 from trackkit.io.frames import EnuFrame
 from trackkit.io.records import ReadReport
-from trackkit.report.html import _CSS, data_uri
+from trackkit.report.files import REPORT_HTML, RESULTS_JSON, write_atomically
+from trackkit.report.html import _CSS, notes_and_figures
 from trackkit.tracking.history import TrackHistory
 from trackkit.tracking.logic import TrackStatus
 
@@ -71,9 +69,6 @@ TRACKS_GEOJSON = "tracks.geojson"
 TRACKS_PNG = "tracks.png"
 GOSPA_PNG = "gospa.png"
 SKIPPED_CSV = "skipped.csv"
-REPORT_HTML = "report.html"
-RESULTS_JSON = "results.json"
-INCOMPLETE = "INCOMPLETE"
 #: every file a track report may write; one of an earlier run that this run does not write
 #: (no truth: no gospa.png) is removed, so the directory holds one consistent result
 TRACK_FILES = (TRACKS_PARQUET, TRACKS_CSV, TRACKS_GEOJSON, TRACKS_PNG, GOSPA_PNG, SKIPPED_CSV,
@@ -530,19 +525,11 @@ def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
     else:
         parts.append("<p>No truth: GOSPA and the track-level counts need reported positions "
                      "(AIS or ADS-B with --as-radar).</p>")
-    if rep.notes:
-        parts.append("<h2>Notes</h2>\n<ul>")
-        parts += [f"<li>{esc(n)}</li>" for n in rep.notes]
-        parts.append("</ul>")
     captions = {"tracks": "Confirmed tracks (coloured) over the "
                           f"{rep.background_label} (grey), east and north in km.",
                 "gospa": "GOSPA against time; below, the objects in range, the confirmed "
                          "tracks and the pairs within the cut-off."}
-    if images:
-        parts.append("<h2>Figures</h2>")
-    for name, png in images.items():
-        parts.append(f'<figure><img src="{data_uri(png)}" alt="{esc(name)}">'
-                     f"<figcaption>{esc(captions.get(name, name))}</figcaption></figure>")
+    parts += notes_and_figures(rep.notes, images, captions)
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)
 
@@ -584,40 +571,4 @@ def write_track_report(rep: TrackReport, out_dir: str | Path) -> dict[str, Path]
     ``INCOMPLETE`` marker, ``results.json`` last (as ``report.files.write_report``). Track
     files of an earlier run that this one does not write are removed; other files are left
     alone. Returns name -> path."""
-    out = Path(out_dir).resolve()
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"output directory {str(out_dir)!r} exists and is not a directory")
-    created = []
-    p = out
-    while not p.exists():
-        created.append(p)
-        p = p.parent
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = out / f".trackkit-tmp.{uuid.uuid4().hex[:12]}"
-    try:
-        tmp.mkdir()
-        written = _write_all(rep, tmp)
-        marker = out / INCOMPLETE
-        marker.write_text("trackkit is replacing the track files in this directory; if this "
-                          "file remains, the write was interrupted and the files here are "
-                          "not one consistent result.\n", encoding="utf-8")
-        (out / RESULTS_JSON).unlink(missing_ok=True)
-        final: dict[str, Path] = {}
-        for key, path in sorted(written.items(), key=lambda kv: kv[1].name == RESULTS_JSON):
-            final[key] = out / path.name
-            os.replace(path, final[key])
-        new = {q.name for q in final.values()}
-        for stale in TRACK_FILES:
-            if stale not in new:
-                (out / stale).unlink(missing_ok=True)
-        marker.unlink()
-        tmp.rmdir()
-        return final
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        for d in created:  # innermost first; stop at one that is not empty
-            try:
-                d.rmdir()
-            except OSError:
-                break
-        raise
+    return write_atomically(out_dir, lambda folder: _write_all(rep, folder), TRACK_FILES)
