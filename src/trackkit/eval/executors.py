@@ -76,10 +76,15 @@ def _dask(fn, scenario, tasks, size_of, total, workers, scheduler, progress) -> 
     finished: dict[str, float] = {}
     lock = threading.Lock()
 
+    last = [0.0]
+
     def tell() -> None:
+        # the sum's order changes as tasks finish, so it can round a hair below the last
+        # report: the bar never goes back
         if progress:
-            progress(sum(finished.values()) + sum(v for k, v in partial.items()
-                                                  if k not in finished), total)
+            last[0] = max(last[0], sum(finished.values())
+                          + sum(v for k, v in partial.items() if k not in finished))
+            progress(last[0], total)
 
     def on_event(event: tuple) -> None:
         _, (key, done) = event
