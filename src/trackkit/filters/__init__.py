@@ -2,6 +2,7 @@
 ``update(belief, z, sensor) -> (belief, innovation)``."""
 
 from trackkit.filters.adaptive import AEKF, AMCEKF, MCEKF, AdaptiveBelief, SageHusaBelief
+from trackkit.filters.alphabeta import AlphaBeta, AlphaBetaBelief, AlphaBetaGamma
 from trackkit.filters.fuzzy import FuzzyAdaptive, FuzzyBelief
 from trackkit.filters.initialise import dbt_prior_cov, ga_initial_position, ga_prior
 from trackkit.filters.kalman import EKF, IEKF, KF
@@ -15,6 +16,9 @@ __all__ = [
     "IEKF",
     "UKF",
     "CKF",
+    "AlphaBeta",
+    "AlphaBetaGamma",
+    "AlphaBetaBelief",
     "MCEKF",
     "AMCEKF",
     "AEKF",
