@@ -28,6 +28,25 @@ from trackkit.tracking.association import (
     pda_costs,
     seed004_costs,
 )
+from trackkit.tracking.gaps import (
+    HANDLER_NAMES,
+    Coast,
+    GapHandler,
+    GapMemory,
+    GapRun,
+    HoldLast,
+    MeanOfLast,
+    PolynomialFit,
+    SineFit,
+    gap_and_after,
+    make_handler,
+    mask_by_count,
+    mask_by_samples,
+    mask_by_time,
+    measurement_times,
+    run_with_gaps,
+    union,
+)
 from trackkit.tracking.gating import (
     GATE_PROBABILITY,
     KDTREE_MIN_PAIRS,
@@ -58,6 +77,26 @@ from trackkit.tracking.logic import (
     tentative,
     to_delete,
 )
+from trackkit.tracking.maneuver import (
+    DetectorRun,
+    DetectorState,
+    FadingMemoryDetector,
+    NISDetector,
+    PInflation,
+    QInflation,
+    ScaledNoise,
+    VariableOrderRun,
+    WindowDetector,
+    WindowState,
+    chi2_threshold,
+    fading_memory,
+    fading_threshold,
+    inflate_p,
+    inflate_q,
+    run_variable_order,
+    run_with_detector,
+    weighted_chi2_sf,
+)
 from trackkit.tracking.scans import Scan, Scans
 from trackkit.tracking.tracker import (
     GNN,
@@ -70,6 +109,13 @@ from trackkit.tracking.tracker import (
 )
 
 __all__ = [
+    "HANDLER_NAMES", "Coast", "GapHandler", "GapMemory", "GapRun", "HoldLast", "MeanOfLast",
+    "PolynomialFit", "SineFit", "gap_and_after", "make_handler", "mask_by_count",
+    "mask_by_samples", "mask_by_time", "measurement_times", "run_with_gaps", "union",
+    "DetectorRun", "DetectorState", "FadingMemoryDetector", "NISDetector", "PInflation",
+    "QInflation", "ScaledNoise", "VariableOrderRun", "WindowDetector", "WindowState",
+    "chi2_threshold", "fading_memory", "fading_threshold", "inflate_p", "inflate_q",
+    "run_variable_order", "run_with_detector", "weighted_chi2_sf",
     "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult", "clusters",
     "distance_costs", "gnn", "jpda", "jpda_update", "loglik_costs", "pda_costs",
     "seed004_costs",
