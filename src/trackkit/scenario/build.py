@@ -33,9 +33,13 @@ __all__ = ["Plan", "compile_scenario", "build_motion", "build_filter", "build_se
 def build_motion(spec: MotionSpec, dim: int, extras: int = 0, dt: float = 1.0):
     """The motion model named by ``spec`` over ``[pos, vel]`` (+ constant extras); a
     ``Linear`` model, or a constant velocity with an additive ``q_diag``, is built for the
-    scenario's step ``dt``."""
+    scenario's step ``dt``; a ``ContinuousLinear`` one is discretised for each step."""
     if spec.model == "Linear":
         return models.LinearMotion(np.asarray(spec.F, dtype=float), np.diag(spec.q_diag))
+    if spec.model == "ContinuousLinear":
+        return models.ContinuousLinear(np.asarray(spec.A, dtype=float),
+                                       np.asarray(spec.L, dtype=float),
+                                       np.asarray(spec.Qc, dtype=float))
     if spec.q_diag is not None:
         n = 2 * dim + extras
         if len(spec.q_diag) != n:
@@ -86,6 +90,8 @@ def build_sensor(spec: SensorSpec, position: Array, velocity: Array, sigma: list
     if m == "BearingFrequency":
         return models.BearingFrequency(position[:2], velocity[:2], sigma[0], sigma[1],
                                        c=spec.c_mps)
+    if m == "Sine":
+        return models.Sine(sigma=sigma[0])
     return models.MultipathDelay(position, spec.h_surface_m, spec.h_bottom_m,
                                  sigma=sigma, c=spec.c_mps)
 
@@ -96,6 +102,7 @@ _CHANNELS = {
     "AzimuthElevation": ["bearing", "elevation"],
     "BearingFrequency": ["bearing", "frequency"],
     "MultipathDelay": ["delay", "delay"],
+    "Sine": ["signal"],
 }
 
 
@@ -313,7 +320,7 @@ COV_LIMIT = 1e150
 PRECISION_LIMIT = 1e12
 
 _CHANNEL_UNITS = {"bearing": "rad", "elevation": "rad", "range": "m", "frequency": "Hz",
-                  "delay": "s", "position": "m"}
+                  "delay": "s", "position": "m", "signal": "(SI)"}
 
 
 def _channel_kinds(spec: SensorSpec, dim: int) -> list[str]:
@@ -326,6 +333,8 @@ def _motion_field(spec: MotionSpec) -> str:
     """The field that scales a motion model's process noise."""
     if spec.q_diag is not None:
         return "q_diag"
+    if spec.model == "ContinuousLinear":
+        return "Qc"
     return "sigma" if spec.model == "Singer" else "q"
 
 

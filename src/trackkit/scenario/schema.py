@@ -161,7 +161,9 @@ class MotionSpec(_Strict):
     """A motion model by name with its parameters (SI)."""
 
     model: Literal["ConstantVelocity", "ConstantAcceleration", "Singer", "CoordinatedTurn",
-                   "Linear"] = Field(description="the motion model (trackkit.models)")
+                   "Linear", "ContinuousLinear"] = Field(
+        description="the motion model (trackkit.models); ContinuousLinear: dx/dt = A x + L w, "
+        "E[w w^T] = Qc delta(t), discretised exactly (Van Loan) for the step")
     q: NonNegFloat = Field(0.0, description="spectral density of the white process noise: of "
                            "the acceleration (ConstantVelocity, CoordinatedTurn) or of the "
                            "jerk (ConstantAcceleration; m^2/s^5)", json_schema_extra=_unit(
@@ -173,6 +175,15 @@ class MotionSpec(_Strict):
     F: list[list[Finite]] | None = Field(
         None, description="the transition matrix per step of a Linear model (any state, e.g. "
         "seed 000's chapter 3)", json_schema_extra=_unit("SI"))
+    A: list[list[Finite]] | None = Field(
+        None, description="the continuous-time system matrix of a ContinuousLinear model",
+        json_schema_extra=_unit("SI"))
+    L: list[list[Finite]] | None = Field(
+        None, description="the noise gain of a ContinuousLinear model (n rows, one column "
+        "per noise input)", json_schema_extra=_unit("SI"))
+    Qc: list[list[Finite]] | None = Field(
+        None, description="the spectral density of the white noise w of a ContinuousLinear "
+        "model (symmetric, positive semi-definite)", json_schema_extra=_unit("SI squared"))
     q_omega: NonNegFloat = Field(1e-6, description="spectral density of the turn rate "
                                  "(CoordinatedTurn)", json_schema_extra=_unit("rad^2/s^3"))
     q_extra: NonNegFloat = Field(0.0, description="random-walk density of the constant "
@@ -199,7 +210,39 @@ class MotionSpec(_Strict):
             raise ValueError(f"F is only for motion model Linear, not {self.model}")
         elif self.q_diag is not None and self.model != "ConstantVelocity":
             raise ValueError(f"q_diag is for ConstantVelocity and Linear, not {self.model}")
+        if self.model == "ContinuousLinear":
+            self._continuous_shapes()
+        elif any(m is not None for m in (self.A, self.L, self.Qc)):
+            raise ValueError(f"A, L and Qc are only for motion model ContinuousLinear, not "
+                             f"{self.model}")
         return self
+
+    def _continuous_shapes(self) -> None:
+        """A (n, n), L (n, s) and Qc (s, s) symmetric positive semi-definite."""
+        if self.A is None or self.L is None or self.Qc is None:
+            raise ValueError("motion model ContinuousLinear needs A (n x n), L (n x s) and Qc "
+                             "(s x s)")
+        n = len(self.A)
+        if any(len(row) != n for row in self.A):
+            raise ValueError(f"A has rows of lengths {[len(r) for r in self.A]}; expected a "
+                             "square matrix")
+        s = len(self.L[0]) if self.L else 0
+        if len(self.L) != n or s == 0 or any(len(row) != s for row in self.L):
+            raise ValueError(f"L has rows of lengths {[len(r) for r in self.L]}; expected {n} "
+                             "rows (the size of A) of one length, the number of noise inputs")
+        if len(self.Qc) != s or any(len(row) != s for row in self.Qc):
+            raise ValueError(f"Qc has rows of lengths {[len(r) for r in self.Qc]}; expected "
+                             f"{s} x {s} (L's columns)")
+        import numpy as np
+
+        Qc = np.asarray(self.Qc, dtype=float)
+        if not np.array_equal(Qc, Qc.T):
+            raise ValueError("Qc is not symmetric; expected a symmetric positive "
+                             "semi-definite matrix")
+        low = float(np.linalg.eigvalsh(Qc)[0])
+        if low < -1e-12 * max(float(np.abs(Qc).max()), 1e-300):
+            raise ValueError(f"Qc is not positive semi-definite (smallest eigenvalue "
+                             f"{low:.3g}); expected a spectral density")
 
 
 class Target(_Strict):
@@ -210,7 +253,7 @@ class Target(_Strict):
                                 description="initial position and velocity")
     state: list[Finite] | None = Field(
         None, description="the full initial state in state order, instead of initial "
-        "(required with motion model Linear)", json_schema_extra=_unit("SI"))
+        "(required with motion model Linear or ContinuousLinear)", json_schema_extra=_unit("SI"))
     motion: MotionSpec = Field(default_factory=lambda: MotionSpec(model="ConstantVelocity"),
                                description="the truth's motion model and process noise (also "
                                "the filters' unless a filter has its own)")
@@ -227,9 +270,10 @@ class SensorSpec(_Strict):
     over the nominal truth / 10^(snr/10))."""
 
     model: Literal["Bearing", "RangeBearing", "Position", "AzimuthElevation",
-                   "BearingFrequency", "MultipathDelay"] = Field(
+                   "BearingFrequency", "MultipathDelay", "Sine"] = Field(
         description="the measurement: bearing; range and bearing; position; azimuth and "
-        "elevation; bearing and received frequency; surface and bottom multipath delays")
+        "elevation; bearing and received frequency; surface and bottom multipath delays; "
+        "a sin(theta) of the state [theta, omega, a] (seed 001's random sine)")
     sigma_deg: PositiveFloat | None = Field(None, description="standard deviation of the "
                                             "bearing (and elevation) noise")
     sigma_m: PositiveFloat | None = Field(None, description="standard deviation of the range "
@@ -268,7 +312,10 @@ class SensorSpec(_Strict):
             "AzimuthElevation": ["sigma_deg"],
             "BearingFrequency": ["sigma_deg", "sigma_hz"],
             "MultipathDelay": ["sigma_s"],
+            "Sine": [],
         }[self.model]
+        if self.model == "Sine" and self.snr_db is None and self.r_diag_si is None:
+            raise ValueError("sensor Sine needs r_diag_si (its R, one value) or snr_db")
         if self.snr_db is None and self.r_diag_si is None:
             missing = [f for f in need if getattr(self, f) is None]
             if missing:
@@ -424,7 +471,8 @@ class ReportSpec(_Strict):
                          "vy", "vz", "x1", "x2", "x3", "frequency", "bearing"]] = Field(
         default_factory=lambda: ["position", "velocity"],
         description="the error groups of the RMSE tables and plots (x1, x2, x3: the states "
-        "of a Linear target)")
+        "of a Linear or ContinuousLinear target, whose positions and velocities, when its "
+        "state has them, are its first 2 dim components)")
     average_from_s: NonNegFloat = Field(0.0, description="RMSE, ANEES and ANIS are averaged "
                                         "from this time on (after convergence)")
     matching: bool = Field(False, description="report seed 000's J1-J4 and the per-step R, "
@@ -480,13 +528,17 @@ class Scenario(_Strict):
         if self.dim == 2 and (self.target.initial.z_m is not None):
             raise ValueError("target.initial.z_m is set but dim = 2")
         if self.linear_system and (self.target.state is None or self.target.legs):
-            raise ValueError("a target with motion model Linear needs target.state and "
-                             "takes no legs")
+            raise ValueError(f"a target with motion model {self.target.motion.model} needs "
+                             "target.state and takes no legs")
         for i, f in enumerate(self.filters):
             if f.motion is not None and f.motion.model == "Linear" and (
                     len(f.motion.F) != n):
                 raise ValueError(f"filters[{i}].motion.F is {len(f.motion.F)} x "
                                  f"{len(f.motion.F)}; expected {n} x {n}")
+            if f.motion is not None and f.motion.model == "ContinuousLinear" and (
+                    len(f.motion.A) != n):
+                raise ValueError(f"filters[{i}].motion.A is {len(f.motion.A)} x "
+                                 f"{len(f.motion.A)}; expected {n} x {n}")
             kappa = f.options.get("kappa")
             if f.type == "UKF" and kappa is not None and not kappa > -n:
                 # lambda = alpha^2 (n + kappa) - n: the sigma points need n + lambda > 0
@@ -502,13 +554,25 @@ class Scenario(_Strict):
                                      f"{len(leg.velocity_mps)} components; expected "
                                      f"{self.dim} (dim)")
         if self.linear_system:
+            # a full state follows DESIGN.md's ordering: with at least 2 dim components its
+            # head is [positions, velocities] (a CWPA's [x, y, vx, vy, ax, ay])
             allowed = {f"x{i}" for i in range(1, n + 1)}
+            if n >= 2 * self.dim:
+                allowed |= {"position", "velocity", "speed", "course", "bearing", "x", "y",
+                            "z", "vx", "vy", "vz"}
             bad = [g for g in self.report.groups if g not in allowed]
             if bad:
-                raise ValueError(f"report.groups has {bad}; a Linear target's state has no "
-                                 f"positions or velocities, so expected groups among "
-                                 f"{sorted(allowed)}")
+                raise ValueError(
+                    f"report.groups has {bad}; a {self.target.motion.model} target's state "
+                    f"of {n} components has positions and velocities only when it has at "
+                    f"least 2 dim = {2 * self.dim} (positions, velocities, then the rest), "
+                    f"so expected groups among {sorted(allowed)}")
         for i, o in enumerate(self.observers):
+            if o.sensor.model == "Sine" and not (self.linear_system and n == 3):
+                raise ValueError(f"observers[{i}].sensor is Sine, which measures a sin(theta) "
+                                 "of the state [theta, omega, a]; expected a target with motion "
+                                 "Linear or ContinuousLinear and a 3-component target.state, "
+                                 f"not {self.target.motion.model} with {n} components")
             r = o.sensor.r_diag_si
             if (o.sensor.model == "Position" and r is not None and not self.linear_system
                     and len(r) != self.dim):
@@ -519,11 +583,13 @@ class Scenario(_Strict):
 
     @property
     def linear_system(self) -> bool:
-        """The target follows a ``Linear`` model (a state that is not [pos, vel])."""
-        return self.target.motion.model == "Linear"
+        """The target follows a ``Linear`` or ``ContinuousLinear`` model: its full state is
+        given (``target.state``), not built from [pos, vel] and extras."""
+        return self.target.motion.model in ("Linear", "ContinuousLinear")
 
     @property
     def state_dim(self) -> int:
         if self.linear_system:
-            return len(self.target.motion.F)
+            m = self.target.motion
+            return len(m.F if m.model == "Linear" else m.A)
         return 2 * self.dim + len(self.target.extras)
