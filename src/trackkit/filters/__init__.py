@@ -4,6 +4,7 @@
 from trackkit.filters.adaptive import AEKF, AMCEKF, MCEKF, AdaptiveBelief, SageHusaBelief
 from trackkit.filters.alphabeta import AlphaBeta, AlphaBetaBelief, AlphaBetaGamma
 from trackkit.filters.fuzzy import FuzzyAdaptive, FuzzyBelief
+from trackkit.filters.imm import IMM, IMMBelief
 from trackkit.filters.initialise import dbt_prior_cov, ga_initial_position, ga_prior
 from trackkit.filters.kalman import EKF, IEKF, KF
 from trackkit.filters.run import run_filter
@@ -19,6 +20,8 @@ __all__ = [
     "AlphaBeta",
     "AlphaBetaGamma",
     "AlphaBetaBelief",
+    "IMM",
+    "IMMBelief",
     "MCEKF",
     "AMCEKF",
     "AEKF",

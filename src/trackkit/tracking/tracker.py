@@ -9,6 +9,7 @@ One scan, for every live track at once (axis 0 of one batched belief is the trac
     update       GNN: f.update(x-, z_assigned)  (nan: a missed track keeps x-)
                  JPDA: every gated hypothesis updated as one batch, then the mixture
                  x = beta_0 x- + sum_j beta_j x_j, P = sum (beta (P + d d^T)) moment-matched
+                 (a filter with ``merge_hypotheses``, the IMM, combines its own beliefs)
     logic        hit/miss -> M-of-N or SPRT score -> confirm, delete
     initiate     unassigned plots -> new tentative tracks, new IDs
 
@@ -358,8 +359,16 @@ class Tracker:
         r = jpda(g, self.pd, self.clutter_density, self.p_gate, max_events=a.max_events,
                  star=a.star)
         info["clusters"], info["approximated"] = r.clusters.count, int(r.approximated.sum())
+        merge = getattr(self.filter, "merge_hypotheses", None)
+        if merge is not None:
+            # a filter with its own combination of hypotheses (the IMM: per model, weights
+            # beta_h mu_{j|h}), given the predicted belief and each gated pair's update
+            if g.size:
+                post, _ = self.filter.update(_take(belief, g.track), z[g.det], sensor)
+                belief = merge(belief, post, g.track, r.beta0, r.beta)
+            return belief, *self._jpda_outcome(g, r, z.shape[0])
         prior = self.estimate(belief)
-        T, n = prior.mean.shape
+        n = prior.mean.shape[1]
         if g.size:
             # every gated hypothesis (track i, detection j) updated as one batch
             post, _ = self.filter.update(_take(belief, g.track), z[g.det], sensor)
@@ -377,15 +386,20 @@ class Tracker:
         P = 0.5 * (P + P.mT)
         mixed = Gaussian._make((x, P))
         belief = self.filter.init(mixed) if hasattr(self.filter, "init") else mixed
-        hit = 1.0 - b0 >= a.hit
-        claim = np.bincount(g.det, r.beta, minlength=z.shape[0])
+        return belief, *self._jpda_outcome(g, r, z.shape[0])
+
+    def _jpda_outcome(self, g: Gate, r: Any, D: int):
+        """Hits, the score logic's hit term and the plots claimed, from JPDA's marginals."""
+        T = g.n_tracks
+        hit = 1.0 - r.beta0 >= self.associator.hit
+        claim = np.bincount(g.det, r.beta, minlength=D)
         # the score logic's hit term: ln N of the most probable gated detection
         best = np.full(T, -np.inf)
         np.maximum.at(best, g.track, r.beta)
         ll = np.zeros(T)
         top = r.beta == best[g.track]
         ll[g.track[top]] = g.loglik[top]
-        return belief, hit, ll, claim >= a.claim
+        return hit, ll, claim >= self.associator.claim
 
     def _initiate(self, z: Array, sensor: Any, t: float, waiting):
         """New track beliefs ([x, y, vx, vy]) from the unclaimed plots, and the plots left
