@@ -572,7 +572,7 @@ def _print_summary(result: Any, paths: dict[str, Path]) -> None:
 
     console = Console()
     console.print(rich_table(result, width=console.width))
-    for table in matching_rich_tables(result):  # seed 000's J1-J4 and tuning, when present
+    for table in matching_rich_tables(result):  # seed 000's tables, the gap table: if present
         console.print(table)
     for note in getattr(result, "notes", []) or []:
         console.print(Text(f"note: {note}", style="yellow"))

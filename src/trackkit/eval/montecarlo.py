@@ -143,6 +143,7 @@ class BlockResult:
     example: Example | None = None
     matching: dict[str, dict[str, Array]] | None = None  # filter -> per-run J2, J3, J4
     j1: Array | None = None  # (runs, m) per-run raw noise RMS
+    gaps: dict[str, dict] | None = None  # filter -> _GapAccumulator.result
 
 
 def run_block(scenario: Scenario, block: int,
@@ -157,25 +158,36 @@ def run_block(scenario: Scenario, block: int,
         raise ValueError(f"block {block} is outside the {s.run.runs} runs")
     data = simulate_block(plan, r0, r1)
     T, n, d = plan.steps, plan.n, plan.dim
+    if plan.gap_mask is not None:
+        data.z[plan.gap_mask] = np.nan  # the radar saw nothing: every filter's data alike
+    gap_windows = _gap_windows(plan)
     groups = groups_for(plan)
+    angular = None
+    if s.report.angle_states:
+        angular = tuple(j in s.report.angle_states for j in range(n))
     metrics, seconds = {}, {}
     example = None
     keep = r0 == 0
     est_hist: dict[str, tuple[Array, Array]] = {}
     matching = {} if s.report.matching else None
     logs = {}
+    gaps: dict[str, dict] = {}
+    pseudo_hist: dict[str, Array] = {}
     m = plan.sensors[0].dim_z
     for i, (name, f, motion, (mean0, P0)) in enumerate(zip(
             plan.filter_names, plan.filters, plan.filter_motions, plan.priors, strict=True)):
-        acc = MonteCarloMetrics(groups=groups)
+        acc = MonteCarloMetrics(groups=groups, angular=angular)
         match = None if matching is None else MatchingMetrics(r1 - r0, n, m, T, log=keep)
         L0 = np.linalg.cholesky(P0)
         m0 = (data.truth[0] + data.prior_offset @ L0.T) if mean0 is None else (
             np.broadcast_to(mean0, (r1 - r0, n)).copy())
         b = f.init(Gaussian(m0, np.broadcast_to(P0, (r1 - r0, n, n)).copy()))
         elapsed = 0.0
+        handler = plan.gap_handlers[i] if plan.gap_handlers else None
+        gap = _GapAccumulator(groups, gap_windows, r1 - r0, T, handler is not None, angular)
         if keep:
             hm, hP = np.empty((T, n)), np.empty((T, n, n))
+            hz = np.full((T, m), np.nan)
         for k in range(T):
             sensor = plan.filter_sensor(i, k)
             t0 = time.perf_counter()
@@ -187,6 +199,9 @@ def run_block(scenario: Scenario, block: int,
             if "bearing" in groups:
                 groups["bearing"].origin = plan.observer_states[0, k + 1, :2]
             acc.add(k, data.truth[k + 1], g, innov)
+            gap.add(k, data.truth[k + 1], g.mean, b)
+            if keep and handler is not None:
+                hz[k] = b.z_pseudo[0]
             if match is not None:
                 match.add(k, data.truth[k + 1], g.mean, innov, R_used, plan.sensors[k])
             if keep:
@@ -194,6 +209,9 @@ def run_block(scenario: Scenario, block: int,
             if progress is not None and (k + 1) % PROGRESS_STEPS == 0:
                 progress((i + (k + 1) / T) / len(plan.filters))
         metrics[name], seconds[name] = acc, elapsed
+        gaps[name] = gap.result(handler)
+        if keep and handler is not None:
+            pseudo_hist[name] = hz
         if match is not None:
             matching[name] = match.per_run(s.report.dom_alpha)
             if keep:
@@ -216,12 +234,65 @@ def run_block(scenario: Scenario, block: int,
     if keep:
         example = Example(times=plan.times[1:], truth=data.truth[1:, 0],
                           observer=plan.observer_states[0, 1:, :d], estimates=est_hist,
-                          measurements=data.z[:, 0], logs=logs)
+                          measurements=data.z[:, 0], logs=logs, pseudo=pseudo_hist)
     j1 = None
     if matching is not None:
         z_true = np.stack([plan.sensors[k].h(data.truth[k + 1]) for k in range(T)])
         j1 = measurement_noise_rms(data.z, z_true, plan.sensors[0])
-    return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example, matching, j1)
+    return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example, matching, j1,
+                       gaps)
+
+
+def _gap_windows(plan: Plan) -> tuple[Array, Array] | None:
+    """The steps [gaps] hides and the ``round(after_gap_s / dt)`` steps after each gap that
+    are not themselves missing (where the recovery is scored), as step indices; None
+    without [gaps]."""
+    if plan.gap_mask is None:
+        return None
+    from trackkit.tracking.gaps import gap_and_after
+
+    after = int(round(plan.scenario.report.after_gap_s / plan.dt))
+    mask = plan.gap_mask
+    return np.flatnonzero(mask), np.flatnonzero(gap_and_after(mask, after) & ~mask)
+
+
+class _GapAccumulator:
+    """Per-run sums of squared errors per group over the gap steps and the steps after
+    them, and the runs fed a pseudo-measurement at each step. Each run's sums add its own
+    steps in time order, so they do not depend on how runs are split into blocks."""
+
+    def __init__(self, groups: dict, windows: tuple[Array, Array] | None, runs: int,
+                 steps: int, handler: bool, angular: tuple[bool, ...] | None) -> None:
+        self.groups, self.handler = groups, handler
+        self.angular = None if angular is None else np.asarray(angular)
+        self.where = np.zeros(steps, np.int8)  # 1: gap, 2: after
+        if windows is not None:
+            self.where[windows[0]], self.where[windows[1]] = 1, 2
+        self.sse = ({g: np.zeros(runs) for g in groups} if windows is not None else None,
+                    {g: np.zeros(runs) for g in groups} if windows is not None else None)
+        self.pseudo = np.zeros(steps, np.int64)
+
+    def add(self, k: int, truth: Array, mean: Array, belief) -> None:
+        if self.handler:
+            self.pseudo[k] = int(np.count_nonzero(belief.pseudo))
+        w = self.where[k]
+        if not w:
+            return
+        sse = self.sse[w - 1]
+        e_all = truth - mean
+        if self.angular is not None:  # as MonteCarloMetrics wraps them
+            e_all = np.where(self.angular, wrap(e_all), e_all)
+        for g, spec in self.groups.items():
+            e = spec(truth, mean) if callable(spec) else e_all[..., spec]
+            sse[g] += np.sum(e * e, -1)
+
+    def result(self, handler: str | None) -> dict:
+        out: dict = {"handler": handler}
+        if self.sse[0] is not None:
+            out["gap_sse"], out["after_sse"] = self.sse
+        if self.handler:
+            out["pseudo_steps"] = self.pseudo
+        return out
 
 
 def run_blocks(scenario: Scenario, blocks: list[int],
@@ -277,6 +348,7 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
             pcrlb[g] = rmse_bound(bounds, spec)
     pcrlb_mean = {g: float(np.sqrt(np.mean(v[start:] ** 2))) for g, v in pcrlb.items()}
     filters = {}
+    windows = _gap_windows(plan)
     for name in plan.filter_names:
         acc = parts[0].metrics[name]
         for p in parts[1:]:
@@ -295,6 +367,7 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
             matching={} if parts[0].matching is None else {
                 k: np.concatenate([p.matching[name][k] for p in parts])
                 for k in parts[0].matching[name]},
+            gaps=_combine_gaps([p.gaps[name] for p in parts]),
         )
     notes = list(s.notes)
     if {"speed", "course", "bearing"} & set(groups):
@@ -313,7 +386,24 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
         pcrlb_mean=pcrlb_mean, example=parts[0].example, notes=notes,
         j1=None if parts[0].j1 is None else np.concatenate([p.j1 for p in parts]),
         dom_alpha=s.report.dom_alpha,
+        gap_steps=None if windows is None else windows[0],
+        after_steps=None if windows is None else windows[1],
+        after_gap_s=s.report.after_gap_s, kinematic=not s.linear_system or plan.n >= 2 * plan.dim,
     )
+
+
+def _combine_gaps(parts: list[dict]) -> dict:
+    """Block results of one filter's gap accumulator, in block order."""
+    out = {"handler": parts[0]["handler"]}
+    for key in ("gap_sse", "after_sse"):
+        if key in parts[0]:
+            out[key] = {g: np.concatenate([p[key][g] for p in parts]) for g in parts[0][key]}
+    if "pseudo_steps" in parts[0]:
+        total = parts[0]["pseudo_steps"].copy()
+        for p in parts[1:]:
+            total += p["pseudo_steps"]
+        out["pseudo_steps"] = total
+    return out
 
 
 # --- the public entry point ---------------------------------------------------------------

@@ -36,6 +36,11 @@ class FilterResult:
     #: seed 000's per-run metrics (trackkit.eval.matching): "J2" (runs, m), "J3" (runs, n),
     #: "J4" (runs,)
     matching: dict[str, Array] = field(default_factory=dict)
+    #: missing measurements (scenario [gaps], filter gaps handlers): "handler" (label or
+    #: None), per-run sums of squared errors per group over the gap steps "gap_sse" and the
+    #: steps after them "after_sse" ({group: (runs,)}), "pseudo_steps" (steps,) the runs fed
+    #: a pseudo-measurement at each step; see :class:`GapReport`
+    gaps: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -50,6 +55,8 @@ class Example:
     #: filter -> {"R", "S", "C", "DOM"}: diagonals per step (steps, m) of the innovation
     #: covariance matching (trackkit.eval.matching)
     logs: dict[str, dict[str, Array]] = field(default_factory=dict)
+    #: filter -> the pseudo-measurements it was fed (steps, m), nan elsewhere (gap handlers)
+    pseudo: dict[str, Array] = field(default_factory=dict)
 
 
 @dataclass
@@ -74,6 +81,47 @@ class MonteCarloResult:
     dom_alpha: float = 1000.0  # the alpha of J4
     #: filter -> tuning summary of its fuzzy system (trackkit.eval.tuning.TuningResult)
     tuning: dict[str, object] = field(default_factory=dict)
+    #: the step indices [gaps] hides, and the ones after them (``after_gap_s``) where the
+    #: recovery is scored; None without [gaps]
+    gap_steps: NDArray[np.int64] | None = None
+    after_steps: NDArray[np.int64] | None = None
+    after_gap_s: float = 0.0
+    #: the state is [positions, velocities, ...] (an X-Y picture means something)
+    kinematic: bool = True
+
+    def gap_rmse(self, name: str, group: str, window: str = "gap") -> float:
+        """RMSE over all runs and the steps of ``window`` ("gap", "after" or "both")."""
+        g = self.filters[name].gaps
+        if self.gap_steps is None or "gap_sse" not in g:
+            return float("nan")
+        sse, steps = self._window_sse(g, group, window)
+        return float(np.sqrt(np.sum(sse) / (steps * self.runs))) if steps else float("nan")
+
+    def gap_rmse_per_run(self, name: str, group: str, window: str = "both") -> Array:
+        """Each run's RMSE over the steps of ``window`` ("gap", "after" or "both")."""
+        g = self.filters[name].gaps
+        if self.gap_steps is None or "gap_sse" not in g:
+            raise ValueError(f"scenario {self.scenario!r} has no [gaps]; no gap RMSE")
+        sse, steps = self._window_sse(g, group, window)
+        return np.sqrt(sse / steps)
+
+    def _window_sse(self, g: dict, group: str, window: str) -> tuple[Array, int]:
+        nga, naf = len(self.gap_steps), len(self.after_steps)
+        if window == "gap":
+            return g["gap_sse"][group], nga
+        if window == "after":
+            return g["after_sse"][group], naf
+        if window == "both":
+            return g["gap_sse"][group] + g["after_sse"][group], nga + naf
+        raise ValueError(f"window = {window!r}; expected 'gap', 'after' or 'both'")
+
+    def pseudo_fraction(self, name: str) -> float:
+        """The fraction of (run, step) pairs at which filter ``name`` was fed a
+        pseudo-measurement."""
+        g = self.filters[name].gaps
+        if "pseudo_steps" not in g:
+            return 0.0
+        return float(np.sum(g["pseudo_steps"]) / (self.runs * self.steps))
 
     def efficiency(self, name: str, group: str) -> float:
         """RMSE / PCRLB (time averaged): 1 is efficient, larger is further from the bound."""
@@ -101,7 +149,26 @@ class MonteCarloResult:
             },
             "pcrlb": {g: float(v) for g, v in self.pcrlb_mean.items()},
             **self._matching_json(),
+            **self._gaps_json(),
         }
+
+    def _gaps_json(self) -> dict:
+        """The missing-measurement block, when the scenario has [gaps] or handlers."""
+        handlers = {n: f.gaps.get("handler") for n, f in self.filters.items()}
+        if self.gap_steps is None and not any(handlers.values()):
+            return {}
+        out: dict = {}
+        if self.gap_steps is not None:
+            out = {"steps": self.gap_steps.tolist(), "after_steps": self.after_steps.tolist(),
+                   "after_gap_s": self.after_gap_s}
+        out["filters"] = {
+            name: {"handler": handlers[name] or "B0",
+                   "pseudo_fraction": self.pseudo_fraction(name),
+                   **({} if self.gap_steps is None else {
+                       f"rmse_{w}": {g: self.gap_rmse(name, g, w) for g in self.groups}
+                       for w in ("gap", "after", "both")})}
+            for name in self.filters}
+        return {"gaps": out}
 
     def _matching_json(self) -> dict:
         """J1-J4 (mean over runs and run 0) and the tuning summaries, when present."""

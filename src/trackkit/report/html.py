@@ -12,7 +12,12 @@ from pathlib import Path
 from trackkit import __version__
 from trackkit.eval.results import MonteCarloResult
 from trackkit.report.glossary import glossary_html
-from trackkit.report.tables import html_table, matching_html_tables
+from trackkit.report.tables import (
+    gap_summary,
+    html_table,
+    matching_html_tables,
+    summary_html_table,
+)
 
 __all__ = ["data_uri", "render_html"]
 
@@ -27,6 +32,9 @@ _CAPTIONS = {
     "membership": "The tuned fuzzy systems: input sets NM..PM over the normalised DOM, output "
                   "centres IL..DL (the adjustment, in units of the initial noise) and the "
                   "resulting input-output curve.",
+    "time": "Run 0 against time: the first state component's truth and each filter's estimate "
+            "(top), and the measurements with each filter's pseudo-measurements (bottom); the "
+            "gaps shaded.",
     "convergence": "Optimiser convergence: best-so-far DOM cost against iteration, median over "
                    "the independent runs with the min-max band.",
 }
@@ -101,6 +109,9 @@ def render_html(result: MonteCarloResult, images: Mapping[str, str | Path | byte
         parts.append("<h2>Seed 000 metrics and tuning</h2>")
     for title, table in extra:
         parts += [f"<h3>{esc(title)}</h3>", table]
+    gap = gap_summary(result)
+    if gap is not None:
+        parts += [f"<h2>{esc(gap.title)}</h2>", summary_html_table(gap)]
     parts += notes_and_figures(result.notes, images, _CAPTIONS)
     parts += ["<h2>Glossary</h2>", glossary_html()]
     parts += ["</body>", "</html>", ""]

@@ -24,12 +24,13 @@ from trackkit.report.tables import channel_labels, display_unit
 __all__ = [
     "geometry_figure", "rmse_figure", "nees_figure", "plot_geometry", "plot_rmse", "plot_nees",
     "matching_figure", "membership_figure", "convergence_figure", "plot_matching",
-    "plot_membership", "plot_convergence", "make_plots", "PLOT_FILES",
+    "plot_membership", "plot_convergence", "make_plots", "PLOT_FILES", "time_figure",
+    "plot_time",
 ]
 
 PLOT_FILES = {"geometry": "geometry.png", "rmse": "rmse.png", "nees": "nees.png",
               "matching": "matching.png", "membership": "membership.png",
-              "convergence": "convergence.png"}
+              "convergence": "convergence.png", "time": "time.png"}
 _DPI = 110
 
 
@@ -409,15 +410,77 @@ def plot_convergence(result: MonteCarloResult, path: str | Path) -> Path | None:
     return None if fig is None else _save(fig, path)
 
 
+def _shade_gaps(ax, result: MonteCarloResult) -> None:
+    if result.gap_steps is None or not len(result.gap_steps):
+        return
+    t = np.asarray(result.times, dtype=float)
+    steps = np.asarray(result.gap_steps)
+    for part in np.split(steps, np.flatnonzero(np.diff(steps) > 1) + 1):
+        # a measurement's gap runs from the last real one before it to the first after it
+        lo = t[part[0] - 1] if part[0] > 0 else t[0] - result.dt
+        hi = t[part[-1] + 1] if part[-1] + 1 < len(t) else t[-1]
+        ax.axvspan(lo, hi, color="0.85", lw=0)
+
+
+def time_figure(result: MonteCarloResult) -> Figure | None:
+    """Run 0 against time (seed 001's figures 4-4 .. 4-15): the first state component, true
+    and estimated by each filter, and the first measurement channel, measured and fed as a
+    pseudo-measurement by each filter; gaps shaded. None without an example run."""
+    ex = result.example
+    if ex is None:
+        return None
+    t = np.asarray(ex.times, dtype=float)
+    fig = Figure(figsize=(8.0, 6.5), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for ax in (top, bottom):
+        _shade_gaps(ax, result)
+        ax.grid(True, alpha=0.3)
+    top.plot(t, np.asarray(ex.truth)[:, 0], color="black", lw=2, label="truth")
+    for i, (name, (means, _)) in enumerate(ex.estimates.items()):
+        top.plot(t, np.asarray(means)[:, 0], color=f"C{i}", lw=1.2, label=name)
+    top.set_ylabel("x (east) [m]" if result.kinematic else "state component 1")
+    top.legend(fontsize="small", ncols=3)
+    if ex.measurements is not None:
+        z = np.asarray(ex.measurements, dtype=float).reshape(len(t), -1)[:, 0]
+        bottom.plot(t, z, ".", color="0.3", ms=4, label="measurements")
+    for i, name in enumerate(ex.estimates):
+        zp = ex.pseudo.get(name)
+        if zp is not None and np.isfinite(zp).any():
+            bottom.plot(t, np.asarray(zp).reshape(len(t), -1)[:, 0], "x", color=f"C{i}",
+                        ms=4, label=f"{name}: pseudo")
+    bottom.set_ylabel("measurement, channel 1")
+    bottom.set_xlabel("time [s]")
+    bottom.legend(fontsize="small", ncols=3)
+    fig.suptitle(f"{result.scenario}: run 0 against time (gaps shaded)", fontsize="medium")
+    return fig
+
+
+def plot_time(result: MonteCarloResult, path: str | Path) -> Path | None:
+    """Write :func:`time_figure` as a PNG; None (nothing written) without an example run."""
+    fig = time_figure(result)
+    return None if fig is None else _save(fig, path)
+
+
+def _wants_time_plot(result: MonteCarloResult) -> bool:
+    return (result.gap_steps is not None or not result.kinematic
+            or any(f.gaps.get("handler") for f in result.filters.values()))
+
+
 def make_plots(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Path]:
     """Write every figure into ``out_dir``; returns ``{figure: path}`` for those written
-    (geometry only with an example run; matching, membership and convergence only when the
-    result has those data)."""
+    (geometry only with an example run of a kinematic state; the time plot with an example
+    run of a scenario with gaps, handlers or a given, non-kinematic state; matching,
+    membership and convergence only when the result has those data)."""
     out = Path(out_dir)
     written: dict[str, Path] = {}
-    geometry = plot_geometry(result, out / PLOT_FILES["geometry"])
+    # a given state that is not [positions, velocities] has no plan view: the time plot
+    geometry = plot_geometry(result, out / PLOT_FILES["geometry"]) if result.kinematic else None
     if geometry is not None:
         written["geometry"] = geometry
+    if _wants_time_plot(result):
+        path = plot_time(result, out / PLOT_FILES["time"])
+        if path is not None:
+            written["time"] = path
     written["rmse"] = plot_rmse(result, out / PLOT_FILES["rmse"])
     written["nees"] = plot_nees(result, out / PLOT_FILES["nees"])
     for name, plot in (("matching", plot_matching), ("membership", plot_membership),

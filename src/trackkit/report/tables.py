@@ -351,8 +351,54 @@ def summary_html_table(s: Summary) -> str:
 
 
 def matching_rich_tables(result: MonteCarloResult) -> list[Table]:
-    """:func:`matching_summaries` as ``rich`` tables (printed after :func:`rich_table`)."""
-    return [summary_rich_table(s) for s in matching_summaries(result)]
+    """:func:`matching_summaries` and the missing-measurement table (:func:`gap_summary`),
+    when present, as ``rich`` tables (printed after :func:`rich_table`)."""
+    gap = gap_summary(result)
+    return [summary_rich_table(s) for s in matching_summaries(result)
+            + ([] if gap is None else [gap])]
+
+
+def gap_summary(result: MonteCarloResult) -> Summary | None:
+    """"Error over the gap and after, per handler": each filter's handler, the fraction of
+    (run, step) pairs fed a pseudo-measurement, and per error group the RMSE over the steps
+    [gaps] hides and over the ``after_gap_s`` after them (all runs). None when the scenario
+    has neither [gaps] nor a filter with a handler."""
+    handlers = {n: f.gaps.get("handler") for n, f in result.filters.items()}
+    if result.gap_steps is None and not any(handlers.values()):
+        return None
+    groups = list(result.groups) if result.gap_steps is not None else []
+    headers = ["filter", "handler", "pseudo-\nmeasurements"]
+    for g in groups:
+        label, _ = display_unit(result.groups[g])
+        headers += [f"RMSE {g}\ngap [{label}]", f"RMSE {g}\nafter [{label}]"]
+    rows = []
+    for name in result.filters:
+        row = [name, handlers[name] or "B0", f"{100 * result.pseudo_fraction(name):.1f}%"]
+        for g in groups:
+            _, factor = display_unit(result.groups[g])
+            row += [_num(result.gap_rmse(name, g, w) * factor) for w in ("gap", "after")]
+        rows.append(row)
+    if result.gap_steps is None:
+        where = "no [gaps]: measurements missing at random only"
+    else:
+        t = np.asarray(result.times, dtype=float)
+        gap, after = result.gap_steps, result.after_steps
+        where = (f"gap: {len(gap)} steps (t = {_spans(t, gap)} s); after: the "
+                 f"{result.after_gap_s:g} s after each gap ({len(after)} steps"
+                 + (f", t = {_spans(t, after)} s)" if len(after) else ")"))
+    caption = (f"{where}. pseudo-measurements: the share of (run, step) pairs fed one. RMSE "
+               f"over all {result.runs} runs.")
+    return Summary(headers, rows, caption, title="Error over the gap and after, per handler")
+
+
+def _spans(t: np.ndarray, steps: np.ndarray) -> str:
+    """The times of runs of consecutive steps, as "a-b, c-d"."""
+    if len(steps) == 0:
+        return "none"
+    cuts = np.flatnonzero(np.diff(steps) > 1) + 1
+    parts = np.split(steps, cuts)
+    return ", ".join(f"{t[p[0]]:g}" if len(p) == 1 else f"{t[p[0]]:g}-{t[p[-1]]:g}"
+                     for p in parts)
 
 
 def matching_html_tables(result: MonteCarloResult) -> list[tuple[str, str]]:

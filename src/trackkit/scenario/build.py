@@ -23,6 +23,7 @@ from trackkit.scenario.schema import (
     SensorSpec,
 )
 from trackkit.sim.kinematics import LegPlan, propagate
+from trackkit.tracking.gaps import WithGaps
 
 Array = NDArray[np.float64]
 
@@ -91,7 +92,7 @@ def build_sensor(spec: SensorSpec, position: Array, velocity: Array, sigma: list
         return models.BearingFrequency(position[:2], velocity[:2], sigma[0], sigma[1],
                                        c=spec.c_mps)
     if m == "Sine":
-        return models.Sine(sigma=sigma[0])
+        return models.Sine(sigma=sigma[0], amplitude=spec.amplitude)
     return models.MultipathDelay(position, spec.h_surface_m, spec.h_bottom_m,
                                  sigma=sigma, c=spec.c_mps)
 
@@ -192,6 +193,8 @@ class Plan:
     p_detect: float
     filter_r0: list[Array | None]  # per filter: the R it believes, or None for the true R
     nominal: Array  # (T + 1, n) the noise-free truth
+    gap_mask: Array | None = None  # (T,) True where [gaps] hides the measurement
+    gap_handlers: list[str | None] | None = None  # per filter: its handler's label, or None
 
     def filter_sensor(self, i: int, k: int):
         """The sensor of step k (0-based) as filter i sees it (its own R0 if it has one)."""
@@ -281,8 +284,17 @@ def compile_scenario(s: Scenario) -> Plan:
     ]
     fmotions, filters, priors, r0 = [], [], [], []
     m = sensors[0].dim_z
+    handlers = []
     for f in s.filters:
-        filters.append(build_filter(f))
+        flt = build_filter(f)
+        if f.gaps is not None:
+            handler = f.gaps.build()
+            detector = None if f.gaps.detector is None else f.gaps.detector.build(m)
+            flt = WithGaps(flt, handler, detector)
+            handlers.append(handler.label)
+        else:
+            handlers.append(None)
+        filters.append(flt)
         fmotions.append(build_motion(f.motion or s.target.motion, dim, extras, dt))
         priors.append(_prior(f.prior or s.prior))
         if f.r0_diag_si is not None and len(f.r0_diag_si) != m:
@@ -296,7 +308,8 @@ def compile_scenario(s: Scenario) -> Plan:
         sensor_specs=[o.sensor for o in s.observers], sigmas=sigmas, sensors=sensors,
         filter_names=[f.name for f in s.filters], filters=filters, filter_motions=fmotions,
         priors=priors, prior_cov=_prior(s.prior)[1], p_detect=min(pds), filter_r0=r0,
-        nominal=nominal,
+        nominal=nominal, gap_mask=None if s.gaps is None else s.gaps.mask(T, dt),
+        gap_handlers=handlers,
     )
 
 

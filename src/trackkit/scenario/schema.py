@@ -302,6 +302,9 @@ class SensorSpec(_Strict):
     p_detect: Annotated[float, Field(gt=0, le=1)] = Field(
         1.0, description="probability that a scan has a measurement (1 = always); missing "
         "ones are nan")
+    amplitude: bool = Field(True, description="Sine only: y = a sin(theta) on the state "
+                            "[theta, omega, a] (true, S3), or y = sin(theta) on [theta, omega] "
+                            "(false, S6)")
 
     @model_validator(mode="after")
     def _noise_given(self) -> SensorSpec:
@@ -321,6 +324,8 @@ class SensorSpec(_Strict):
             if missing:
                 raise ValueError(f"sensor {self.model} needs {', '.join(missing)} (or snr_db "
                                  "or r_diag_si)")
+        if self.model != "Sine" and not self.amplitude:
+            raise ValueError(f"amplitude = false is for sensor Sine, not {self.model}")
         if self.model == "MultipathDelay" and (self.h_surface_m is None
                                                or self.h_bottom_m is None):
             raise ValueError("sensor MultipathDelay needs h_surface_m and h_bottom_m")
@@ -375,6 +380,181 @@ class PriorSpec(_Strict):
         return len(self.std) if self.std is not None else len(self.cov)
 
 
+class GapsSpec(_Strict):
+    """Missing measurements (seed 001, chapter 4): every listed interval is masked out of the
+    simulated measurements of every filter (nan, as if the radar saw nothing). Intervals by
+    time, by sample index or by count, several of each, combined (their union); measurement
+    k (0-based) is taken at ``t = (k + 1) step_s``. What each filter is fed instead is its own
+    ``gaps`` handler (default B0: nothing, the filter coasts)."""
+
+    time_s: list[tuple[NonNegFloat, NonNegFloat]] = Field(
+        default_factory=list, description="[start_s, stop_s] intervals, half-open: missing "
+        "where start_s <= t < stop_s (ends compared within 1e-9 relative), so [2, 5] at "
+        "step_s = 0.1 hides the 30 measurements at t = 2.0 .. 4.9 s; each must hold one")
+    samples: list[tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=0)]]] = Field(
+        default_factory=list, description="[first, last] measurement indices, 0-based, both "
+        "included (seed 001's samples 50 to 90, counted from 1, are [49, 89])",
+        json_schema_extra=_unit("index"))
+    counts: list[tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=1)]]] = Field(
+        default_factory=list, description="[start, count]: count consecutive measurements "
+        "from index start (0-based)", json_schema_extra=_unit("index, samples"))
+
+    @model_validator(mode="after")
+    def _some(self) -> GapsSpec:
+        if not (self.time_s or self.samples or self.counts):
+            raise ValueError("gaps has no interval; expected at least one of time_s, samples "
+                             "or counts")
+        for i, (a, b) in enumerate(self.time_s):
+            if not a < b:
+                raise_at(("time_s", i), [a, b], f"time_s[{i}] = [{a}, {b}]; expected start_s "
+                         "< stop_s")
+        for i, (a, b) in enumerate(self.samples):
+            if not a <= b:
+                raise_at(("samples", i), [a, b], f"samples[{i}] = [{a}, {b}]; expected first "
+                         "<= last")
+        return self
+
+    def mask(self, steps: int, step_s: float) -> Any:
+        """The (steps,) bool mask of missing measurements (True = missing)."""
+        import numpy as np
+
+        from trackkit.tracking.gaps import (
+            mask_by_count,
+            mask_by_samples,
+            mask_by_time,
+            measurement_times,
+        )
+
+        t = measurement_times(steps, step_s)
+        out = np.zeros(steps, bool)
+        for a, b in self.time_s:
+            out |= mask_by_time(t, a, b)
+        for a, b in self.samples:
+            out |= mask_by_samples(steps, a, b)
+        for a, c in self.counts:
+            out |= mask_by_count(steps, a, c)
+        return out
+
+
+class DetectorSpec(_Strict):
+    """The manoeuvre detector that switches a P' handler to its short window
+    (``trackkit.tracking.maneuver``); fed the innovations of real measurements only."""
+
+    type: Literal["NIS", "fading", "window"] = Field(
+        description="NIS: eps = nu^T S^-1 nu against the chi-square quantile; fading: rho = "
+        "alpha rho + eps (Imhof threshold); window: the sum of the last L residuals")
+    pfa: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)] = Field(
+        0.01, description="false-alarm probability per step of the on threshold",
+        json_schema_extra=_unit("-"))
+    alpha: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)] | None = Field(
+        None, description="fading memory's factor (fading only; default 0.8)",
+        json_schema_extra=_unit("-"))
+    L: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="window length (window only; default 5)",
+        json_schema_extra=_unit("steps"))
+
+    @model_validator(mode="after")
+    def _fields_of_type(self) -> DetectorSpec:
+        if self.alpha is not None and self.type != "fading":
+            raise_at(("alpha",), self.alpha, f"alpha is for detector type \"fading\", not "
+                     f"{self.type!r}")
+        if self.L is not None and self.type != "window":
+            raise_at(("L",), self.L, f"L is for detector type \"window\", not {self.type!r}")
+        return self
+
+    def build(self, dim_z: int) -> Any:
+        from trackkit.tracking import maneuver as mv
+
+        if self.type == "NIS":
+            return mv.NISDetector(pfa=self.pfa, dim_z=dim_z)
+        if self.type == "fading":
+            return mv.FadingMemoryDetector(alpha=0.8 if self.alpha is None else self.alpha,
+                                           pfa=self.pfa, dim_z=dim_z)
+        return mv.WindowDetector(L=5 if self.L is None else self.L, pfa=self.pfa, dim_z=dim_z)
+
+
+#: the handler options each handler takes (the rest are refused)
+_HANDLER_OPTIONS = {
+    "B0": set(), "B1": set(), "B2": {"n"},
+    "P": {"degree", "window", "function", "amplitude"},
+    "P'": {"degree", "window", "function", "amplitude", "short_window", "detector"},
+}
+
+
+class GapHandlerSpec(_Strict):
+    """What a filter is fed at a missing measurement (seed 001, chapter 4;
+    ``trackkit.tracking.gaps``): B0 nothing (coast on the prediction), B1 the last real
+    measurement, B2 the mean of the last n, P a least-squares fit through the last ``window``
+    real measurements extrapolated over the gap (a polynomial in time of ``degree``, or the
+    sine ``y = a sin(theta0 + omega tau)`` of a [theta, omega(, a)] state), and P' the same fit
+    over the last ``short_window`` only in the runs whose manoeuvre ``detector`` is on when
+    the gap begins. The steps fed a pseudo-measurement are counted in the results."""
+
+    handler: Literal["B0", "B1", "B2", "P", "P'"] = Field(
+        "B0", description="the handler (B0: the plain nan convention)")
+    n: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="B2: measurements averaged (default 5)", json_schema_extra=_unit(
+            "samples"))
+    function: Literal["polynomial", "sine"] | None = Field(
+        None, description="P, P': the fitted function (default polynomial; sine needs a "
+        "one-channel sensor and the state's theta, omega at indices 0, 1)")
+    degree: Annotated[int, Field(ge=0)] | None = Field(
+        None, description="P, P' polynomial: its degree (default 1: 1 for a CV target, 2 for "
+        "CA)", json_schema_extra=_unit("-"))
+    window: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="P, P': real measurements fitted (default 10 polynomial, 30 sine)",
+        json_schema_extra=_unit("samples"))
+    amplitude: Annotated[int, Field(ge=0)] | None = Field(
+        None, description="P, P' sine: the state index of the amplitude a, fitted too "
+        "(default none: a = 1)", json_schema_extra=_unit("index"))
+    short_window: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="P' (required): the window while the detector is on",
+        json_schema_extra=_unit("samples"))
+    detector: DetectorSpec | None = Field(None, description="P' (required): the manoeuvre "
+                                          "detector")
+
+    @model_validator(mode="after")
+    def _options_of_handler(self) -> GapHandlerSpec:
+        allowed = _HANDLER_OPTIONS[self.handler]
+        for name in ("n", "function", "degree", "window", "amplitude", "short_window",
+                     "detector"):
+            value = getattr(self, name)
+            if value is not None and name not in allowed:
+                takes = ", ".join(sorted(allowed)) or "no options"
+                raise_at((name,), value if name != "detector" else value.model_dump(),
+                         f"{name} is not an option of handler {self.handler!r}; it takes "
+                         f"{takes}")
+        if self.handler == "P'":
+            for name in ("short_window", "detector"):
+                if getattr(self, name) is None:
+                    raise_at((name,), None, f"handler \"P'\" needs {name} (the window and "
+                             "the manoeuvre detector that shortens it)")
+        if self.function == "sine" and self.degree is not None:
+            raise_at(("degree",), self.degree, "degree is for function \"polynomial\", not "
+                     "\"sine\"")
+        if self.function != "sine" and self.amplitude is not None:
+            raise_at(("amplitude",), self.amplitude, "amplitude is for function \"sine\"")
+        try:
+            self.build()
+        except ValueError as err:
+            named = [k for k in ("short_window", "window", "degree", "n", "amplitude")
+                     if k in str(err) and getattr(self, k) is not None]
+            where = named[0] if named else "handler"
+            raise_at((where,), getattr(self, where), str(err))
+        return self
+
+    def build(self) -> Any:
+        """The ``trackkit.tracking.gaps`` handler."""
+        from trackkit.tracking.gaps import make_handler
+
+        opts = {k: getattr(self, k) for k in ("n", "degree", "window", "amplitude",
+                                               "short_window")
+                if getattr(self, k) is not None}
+        if self.function is not None:
+            opts["function"] = self.function
+        return make_handler(self.handler, **opts)
+
+
 class TuneSpec(_Strict):
     """Off-line tuning of a fuzzy-adaptive filter's membership functions (seed 000, 3-2):
     ``runs`` independent optimiser runs on the DOM cost of ``realisations`` simulated runs of
@@ -420,6 +600,9 @@ class FilterSpec(_Strict):
         "true R", json_schema_extra=_unit("SI squared"))
     tune: TuneSpec | None = Field(None, description="tune the fuzzy system off-line "
                                   "(fuzzy-adaptive types without options.params)")
+    gaps: GapHandlerSpec | None = Field(None, description="what the filter is fed at a "
+                                        "missing measurement (see `filters[].gaps`); "
+                                        "default: nothing (B0, it coasts)")
 
     @field_validator("options")
     @classmethod
@@ -479,6 +662,15 @@ class ReportSpec(_Strict):
                            "S, C, DOM of run 0 (trackkit.eval.matching)")
     dom_alpha: PositiveFloat = Field(1000.0, description="the alpha of J4 = alpha sum_i "
                                      "RMS(DOM(i,i)) (seed 000: 1000 in chapter 3, 5000 after)")
+    angle_states: list[Annotated[int, Field(ge=0)]] = Field(
+        default_factory=list, description="state indices (0-based) whose errors are angles, "
+        "wrapped to (-pi, pi] in every metric (e.g. the phase theta of seed 001's sine, which "
+        "a measurement of sin(theta) cannot tell from theta + 2 pi)", json_schema_extra=_unit(
+            "index"))
+    after_gap_s: NonNegFloat = Field(1.0, description="with [gaps]: the window after each "
+                                     "gap over which the recovery's RMSE is reported (the "
+                                     "round(after_gap_s / step_s) measurements that follow "
+                                     "the gap's last missing one, themselves not missing)")
 
 
 class Scenario(_Strict):
@@ -501,6 +693,8 @@ class Scenario(_Strict):
     report: ReportSpec = Field(default_factory=ReportSpec, description="what the report shows")
     notes: list[str] = Field(default_factory=list, description="notes printed with the "
                              "results (sources, choices, readings of a paper)")
+    gaps: GapsSpec | None = Field(None, description="missing measurements for every filter "
+                                  "(see `gaps`)")
 
     _plain_name = field_validator("name")(classmethod(lambda cls, v: check_plain_name(v)))
 
@@ -545,6 +739,11 @@ class Scenario(_Strict):
                 raise_at(("filters", i, "options", "kappa"), kappa,
                          f"filter {f.name!r} (UKF): expected a number > -n = {-n} (n = {n}, "
                          "the state length), so that n + lambda = alpha^2 (n + kappa) > 0")
+        self._check_gaps()
+        for j, i in enumerate(self.report.angle_states):
+            if i >= n:
+                raise_at(("report", "angle_states", j), i, f"report.angle_states has {i}; "
+                         f"expected state indices 0 .. {n - 1}")
         platforms = [("target", self.target.legs)] + [
             (f"observers[{i}]", o.legs) for i, o in enumerate(self.observers)]
         for where, legs in platforms:
@@ -568,11 +767,14 @@ class Scenario(_Strict):
                     f"least 2 dim = {2 * self.dim} (positions, velocities, then the rest), "
                     f"so expected groups among {sorted(allowed)}")
         for i, o in enumerate(self.observers):
-            if o.sensor.model == "Sine" and not (self.linear_system and n == 3):
-                raise ValueError(f"observers[{i}].sensor is Sine, which measures a sin(theta) "
-                                 "of the state [theta, omega, a]; expected a target with motion "
-                                 "Linear or ContinuousLinear and a 3-component target.state, "
-                                 f"not {self.target.motion.model} with {n} components")
+            sine_n = 3 if o.sensor.amplitude else 2
+            if o.sensor.model == "Sine" and not (self.linear_system and n == sine_n):
+                what = ("a sin(theta) of the state [theta, omega, a]" if o.sensor.amplitude
+                        else "sin(theta) of the state [theta, omega] (amplitude = false)")
+                raise ValueError(f"observers[{i}].sensor is Sine, which measures {what}; "
+                                 "expected a target with motion Linear or ContinuousLinear and "
+                                 f"a {sine_n}-component target.state, not "
+                                 f"{self.target.motion.model} with {n} components")
             r = o.sensor.r_diag_si
             if (o.sensor.model == "Position" and r is not None and not self.linear_system
                     and len(r) != self.dim):
@@ -580,6 +782,40 @@ class Scenario(_Strict):
                                  f"Position sensor measures the {self.dim} position "
                                  "components (dim)")
         return self
+
+    def _check_gaps(self) -> None:
+        """Every gap interval lies within the scenario's measurements, and a sine fit has
+        a one-channel sensor."""
+        T = self.time.steps
+        if self.gaps is not None:
+            for i, (a, b) in enumerate(self.gaps.samples):
+                if b > T - 1:
+                    raise_at(("gaps", "samples", i), [a, b], f"gaps.samples[{i}] = [{a}, {b}]; "
+                             f"expected 0 <= first <= last <= {T - 1} (the last measurement "
+                             "index)")
+            for i, (a, c) in enumerate(self.gaps.counts):
+                if a + c - 1 > T - 1:
+                    raise_at(("gaps", "counts", i), [a, c], f"gaps.counts[{i}] = [{a}, {c}] "
+                             f"reaches index {a + c - 1}; expected start + count - 1 <= {T - 1} "
+                             "(the last measurement index)")
+            for i, (a, b) in enumerate(self.gaps.time_s):
+                try:
+                    self.gaps.model_copy(update={"time_s": [(a, b)], "samples": [],
+                                                 "counts": []}).mask(T, self.time.step_s)
+                except ValueError:
+                    raise_at(("gaps", "time_s", i), [a, b], f"gaps.time_s[{i}] = [{a}, {b}] "
+                             f"holds no measurement time (t = {self.time.step_s:g} .. "
+                             f"{T * self.time.step_s:g} s, every {self.time.step_s:g} s); "
+                             "expected start_s <= t < stop_s for at least one")
+        from trackkit.scenario.build import channels
+
+        dim_z = sum(channels(o.sensor, self.dim) for o in self.observers)
+        for i, f in enumerate(self.filters):
+            g = f.gaps
+            if g is not None and g.function == "sine" and dim_z != 1:
+                raise_at(("filters", i, "gaps", "function"), "sine",
+                         f"filter {f.name!r}: the sine fit needs a sensor of one channel; "
+                         f"the scenario measures {dim_z}")
 
     @property
     def linear_system(self) -> bool:

@@ -54,6 +54,8 @@ __all__ = [
     "make_handler",
     "GapRun",
     "run_with_gaps",
+    "GapBelief",
+    "WithGaps",
 ]
 
 Array = NDArray[np.float64]
@@ -768,3 +770,105 @@ def run_with_gaps(f, prior: Any, z: ArrayLike, mask: ArrayLike, handler: GapHand
         is_pseudo[k] = miss & ~np.isnan(zp).any(-1)
         missing[k] = miss
     return GapRun(times, Gaussian._make((means, covs)), pseudo, is_pseudo, missing, maneuver, b)
+
+
+# --------------------------------------------------------------------------------------------
+# The same, one step at a time: a filter wrapper
+# --------------------------------------------------------------------------------------------
+
+
+class GapBelief(NamedTuple):
+    """A :class:`WithGaps` filter's belief, leading axes the batch axes.
+
+    ``inner``: the wrapped filter's belief; ``memory``: the handler's ``GapMemory`` (None
+    until the first update, which gives the sensor); ``detector``: the detector's state (None
+    without one); ``t (...)``: the time of the last prediction, the sum of the steps;
+    ``pseudo (...)``: the last update was fed a pseudo-measurement; ``z_pseudo (..., m)``:
+    that pseudo-measurement (nan where none; None before the first update)."""
+
+    inner: Any
+    memory: GapMemory | None
+    detector: Any
+    t: Array
+    pseudo: NDArray[np.bool_]
+    z_pseudo: Array | None
+
+
+class WithGaps:
+    """Filter ``f`` with a missing-measurement handler and optionally a manoeuvre detector,
+    as a filter: ``init``, ``predict``, ``update``, ``estimate`` (what a per-step loop like the
+    scenario engine's calls). Missing rows are those of z that are nan.
+
+    Each step does what :func:`run_with_gaps` does: ``predict`` advances the inner filter
+    and the belief's time ``t <- t + dt``; ``update`` fills the missing rows with
+    ``z~ = handler.pseudo(...)``, updates the inner filter with the real or pseudo
+    measurement, remembers the real ones and steps the detector with the innovations of the
+    real ones. The returned innovation's residual is nan where no real measurement came, so
+    the NIS counts real measurements only. With the step sequence given to
+    :func:`run_with_gaps` as an array (its times the cumulative sum of the steps, the sum
+    this wrapper keeps), both give the same numbers bit for bit.
+    """
+
+    def __init__(self, f: Any, handler: GapHandler | str, detector: Any = None,
+                 t0: float = 0.0) -> None:
+        if isinstance(handler, str):
+            handler = make_handler(handler)
+        if not isinstance(handler, GapHandler):
+            raise ValueError(f"handler = {handler!r}; expected a GapHandler or one of "
+                             f"{list(HANDLER_NAMES)}")
+        if handler.short_window is not None and detector is None:
+            raise ValueError(f"WithGaps: handler {handler!r} is P' (short_window) and needs a "
+                             "manoeuvre detector; got detector=None")
+        if not math.isfinite(t0):
+            raise ValueError(f"WithGaps: t0 = {t0!r}; expected a finite start time (s)")
+        self.f, self.handler, self.detector, self.t0 = f, handler, detector, float(t0)
+
+    def _estimate(self, inner: Any) -> Gaussian:
+        return self.f.estimate(inner) if hasattr(self.f, "estimate") else inner
+
+    def init(self, prior: Any) -> GapBelief:
+        """The belief from a Gaussian prior (through the inner filter's ``init``) or from the
+        inner filter's own belief."""
+        inner = self.f.init(prior) if isinstance(prior, Gaussian) and hasattr(
+            self.f, "init") else prior
+        batch = np.shape(self._estimate(inner).mean)[:-1]
+        dstate = self.detector.init(batch) if self.detector is not None else None
+        return GapBelief(inner, None, dstate, np.full(batch, self.t0), np.zeros(batch, bool),
+                         None)
+
+    def predict(self, belief: GapBelief, motion, dt: float) -> GapBelief:
+        inner = self.f.predict(belief.inner, motion, dt)
+        return belief._replace(inner=inner, t=belief.t + dt)
+
+    def update(self, belief: GapBelief, z: ArrayLike, sensor) -> tuple[GapBelief, Innovation]:
+        m = sensor.dim_z
+        zk = np.asarray(z, dtype=float)
+        batch = belief.t.shape
+        zk = np.broadcast_to(zk, batch + (m,))
+        memory = belief.memory
+        if memory is None:
+            memory = self.handler.init(batch, sensor)
+        miss = np.isnan(zk).any(-1)
+        on = belief.detector.on if belief.detector is not None else None
+        # every row shares the step's time; run_with_gaps passes it as a float
+        t = float(belief.t.flat[0]) if belief.t.size else self.t0
+        est = self._estimate(belief.inner) if self.handler.needs_estimate else None
+        zp, memory = self.handler.pseudo(memory, t, miss, sensor, est, on)
+        zp = np.where(miss[..., None], zp, np.nan)
+        fed = np.where(miss[..., None], zp, zk)
+        inner, innov = self.f.update(belief.inner, fed, sensor)
+        real = np.where(miss[..., None], np.nan, zk)
+        memory = self.handler.observe(memory, t, real)
+        r = np.where(miss[..., None], np.nan, innov.residual)
+        dstate = belief.detector
+        if dstate is not None:
+            dstate = self.detector.step(dstate, Innovation(r, innov.cov))
+        pseudo = miss & ~np.isnan(zp).any(-1)
+        out = GapBelief(inner, memory, dstate, belief.t, pseudo, zp)
+        return out, innov._replace(residual=r)
+
+    def estimate(self, belief: GapBelief) -> Gaussian:
+        return self._estimate(belief.inner)
+
+    def __repr__(self) -> str:
+        return f"WithGaps({self.f!r}, {self.handler!r}, detector={self.detector!r})"
