@@ -342,7 +342,32 @@ class MeanOfLast(GapHandler):
         return np.where(ok[..., None], _wrap_angles(zbar, sensor), np.nan), memory
 
 
-class PolynomialFit(GapHandler):
+class _Fit(GapHandler):
+    """What P and P' share: a fit through the last ``window`` real measurements, or the last
+    ``short_window`` while the manoeuvre detector is on (P')."""
+
+    window: int
+
+    def _windows(self, window: int, short_window: int | None, least: int) -> None:
+        name = type(self).__name__
+        self.window = _count(window, f"{name} window", least)
+        if short_window is not None:
+            short_window = _count(short_window, f"{name} short_window", least)
+            if short_window >= self.window:
+                raise ValueError(f"{name} short_window = {short_window!r}; expected fewer "
+                                 f"than window = {self.window}")
+        self.short_window = short_window
+
+    @property
+    def label(self) -> str:  # type: ignore[override]
+        return "P" if self.short_window is None else "P'"
+
+    @property
+    def memory(self) -> int:  # type: ignore[override]
+        return self.window
+
+
+class PolynomialFit(_Fit):
     """P (P' with ``short_window``): a least-squares polynomial through the last ``window``
     real measurements, extrapolated to the missing times.
 
@@ -359,21 +384,7 @@ class PolynomialFit(GapHandler):
     def __init__(self, degree: int = 1, window: int = 10,
                  short_window: int | None = None) -> None:
         self.degree = _count(degree, "PolynomialFit degree", 0)
-        self.window = _count(window, "PolynomialFit window", self.degree + 1)
-        if short_window is not None:
-            short_window = _count(short_window, "PolynomialFit short_window", self.degree + 1)
-            if short_window >= self.window:
-                raise ValueError(f"PolynomialFit short_window = {short_window!r}; expected "
-                                 f"fewer than window = {self.window}")
-        self.short_window = short_window
-
-    @property
-    def label(self) -> str:  # type: ignore[override]
-        return "P" if self.short_window is None else "P'"
-
-    @property
-    def memory(self) -> int:  # type: ignore[override]
-        return self.window
+        self._windows(window, short_window, self.degree + 1)
 
     def _coefficients(self) -> int:
         return self.degree + 1
@@ -397,7 +408,7 @@ class PolynomialFit(GapHandler):
         return np.where(ok[..., None], _wrap_angles(y, sensor), np.nan), memory
 
 
-class SineFit(GapHandler):
+class SineFit(_Fit):
     """P for seed 001's sine (S3, S6): ``y(t) = a sin(theta0 + omega (t - t_ref))`` fitted
     to the last ``window`` real measurements, extrapolated to the missing times.
 
@@ -426,22 +437,8 @@ class SineFit(GapHandler):
             raise ValueError(f"SineFit phase, rate, amplitude = {idx!r}; expected distinct "
                              "state indices")
         p = len(idx)
-        self.window = _count(window, "SineFit window", p)
         self.iterations = _count(iterations, "SineFit iterations", 1)
-        if short_window is not None:
-            short_window = _count(short_window, "SineFit short_window", p)
-            if short_window >= self.window:
-                raise ValueError(f"SineFit short_window = {short_window!r}; expected fewer "
-                                 f"than window = {self.window}")
-        self.short_window = short_window
-
-    @property
-    def label(self) -> str:  # type: ignore[override]
-        return "P" if self.short_window is None else "P'"
-
-    @property
-    def memory(self) -> int:  # type: ignore[override]
-        return self.window
+        self._windows(window, short_window, p)
 
     def _coefficients(self) -> int:
         return 3
