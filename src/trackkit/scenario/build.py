@@ -10,7 +10,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from trackkit import filters as tkf
 from trackkit import models
+from trackkit.belief import Gaussian
 from trackkit.scenario.options import make_filter
 from trackkit.scenario.schema import (
     KNOT,
@@ -27,8 +29,8 @@ from trackkit.tracking.gaps import WithGaps
 
 Array = NDArray[np.float64]
 
-__all__ = ["Plan", "compile_scenario", "build_motion", "build_filter", "build_sensor",
-           "numeric_problems", "COV_LIMIT", "PRECISION_LIMIT"]
+__all__ = ["Plan", "compile_scenario", "build_motion", "build_filter", "build_imm",
+           "WiderState", "build_sensor", "numeric_problems", "COV_LIMIT", "PRECISION_LIMIT"]
 
 
 def build_motion(spec: MotionSpec, dim: int, extras: int = 0, dt: float = 1.0):
@@ -63,15 +65,76 @@ def build_motion(spec: MotionSpec, dim: int, extras: int = 0, dt: float = 1.0):
     return models.Augmented(base, extras, spec.q_extra) if extras else base
 
 
-def build_filter(spec: FilterSpec):
+class WiderState:
+    """A filter whose state is the scenario's n components followed by extra ones the truth
+    does not carry (an IMM's union state [x, y, vx, vy, omega] over a CV truth).
+
+    ``init`` appends the extras' prior to the scenario's prior, independent of it:
+    ``x0 = [x0_n, m_e]``, ``P0 = blockdiag(P0_n, P_e)``; ``estimate`` is the marginal of the
+    first n components (mean and covariance), which is what the metrics score. ``predict``
+    ignores the scenario's motion: the filter has its own models.
+    """
+
+    def __init__(self, f: Any, n: int, extra_mean: Array, extra_cov: Array) -> None:
+        self.f, self.n = f, n
+        self.extra_mean = np.asarray(extra_mean, dtype=float)
+        self.extra_cov = np.asarray(extra_cov, dtype=float)
+
+    def init(self, prior: Gaussian):
+        x, P = np.asarray(prior.mean, dtype=float), np.asarray(prior.cov, dtype=float)
+        if x.shape[-1] != self.n:
+            raise ValueError(f"WiderState.init: prior.mean has {x.shape[-1]} components; "
+                             f"expected {self.n} (the scenario's state)")
+        batch, e = x.shape[:-1], self.extra_mean.size
+        X = np.concatenate([x, np.broadcast_to(self.extra_mean, batch + (e,))], -1)
+        PX = np.zeros(batch + (self.n + e, self.n + e))
+        PX[..., : self.n, : self.n] = P
+        PX[..., self.n:, self.n:] = self.extra_cov
+        return self.f.init(Gaussian(X, PX))
+
+    def predict(self, belief: Any, motion: Any, dt: float):
+        return self.f.predict(belief, None, dt)
+
+    def update(self, belief: Any, z: Any, sensor: Any):
+        return self.f.update(belief, z, sensor)
+
+    def estimate(self, belief: Any) -> Gaussian:
+        g = self.f.estimate(belief)
+        return Gaussian(g.mean[..., : self.n], g.cov[..., : self.n, : self.n])
+
+
+def build_imm(spec: FilterSpec, dim: int, dt: float) -> tkf.IMM:
+    """The IMM of a filter's ``imm`` table: each model's motion (over ``dim`` positions, for
+    the step ``dt``) with its inner filter, the transition and mu0 (default equal); each
+    model's state is the first components of the union (imm.py's default state maps)."""
+    imm = spec.imm
+    motions = [build_motion(m.motion, dim, 0, dt) for m in imm.models]
+    inner = [make_filter(m.filter, m.options) for m in imm.models]
+    r = len(motions)
+    mu0 = np.full(r, 1.0 / r) if imm.mu0 is None else np.asarray(imm.mu0, dtype=float)
+    return tkf.IMM(motions, inner, np.asarray(imm.transition, dtype=float), mu0=mu0,
+                   fill=make_filter(spec.type, spec.options).fill)
+
+
+def build_filter(spec: FilterSpec, dim: int = 2, dt: float = 1.0, n: int | None = None):
     """The filter named by ``spec.type`` with ``spec.options``, as the table of
     ``trackkit.scenario.options`` says (the options were validated with the scenario).
 
     A fuzzy-adaptive type (OFKF, OFEKF, OFUKF) wraps a KF, EKF or UKF; ``q_inputs`` is given
     flat, ``[i1, l1, i2, l2, ...]``. Without ``params`` (a filter still to be tuned) it gets
-    the untuned default system.
+    the untuned default system. An IMM (``spec.imm``) is built for ``dim`` positions and
+    the step ``dt``; when its union state is longer than the scenario's ``n`` components it
+    is wrapped in :class:`WiderState` with the prior of the extras (``imm.extra_std``).
     """
-    return make_filter(spec.type, spec.options)
+    if spec.imm is None:
+        return make_filter(spec.type, spec.options)
+    f = build_imm(spec, dim, dt)
+    extra = len(spec.imm.extra_std)
+    if n is None:
+        return f
+    mean = np.zeros(extra) if spec.imm.extra_mean is None else spec.imm.extra_mean
+    return WiderState(f, n, np.asarray(mean, dtype=float),
+                      np.diag(np.square(np.asarray(spec.imm.extra_std, dtype=float))))
 
 
 def build_sensor(spec: SensorSpec, position: Array, velocity: Array, sigma: list[float]):
@@ -286,7 +349,7 @@ def compile_scenario(s: Scenario) -> Plan:
     m = sensors[0].dim_z
     handlers = []
     for f in s.filters:
-        flt = build_filter(f)
+        flt = build_filter(f, dim, dt, s.state_dim)
         if f.gaps is not None:
             handler = f.gaps.build()
             detector = None if f.gaps.detector is None else f.gaps.detector.build(m)

@@ -18,7 +18,8 @@ from trackkit import filters as tkf
 from trackkit.filters.adaptive import Q_FORMS
 from trackkit.filters.fuzzy import DEFAULT_PARAMS, N_PARAMS
 
-__all__ = ["Option", "FilterType", "FILTER_TYPES", "FUZZY_TYPES", "check_options",
+__all__ = ["Option", "FilterType", "FILTER_TYPES", "FUZZY_TYPES", "CONSTANT_GAIN_TYPES",
+           "IMM_INNER_TYPES", "IMMSettings", "alpha_beta", "alpha_beta_gamma", "check_options",
            "make_filter"]
 
 Kind = Literal["int", "float", "bool", "choice", "floats", "pairs"]
@@ -170,6 +171,88 @@ _FUZZY_OPTIONS = (
 
 _BOUNDS = "[low, high], 0 < low <= high"
 
+AB_GAINS = ("kohn", "benedict-bordner", "fading-memory", "explicit")
+ABG_GAINS = ("benedict-bordner", "fading-memory", "explicit")
+
+
+def _unused(gains: str, given: dict[str, float | None], needs: tuple[str, ...]) -> None:
+    """Refuse a gain option the chosen designer does not use, and a missing one it needs."""
+    for name, value in given.items():
+        if value is None and name in needs:
+            raise ValueError(f"gains = {gains!r} needs {name}; expected "
+                             f"{', '.join(needs)} given")
+        if value is not None and name not in needs:
+            wanted = ", ".join(needs) if needs else "no gain option"
+            raise ValueError(f"{name} = {value!r} is not used with gains = {gains!r}; "
+                             f"expected {wanted}")
+
+
+def alpha_beta(gains: str = "kohn", alpha: float | None = None, beta: float | None = None,
+               xi: float | None = None, startup: str = "thesis") -> tkf.AlphaBeta:
+    """The alpha-beta tracker of a scenario: gains from a designer of
+    ``trackkit.filters.alphabeta`` (Kohn's (0.5, 0.167); Benedict-Bordner's
+    ``beta = alpha^2 / (2 - alpha)``; fading memory ``(1 - xi^2, (1 - xi)^2)``) or given."""
+    from trackkit.filters import alphabeta as ab
+
+    if gains not in AB_GAINS:
+        raise ValueError(f"gains = {gains!r}; expected one of {AB_GAINS}")
+    needs = {"kohn": (), "benedict-bordner": ("alpha",), "fading-memory": ("xi",),
+             "explicit": ("alpha", "beta")}[gains]
+    _unused(gains, {"alpha": alpha, "beta": beta, "xi": xi}, needs)
+    if gains == "kohn":
+        a, b = ab.kohn()
+    elif gains == "benedict-bordner":
+        a, b = alpha, ab.benedict_bordner(alpha)
+    elif gains == "fading-memory":
+        a, b = ab.fading_memory(xi)
+    else:
+        a, b = alpha, beta
+    return tkf.AlphaBeta(a, b, startup=startup)
+
+
+def alpha_beta_gamma(gains: str = "fading-memory", alpha: float | None = None,
+                     beta: float | None = None, gamma: float | None = None,
+                     xi: float | None = None, startup: str = "thesis") -> tkf.AlphaBetaGamma:
+    """The alpha-beta-gamma tracker of a scenario (acceleration gain 2 gamma / T^2): gains
+    Benedict-Bordner (gamma from alpha and beta, eq. 2-50), fading memory (xi) or given."""
+    from trackkit.filters import alphabeta as ab
+
+    if gains not in ABG_GAINS:
+        raise ValueError(f"gains = {gains!r}; expected one of {ABG_GAINS}")
+    needs = {"benedict-bordner": ("alpha", "beta"), "fading-memory": ("xi",),
+             "explicit": ("alpha", "beta", "gamma")}[gains]
+    _unused(gains, {"alpha": alpha, "beta": beta, "gamma": gamma, "xi": xi}, needs)
+    if gains == "benedict-bordner":
+        a, b, g = alpha, beta, ab.benedict_bordner_gamma(alpha, beta)
+    elif gains == "fading-memory":
+        a, b, g = ab.fading_memory_abg(xi)
+    else:
+        a, b, g = alpha, beta, gamma
+    return tkf.AlphaBetaGamma(a, b, g, startup=startup)
+
+
+@dataclass(frozen=True)
+class IMMSettings:
+    """The options of a scenario's IMM; its models, transition and mu0 are the filter's
+    ``imm`` table (``trackkit.scenario.build`` assembles the :class:`~trackkit.filters.IMM`)."""
+
+    fill: str = "others"
+
+    def __post_init__(self) -> None:
+        if self.fill not in ("others", "zero"):
+            raise ValueError(f"fill = {self.fill!r}; expected 'others' or 'zero'")
+
+
+_STARTUP = Option("startup", "choice", "thesis", "thesis: the thesis's start-up rules; "
+                  "prior: the constant gains from the first scan; simpson: Simpson's "
+                  "growing-memory gains until they fall below the constant ones",
+                  choices=("thesis", "prior", "simpson"))
+_GAIN_ALPHA = Option("alpha", "float", None, "position gain (benedict-bordner, explicit)",
+                     low=0, high=2, open_low=True, open_high=True, default_text="none")
+_GAIN_XI = Option("xi", "float", None, "the fading-memory discount: every root of the "
+                  "characteristic polynomial at xi (fading-memory)", low=0, high=1,
+                  open_high=True, default_text="none")
+
 #: Every filter type of a scenario, in the order the reference lists them.
 FILTER_TYPES: dict[str, FilterType] = {
     "KF": FilterType(tkf.KF, "linear Kalman filter (linear motion and sensor models)"),
@@ -220,6 +303,38 @@ FILTER_TYPES: dict[str, FilterType] = {
                "1 / (1 - b) steps)", low=0, high=1, open_low=True, open_high=True),
         Option("adapt_q", "bool", False, "estimate Q as well as R"),
     )),
+    "AlphaBeta": FilterType(alpha_beta, "alpha-beta tracker, constant gains on [x, y, vx, "
+                            "vy] (seed 001; a Position sensor, a ConstantVelocity motion)", (
+        Option("gains", "choice", "kohn", "the gain designer: kohn (0.5, 0.167), "
+               "benedict-bordner (alpha), fading-memory (xi) or explicit (alpha, beta)",
+               choices=AB_GAINS),
+        _GAIN_ALPHA,
+        Option("beta", "float", None, "velocity gain (explicit; with alpha inside the "
+               "stability region 0 < beta < 4 - 2 alpha)", low=0, high=4, open_low=True,
+               open_high=True, default_text="none"),
+        _GAIN_XI,
+        _STARTUP,
+    )),
+    "AlphaBetaGamma": FilterType(alpha_beta_gamma, "alpha-beta-gamma tracker on [x, y, vx, "
+                                 "vy, ax, ay], acceleration gain 2 gamma / T^2 (seed 001; a "
+                                 "Position sensor, a 3 dim state)", (
+        Option("gains", "choice", "fading-memory", "the gain designer: benedict-bordner "
+               "(alpha, beta; gamma by eq. 2-50), fading-memory (xi) or explicit (alpha, beta, "
+               "gamma)", choices=ABG_GAINS),
+        _GAIN_ALPHA,
+        Option("beta", "float", None, "velocity gain (benedict-bordner, explicit)", low=0,
+               high=4, open_low=True, open_high=True, default_text="none"),
+        Option("gamma", "float", None, "acceleration gain (explicit)", low=0, open_low=True,
+               default_text="none"),
+        _GAIN_XI,
+        _STARTUP,
+    )),
+    "IMM": FilterType(IMMSettings, "interacting multiple model filter: its models, inner "
+                      "filters, transition and mu0 in the filter's imm table", (
+        Option("fill", "choice", "others", "what a model says about a union component it "
+               "lacks (a CV model and omega): others (the carriers' estimate) or zero",
+               choices=("others", "zero")),
+    )),
     "OFKF": FilterType(tkf.FuzzyAdaptive, "KF with fuzzy-adaptive R or Q (seed 000)",
                        _FUZZY_OPTIONS, base="KF"),
     "OFEKF": FilterType(tkf.FuzzyAdaptive, "EKF with fuzzy-adaptive R or Q (seed 000)",
@@ -227,6 +342,12 @@ FILTER_TYPES: dict[str, FilterType] = {
     "OFUKF": FilterType(tkf.FuzzyAdaptive, "UKF with fuzzy-adaptive R or Q (seed 000)",
                         _FUZZY_OPTIONS, base="UKF"),
 }
+
+#: constant-gain types -> the number of state blocks (2: [pos, vel], 3: with acceleration)
+CONSTANT_GAIN_TYPES = {"AlphaBeta": 2, "AlphaBetaGamma": 3}
+
+#: the filters an IMM model may run
+IMM_INNER_TYPES = ("KF", "EKF", "UKF", "CKF")
 
 #: fuzzy-adaptive type -> the type of the filter it wraps
 FUZZY_TYPES = {name: t.base for name, t in FILTER_TYPES.items() if t.base is not None}

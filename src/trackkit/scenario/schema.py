@@ -24,7 +24,14 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from trackkit.scenario.options import FILTER_TYPES, FUZZY_TYPES, check_options, make_filter
+from trackkit.scenario.options import (
+    CONSTANT_GAIN_TYPES,
+    FILTER_TYPES,
+    FUZZY_TYPES,
+    IMM_INNER_TYPES,
+    check_options,
+    make_filter,
+)
 
 KNOT = 1852.0 / 3600.0  # m/s
 KMH = 1000.0 / 3600.0  # m/s
@@ -581,6 +588,98 @@ class TuneSpec(_Strict):
 FilterTypeName = Literal[tuple(FILTER_TYPES)]  # type: ignore[valid-type]
 
 
+def motion_dim(spec: MotionSpec, dim: int) -> int:
+    """The state length of a motion model over ``dim`` positions (no extras)."""
+    if spec.model == "Linear":
+        return len(spec.F)
+    if spec.model == "ContinuousLinear":
+        return len(spec.A)
+    return {"ConstantVelocity": 2 * dim, "ConstantAcceleration": 3 * dim, "Singer": 3 * dim,
+            "CoordinatedTurn": 5}[spec.model]
+
+
+class IMMModelSpec(_Strict):
+    """One model of an IMM: its motion and the filter that runs it."""
+
+    motion: MotionSpec = Field(description="the model's motion (its state is the first "
+                               "components of the IMM's union state: CV [x, y, vx, vy] "
+                               "inside CT [x, y, vx, vy, omega])")
+    filter: Literal[IMM_INNER_TYPES] = Field(  # type: ignore[valid-type]
+        "EKF", description="the filter of this model")
+    options: dict[str, Any] = Field(default_factory=dict, description="the inner filter's "
+                                    "options (see Filter types below)")
+
+    @field_validator("options")
+    @classmethod
+    def _valid_options(cls, options: dict[str, Any], info: ValidationInfo) -> dict[str, Any]:
+        type_ = info.data.get("filter")
+        if type_ is None:
+            return options
+        out, problems = check_options(type_, options)
+        if problems:
+            line_errors = [InitErrorDetails(
+                type=PydanticCustomError("scenario", "{message}",
+                                         {"message": f"IMM model ({type_}): {message}"}),
+                loc=(name,), input=value) for name, value, message in problems]
+            raise ValidationError.from_exception_data("IMMModelSpec", line_errors)
+        return out
+
+
+class IMMSpec(_Strict):
+    """The models of an IMM filter, the mode transition matrix and the initial mode
+    probabilities; ``extra_std`` (and ``extra_mean``) is the prior of the union state's
+    components beyond the scenario's state (a CT model's turn rate omega), which the truth
+    does not carry and the metrics do not score."""
+
+    models: list[IMMModelSpec] = Field(min_length=1, description="the models, each a motion "
+                                       "and its filter")
+    transition: list[list[Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]]] = Field(
+        description="p_ij = P(model j at k | model i at k-1): r x r, rows summing to 1",
+        json_schema_extra=_unit("probability"))
+    mu0: list[Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]] | None = Field(
+        None, description="initial mode probabilities (r values summing to 1); default: "
+        "equal", json_schema_extra=_unit("probability"))
+    extra_std: list[PositiveFloat] = Field(
+        default_factory=list, description="prior standard deviations of the union state's "
+        "components after the scenario's state, in order (omega of a CT model: rad/s)",
+        json_schema_extra=_unit("SI"))
+    extra_mean: list[Finite] | None = Field(
+        None, description="prior means of those components (default: zeros)",
+        json_schema_extra=_unit("SI"))
+
+    @model_validator(mode="after")
+    def _probabilities(self) -> IMMSpec:
+        r = len(self.models)
+        P = self.transition
+        if len(P) != r or any(len(row) != r for row in P):
+            raise ValueError(f"transition has rows of lengths {[len(row) for row in P]}; "
+                             f"expected {r} x {r} (one row and column per model)")
+        for i, row in enumerate(P):
+            if abs(math.fsum(row) - 1.0) > 1e-9:
+                raise ValueError(f"transition row {i} = {row} sums to {math.fsum(row)!r}; "
+                                 "expected rows summing to 1")
+        if self.mu0 is not None:
+            if len(self.mu0) != r:
+                raise ValueError(f"mu0 has {len(self.mu0)} values; expected {r} (one per "
+                                 "model)")
+            if abs(math.fsum(self.mu0) - 1.0) > 1e-9:
+                raise ValueError(f"mu0 = {self.mu0} sums to {math.fsum(self.mu0)!r}; expected "
+                                 "probabilities summing to 1")
+        if self.extra_mean is not None and len(self.extra_mean) != len(self.extra_std):
+            raise ValueError(f"extra_mean has {len(self.extra_mean)} values; expected "
+                             f"{len(self.extra_std)} (one per extra_std)")
+        kinds = {m.motion.model for m in self.models}
+        if "CoordinatedTurn" in kinds and kinds & {"ConstantAcceleration", "Singer"}:
+            raise ValueError(f"models {sorted(kinds)}: a CT state [x, y, vx, vy, omega] and "
+                             "an acceleration state [x, y, vx, vy, ax, ay] do not nest (each "
+                             "model's state is the first components of the union); expected "
+                             "CV with CT, or CV with CA or Singer")
+        return self
+
+    def union_dim(self, dim: int) -> int:
+        return max(motion_dim(m.motion, dim) for m in self.models)
+
+
 class FilterSpec(_Strict):
     """A filter to compare: its type, its options (see the table of each type's options),
     and optionally its own motion model, prior, believed R and fuzzy-system tuning."""
@@ -603,6 +702,8 @@ class FilterSpec(_Strict):
     gaps: GapHandlerSpec | None = Field(None, description="what the filter is fed at a "
                                         "missing measurement (see `filters[].gaps`); "
                                         "default: nothing (B0, it coasts)")
+    imm: IMMSpec | None = Field(None, description="type IMM: its models, transition and mu0 "
+                                "(see `filters[].imm`)")
 
     @field_validator("options")
     @classmethod
@@ -629,6 +730,14 @@ class FilterSpec(_Strict):
         if self.tune is not None and not fuzzy:
             raise ValueError(f"filter {self.name!r} ({self.type}): tune is only for the "
                              f"fuzzy-adaptive filters {sorted(FUZZY_TYPES)}")
+        if (self.type == "IMM") != (self.imm is not None):
+            raise ValueError(f"filter {self.name!r} ({self.type}): " + (
+                "an IMM needs its imm table (models, transition)" if self.imm is None
+                else "the imm table is only for type IMM"))
+        if self.type == "IMM" and self.motion is not None:
+            raise ValueError(f"filter {self.name!r} (IMM): motion = {self.motion.model}; an "
+                             "IMM's motions are its imm.models[].motion, so expected no "
+                             "filters[].motion")
         try:  # what one option alone cannot say: ceiling > floor, the fuzzy params' order
             make_filter(self.type, self.options)
         except ValueError as err:
@@ -725,6 +834,7 @@ class Scenario(_Strict):
             raise ValueError(f"a target with motion model {self.target.motion.model} needs "
                              "target.state and takes no legs")
         for i, f in enumerate(self.filters):
+            self._check_special_filter(i, f)
             if f.motion is not None and f.motion.model == "Linear" and (
                     len(f.motion.F) != n):
                 raise ValueError(f"filters[{i}].motion.F is {len(f.motion.F)} x "
@@ -782,6 +892,49 @@ class Scenario(_Strict):
                                  f"Position sensor measures the {self.dim} position "
                                  "components (dim)")
         return self
+
+    def _check_special_filter(self, i: int, f: FilterSpec) -> None:
+        """A constant-gain tracker measures positions (one Position sensor) and carries 2 or
+        3 blocks of dim; an IMM's union state holds the scenario's state and extra_std
+        gives the rest."""
+        n, dim = self.state_dim, self.dim
+        who = f"filters[{i}] {f.name!r} ({f.type})"
+        blocks = CONSTANT_GAIN_TYPES.get(f.type)
+        if blocks is not None:
+            sensors = [o.sensor.model for o in self.observers]
+            r = self.observers[0].sensor.r_diag_si
+            if sensors != ["Position"] or (r is not None and len(r) != dim):
+                raise ValueError(f"{who}: the sensors are {sensors}; a constant-gain tracker "
+                                 f"measures the {dim} position components, so expected one "
+                                 "observer with a Position sensor of dim channels")
+            if n != blocks * dim:
+                what = "[x, y, vx, vy]" if blocks == 2 else "[x, y, vx, vy, ax, ay]"
+                raise ValueError(f"{who}: the scenario's state has {n} components; expected "
+                                 f"{blocks * dim} = {blocks} x dim ({what} for dim = 2)")
+            motion = f.motion or self.target.motion
+            allowed = (("ConstantVelocity",) if blocks == 2 else
+                       ("ConstantAcceleration", "Linear", "ContinuousLinear"))
+            if blocks == 2 and self.linear_system and f.motion is None:
+                allowed = (motion.model,)  # the run checks its transition is the CV one
+            if motion.model not in allowed:
+                raise ValueError(f"{who}: motion {motion.model}; the tracker predicts with "
+                                 f"its own transition, so expected a motion among {allowed} "
+                                 "(whose Q it adds to P)")
+        if f.imm is not None:
+            for j, m in enumerate(f.imm.models):
+                if m.motion.model == "CoordinatedTurn" and dim != 2:
+                    raise ValueError(f"{who}: imm.models[{j}] is CoordinatedTurn, which is "
+                                     f"2-D; the scenario has dim = {dim}")
+            u = f.imm.union_dim(dim)
+            if u - n != len(f.imm.extra_std):
+                raise ValueError(
+                    f"{who}: the IMM's union state has {u} components and the scenario's "
+                    f"{n}; expected imm.extra_std with {u - n} values (the prior of the "
+                    f"components after the first {n}), got {len(f.imm.extra_std)}"
+                    if u >= n else
+                    f"{who}: the IMM's union state has {u} components, fewer than the "
+                    f"scenario's {n}; expected models whose largest state holds the "
+                    "scenario's")
 
     def _check_gaps(self) -> None:
         """Every gap interval lies within the scenario's measurements, and a sine fit has
