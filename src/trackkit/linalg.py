@@ -17,6 +17,7 @@ __all__ = [
     "cholesky",
     "solve_psd",
     "check_covariance",
+    "gaussian_loglik",
     "quadratic_form",
     "mm",
     "mmT",
@@ -228,6 +229,21 @@ def quadratic_form(S: Array, r: Array, name: str = "innovation covariance") -> A
         return (r * solve_psd(S, r[..., None], name)[..., 0]).sum(-1)
     y = np.linalg.solve(cholesky(S, name), r[..., None])[..., 0]
     return (y * y).sum(-1)
+
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+def gaussian_loglik(nu: Array, S: Array) -> Array:
+    """``log N(nu; 0, S) = -(nu^T S^-1 nu + log det S + m log 2 pi) / 2`` per batch row."""
+    m = S.shape[-1]
+    if m == 1:
+        logdet = np.log(S[..., 0, 0])
+    elif m == 2:
+        logdet = np.log(S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0])
+    else:
+        logdet = np.linalg.slogdet(S)[1]
+    return -0.5 * (quadratic_form(S, nu) + logdet + m * _LOG_2PI)
 
 
 def check_covariance(P: Array, name: str, n: int | None = None, psd: bool = True) -> Array:

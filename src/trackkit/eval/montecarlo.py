@@ -42,7 +42,8 @@ Array = NDArray[np.float64]
 #: steps of one filter between progress reports inside a block (a report costs a callback)
 PROGRESS_STEPS = 50
 
-__all__ = ["run_scenario", "run_block", "combine", "BlockResult", "plan_of", "with_run"]
+__all__ = ["run_scenario", "run_block", "combine", "BlockResult", "plan_of", "with_run",
+           "filter_rng"]
 
 UNITS = {"position": "m", "velocity": "m/s", "speed": "m/s", "course": "rad", "x": "m",
          "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s", "x1": "-", "x2": "-",
@@ -181,7 +182,9 @@ def run_block(scenario: Scenario, block: int,
         L0 = np.linalg.cholesky(P0)
         m0 = (data.truth[0] + data.prior_offset @ L0.T) if mean0 is None else (
             np.broadcast_to(mean0, (r1 - r0, n)).copy())
-        b = f.init(Gaussian(m0, np.broadcast_to(P0, (r1 - r0, n, n)).copy()))
+        prior = Gaussian(m0, np.broadcast_to(P0, (r1 - r0, n, n)).copy())
+        b = f.init(prior, rng=filter_rng(s.run.seed, block, i)) if getattr(
+            f, "stochastic", False) else f.init(prior)
         elapsed = 0.0
         handler = plan.gap_handlers[i] if plan.gap_handlers else None
         gap = _GapAccumulator(groups, gap_windows, r1 - r0, T, handler is not None, angular)
@@ -241,6 +244,15 @@ def run_block(scenario: Scenario, block: int,
         j1 = measurement_noise_rms(data.z, z_true, plan.sensors[0])
     return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example, matching, j1,
                        gaps)
+
+
+def filter_rng(seed: int, block: int, index: int) -> np.random.Generator:
+    """The generator of filter ``index`` (its place in ``[[filters]]``) in block ``block``:
+    a stochastic filter (a particle filter, ``f.stochastic``) draws from it, so its result
+    depends on the seed and the block alone, whatever the executor, and never shares a
+    stream with the simulation (``run_rng`` spawns children of ``SeedSequence(seed)``;
+    these are keyed by a distinct word)."""
+    return np.random.default_rng(np.random.SeedSequence([seed, 0x7466696C, block, index]))
 
 
 def _gap_windows(plan: Plan) -> tuple[Array, Array] | None:

@@ -79,7 +79,14 @@ from trackkit.filters.base import (
 )
 from trackkit.filters.kalman import KF, _linearize
 from trackkit.filters.kalman_fast import _predict_matrices
-from trackkit.linalg import _mirror, _triu, check_covariance, quadratic_form, solve_psd, symmetrize
+from trackkit.linalg import (
+    _mirror,
+    _triu,
+    check_covariance,
+    gaussian_loglik,
+    solve_psd,
+    symmetrize,
+)
 
 __all__ = [
     "IMM",
@@ -190,18 +197,6 @@ def combine(mu: Array, X: Array, P: Array, carry: Array | None = None,
     either = np.maximum(cf[:, :, None], cf[:, None, :])
     den = np.einsum("...j,jab->...ab", mu, either)
     return x, symmetrize(num / den)
-
-
-def gaussian_loglik(nu: Array, S: Array) -> Array:
-    """``log N(nu; 0, S) = -(nu^T S^-1 nu + log det S + m log 2 pi) / 2`` per batch row."""
-    m = S.shape[-1]
-    if m == 1:
-        logdet = np.log(S[..., 0, 0])
-    elif m == 2:
-        logdet = np.log(S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0])
-    else:
-        logdet = np.linalg.slogdet(S)[1]
-    return -0.5 * (quadratic_form(S, nu) + logdet + m * _LOG_2PI)
 
 
 def mode_probabilities(c: Array, loglik: Array) -> Array:
