@@ -13,18 +13,18 @@ from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
 
-__all__ = ["Gaussian", "Innovation", "check_gaussian", "angles", "linalg", "models", "filters",
-           "optimize", "tracking"]
+__all__ = ["Gaussian", "Particles", "Innovation", "check_gaussian", "angles", "linalg", "models",
+           "filters", "optimize", "tracking"]
 
 # Submodules load on first use (PEP 562): the command line starts, and answers Ctrl-C, before
 # numpy and scipy are imported, and tk.tracking's scipy.stats and KD-tree cost nothing until
 # they are used.
 _SUBMODULES = {"angles", "linalg", "models", "filters", "optimize", "tracking"}
-_FROM_BELIEF = {"Gaussian", "Innovation", "check_gaussian"}
+_FROM_BELIEF = {"Gaussian", "Particles", "Innovation", "check_gaussian"}
 
 if TYPE_CHECKING:
     from trackkit import angles, filters, linalg, models, optimize, tracking
-    from trackkit.belief import Gaussian, Innovation, check_gaussian
+    from trackkit.belief import Gaussian, Innovation, Particles, check_gaussian
 
 
 def __getattr__(name: str) -> Any:

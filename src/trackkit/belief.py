@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.linalg import check_covariance
 
-__all__ = ["Gaussian", "Innovation", "check_gaussian"]
+__all__ = ["Gaussian", "Particles", "Innovation", "check_gaussian"]
 
 
 class _GaussianFields(NamedTuple):
@@ -74,6 +74,106 @@ class Gaussian(_GaussianFields):
         (Plain ``b[0]`` is the tuple's first field, the mean, as for any NamedTuple.)
         """
         return Gaussian._make((self.mean[index], self.cov[index]))
+
+
+class _ParticlesFields(NamedTuple):
+    states: NDArray[np.float64]
+    log_weights: NDArray[np.float64]
+    rng: np.random.Generator | None = None
+    lost: NDArray[np.int64] | None = None
+
+
+class Particles(_ParticlesFields):
+    """Weighted particles ``{x_i, w_i}``, i = 1..N, per batch row.
+
+    ``states`` is ``(..., N, n)``: leading batch axes (runs or tracks), then the particles.
+    ``log_weights`` is ``(..., N)``, normalised per row: ``logsumexp(log_weights, -1) == 0``
+    (a particle may have weight 0, ``-inf``; a whole row may not). ``rng`` is the generator a
+    stochastic filter draws from (it travels with the belief, so a run is reproducible from
+    its seed alone). ``lost`` counts, per batch row, the updates in which no particle could
+    explain the measurement (every likelihood zero), which the particle filter rejects rather
+    than turn into nan; None means none yet.
+
+    Construction checks the shapes, that the states are finite and that every row's weights
+    are normalised (to 1e-9), naming the field. ``Particles._make((states, log_weights, rng))``
+    is the unchecked constructor for a filter's own outputs (``lost`` may be left out there).
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, states: ArrayLike, log_weights: ArrayLike,
+                rng: np.random.Generator | None = None,
+                lost: ArrayLike | None = None) -> Particles:
+        X = np.asarray(states, dtype=float)
+        lw = np.asarray(log_weights, dtype=float)
+        if X.ndim < 2:
+            raise ValueError(f"Particles.states has shape {X.shape}; expected (..., N, n): "
+                             "batch axes, then particles, then state components")
+        if lw.shape != X.shape[:-1]:
+            raise ValueError(f"Particles.log_weights has shape {lw.shape}; the states "
+                             f"{X.shape} need ({', '.join(map(str, X.shape[:-1]))}), one "
+                             "log-weight per particle")
+        if not np.isfinite(X).all():
+            where = tuple(int(i) for i in np.argwhere(~np.isfinite(X))[0])
+            raise ValueError(f"Particles.states has a non-finite entry ({X[where]} at index "
+                             f"{where}); expected finite values")
+        if np.isnan(lw).any() or (lw == np.inf).any():
+            bad = lw[np.isnan(lw) | (lw == np.inf)][0]
+            raise ValueError(f"Particles.log_weights has an entry {bad}; expected finite "
+                             "values or -inf (weight 0)")
+        top = lw.max(-1, keepdims=True)
+        with np.errstate(invalid="ignore"):
+            lse = (np.log(np.exp(lw - top).sum(-1, keepdims=True)) + top)[..., 0]
+        off = ~(np.abs(lse) <= 1e-9)
+        if off.any():
+            where = tuple(int(i) for i in np.argwhere(off)[0])
+            raise ValueError(
+                f"Particles.log_weights are not normalised: logsumexp over the particles is "
+                f"{float(lse[where]):.6g} in row {where} ({int(off.sum())} of {off.size} "
+                "rows); expected 0 (use trackkit.filters.resample.normalise_log_weights)")
+        if rng is not None and not isinstance(rng, np.random.Generator):
+            raise ValueError(f"Particles.rng is a {type(rng).__name__}; expected a "
+                             "numpy.random.Generator or None")
+        if lost is not None:
+            lost = np.asarray(lost)
+            if lost.shape != X.shape[:-2] or not np.issubdtype(lost.dtype, np.integer):
+                raise ValueError(f"Particles.lost has shape {lost.shape} and dtype "
+                                 f"{lost.dtype}; expected integers of the batch shape "
+                                 f"{X.shape[:-2]}")
+        return super().__new__(cls, X, lw, rng, lost)
+
+    @classmethod
+    def _make(cls, iterable) -> Particles:
+        t = tuple(iterable)
+        if not 2 <= len(t) <= 4:
+            raise TypeError(f"Particles._make: expected 2 to 4 fields, got {len(t)}")
+        return tuple.__new__(cls, t + (None,) * (4 - len(t)))
+
+    @property
+    def dim(self) -> int:
+        return int(np.shape(self.states)[-1])
+
+    @property
+    def n_particles(self) -> int:
+        return int(np.shape(self.states)[-2])
+
+    @property
+    def batch_shape(self) -> tuple[int, ...]:
+        return tuple(np.shape(self.states)[:-2])
+
+    @property
+    def weights(self) -> NDArray[np.float64]:
+        """``exp(log_weights)``, ``(..., N)``: each row sums to 1."""
+        return np.exp(self.log_weights)
+
+    def at(self, index) -> Particles:
+        """The particles of a batch index (the index applies to the batch axes only)."""
+        if not self.batch_shape:
+            raise IndexError("Particles.at: this belief has no batch axes")
+        probe = np.empty(self.batch_shape, dtype=bool)[index]  # an index past the batch fails
+        del probe
+        lost = None if self.lost is None else self.lost[index]
+        return Particles._make((self.states[index], self.log_weights[index], self.rng, lost))
 
 
 class Innovation(NamedTuple):

@@ -7,6 +7,7 @@ from trackkit.filters.fuzzy import FuzzyAdaptive, FuzzyBelief
 from trackkit.filters.imm import IMM, IMMBelief
 from trackkit.filters.initialise import dbt_prior_cov, ga_initial_position, ga_prior
 from trackkit.filters.kalman import EKF, IEKF, KF
+from trackkit.filters.particle import PF
 from trackkit.filters.run import run_filter
 from trackkit.filters.sigma import CKF, UKF, SigmaPoints
 from trackkit.filters.smoothers import smooth
@@ -17,6 +18,7 @@ __all__ = [
     "IEKF",
     "UKF",
     "CKF",
+    "PF",
     "AlphaBeta",
     "AlphaBetaGamma",
     "AlphaBetaBelief",

@@ -22,6 +22,7 @@ def run_filter(
     dt: float | Iterable[float],
     history: bool = False,
     on_step: Callable[[int, Any, Innovation], None] | None = None,
+    rng: np.random.Generator | None = None,
 ) -> tuple[Any, Gaussian | None]:
     """Filter ``measurements`` (an iterable of ``(..., m)`` arrays, nan where missing).
 
@@ -30,8 +31,13 @@ def run_filter(
     observer). Working memory is that of one belief (runs x n^2); with ``history=True`` the
     filtered means and covariances are stacked along a new leading time axis.
     ``on_step(k, belief, innovation)`` lets metrics be accumulated as the run streams.
+
+    A stochastic filter (``f.stochastic``, e.g. the particle filter) is initialised here,
+    ``f.init(prior, rng=rng)``, from a Gaussian prior or its own belief; it draws from
+    ``rng`` (None: a fresh generator, or the one the belief already carries), so a seeded
+    generator makes the run reproducible. Other filters ignore ``rng``.
     """
-    b = prior
+    b = f.init(prior, rng=rng) if getattr(f, "stochastic", False) else prior
     dts = iter(dt) if np.ndim(dt) else None
     sensors = iter(sensor) if isinstance(sensor, list | tuple) else None
     means, covs = [], []
