@@ -303,7 +303,7 @@ def test_the_precision_limit_sits_between_what_runs_and_what_fails():
     bearing_spread = 0.167  # rad: the first predicted bearing's std in bo-cv
     inside = math.degrees(bearing_spread / math.sqrt(PRECISION_LIMIT)) * 2
     result = run_scenario(S.parse(_short_bo_cv(inside)), runs=4)
-    assert set(result.filters) == {"EKF", "IEKF", "UKF", "CKF"}
+    assert set(result.filters) == {"EKF", "IEKF", "UKF", "CKF", "RPEKF", "MPEKF", "PF"}
     assert "observers.0.sensor.sigma_deg" in problem(_short_bo_cv(inside / 4))
     assert "observers.0.sensor.sigma_deg" in problem(_short_bo_cv(1e-8))
 

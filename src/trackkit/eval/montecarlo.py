@@ -145,6 +145,7 @@ class BlockResult:
     matching: dict[str, dict[str, Array]] | None = None  # filter -> per-run J2, J3, J4
     j1: Array | None = None  # (runs, m) per-run raw noise RMS
     gaps: dict[str, dict] | None = None  # filter -> _GapAccumulator.result
+    classes: dict[str, dict] | None = None  # filter -> _ClassAccumulator.result (classifiers)
 
 
 def run_block(scenario: Scenario, block: int,
@@ -174,6 +175,7 @@ def run_block(scenario: Scenario, block: int,
     logs = {}
     gaps: dict[str, dict] = {}
     pseudo_hist: dict[str, Array] = {}
+    classes: dict[str, dict] = {}
     m = plan.sensors[0].dim_z
     for i, (name, f, motion, (mean0, P0)) in enumerate(zip(
             plan.filter_names, plan.filters, plan.filter_motions, plan.priors, strict=True)):
@@ -188,6 +190,9 @@ def run_block(scenario: Scenario, block: int,
         elapsed = 0.0
         handler = plan.gap_handlers[i] if plan.gap_handlers else None
         gap = _GapAccumulator(groups, gap_windows, r1 - r0, T, handler is not None, angular)
+        names = getattr(f, "class_names", None)
+        cls = None if names is None else _ClassAccumulator(names, s.report.true_class, r1 - r0,
+                                                           T)
         if keep:
             hm, hP = np.empty((T, n)), np.empty((T, n, n))
             hz = np.full((T, m), np.nan)
@@ -203,6 +208,8 @@ def run_block(scenario: Scenario, block: int,
                 groups["bearing"].origin = plan.observer_states[0, k + 1, :2]
             acc.add(k, data.truth[k + 1], g, innov)
             gap.add(k, data.truth[k + 1], g.mean, b)
+            if cls is not None:
+                cls.add(k, b.class_prob)  # the classifier's own belief (class_names above)
             if keep and handler is not None:
                 hz[k] = b.z_pseudo[0]
             if match is not None:
@@ -213,6 +220,8 @@ def run_block(scenario: Scenario, block: int,
                 progress((i + (k + 1) / T) / len(plan.filters))
         metrics[name], seconds[name] = acc, elapsed
         gaps[name] = gap.result(handler)
+        if cls is not None:
+            classes[name] = cls.result()
         if keep and handler is not None:
             pseudo_hist[name] = hz
         if match is not None:
@@ -243,7 +252,7 @@ def run_block(scenario: Scenario, block: int,
         z_true = np.stack([plan.sensors[k].h(data.truth[k + 1]) for k in range(T)])
         j1 = measurement_noise_rms(data.z, z_true, plan.sensors[0])
     return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example, matching, j1,
-                       gaps)
+                       gaps, classes)
 
 
 def filter_rng(seed: int, block: int, index: int) -> np.random.Generator:
@@ -305,6 +314,32 @@ class _GapAccumulator:
         if self.handler:
             out["pseudo_steps"] = self.pseudo
         return out
+
+
+class _ClassAccumulator:
+    """The class probabilities of a filter that classifies (its belief's ``class_prob``,
+    ``(runs, C)`` per step): their sum over runs per step, each run's last ones and, when the
+    scenario names the true class, each run's probability of it at every step (for its
+    percentiles over runs)."""
+
+    def __init__(self, names: tuple[str, ...], true_class: str | None, runs: int,
+                 steps: int) -> None:
+        self.names = tuple(names)
+        self.true = self.names.index(true_class) if true_class in self.names else None
+        self.sum = np.zeros((steps, len(self.names)))
+        self.history = None if self.true is None else np.empty((runs, steps))
+        self.final = np.full((runs, len(self.names)), np.nan)
+
+    def add(self, k: int, prob: Array) -> None:
+        p = np.asarray(prob, dtype=float).reshape(-1, len(self.names))
+        self.sum[k] = p.sum(0)
+        self.final = p
+        if self.history is not None:
+            self.history[:, k] = p[:, self.true]
+
+    def result(self) -> dict:
+        return {"names": self.names, "sum": self.sum, "final": self.final.copy(),
+                "true": self.history}
 
 
 def run_blocks(scenario: Scenario, blocks: list[int],
@@ -380,6 +415,8 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
                 k: np.concatenate([p.matching[name][k] for p in parts])
                 for k in parts[0].matching[name]},
             gaps=_combine_gaps([p.gaps[name] for p in parts]),
+            classes=_combine_classes([(p.classes or {}).get(name) for p in parts], runs,
+                                     s.report.true_class),
         )
     notes = list(s.notes)
     if {"speed", "course", "bearing"} & set(groups):
@@ -402,6 +439,23 @@ def combine(scenario: Scenario, parts: list[BlockResult]) -> MonteCarloResult:
         after_steps=None if windows is None else windows[1],
         after_gap_s=s.report.after_gap_s, kinematic=not s.linear_system or plan.n >= 2 * plan.dim,
     )
+
+
+def _combine_classes(parts: list[dict | None], runs: int, true_class: str | None) -> dict:
+    """Block results of one filter's class accumulator, in block order: ``names``, the mean
+    probability of each class per step ``mean (steps, C)``, each run's last probabilities
+    ``final (runs, C)``, ``true_class`` and (when it is one of the filter's classes) each
+    run's probability of it per step ``true (runs, steps)``; empty for a filter that does
+    not classify."""
+    if not parts or parts[0] is None:
+        return {}
+    total = parts[0]["sum"].copy()
+    for p in parts[1:]:
+        total += p["sum"]
+    true = None if parts[0]["true"] is None else np.concatenate([p["true"] for p in parts])
+    return {"names": parts[0]["names"], "mean": total / runs,
+            "final": np.concatenate([p["final"] for p in parts]),
+            "true_class": true_class if true is not None else None, "true": true}
 
 
 def _combine_gaps(parts: list[dict]) -> dict:
@@ -453,6 +507,12 @@ def check_memory(scenario: Scenario) -> None:
     per_run = BYTES_PER_RUN_PER_FILTER * filters
     if scenario.report.matching:
         per_run += 8 * filters * (scenario.state_dim + 4)  # per-run J2-J4 and J1
+    from trackkit.scenario.options import CLASS_TYPES
+
+    classifiers = sum(f.type in CLASS_TYPES for f in scenario.filters)
+    if classifiers:  # each run's last class probabilities and P(true class) per step
+        steps = scenario.time.steps if scenario.report.true_class else 0
+        per_run += 8 * classifiers * (2 + steps)
     budget = _memory_bytes() // 2
     if runs * per_run > budget:
         raise RunBudgetError(

@@ -41,6 +41,15 @@ class FilterResult:
     #: steps after them "after_sse" ({group: (runs,)}), "pseudo_steps" (steps,) the runs fed
     #: a pseudo-measurement at each step; see :class:`GapReport`
     gaps: dict = field(default_factory=dict)
+    #: a filter that classifies (JTC, MultiFilterJTC): "names" its classes, "mean" (steps, C)
+    #: each class's probability per step averaged over runs, "final" (runs, C) each run's last
+    #: probabilities, "true_class" (a name or None) and "true" (runs, steps) each run's
+    #: probability of the true class per step (None without a true class); empty otherwise
+    classes: dict = field(default_factory=dict)
+
+
+#: a run counts as classified when its last probability of the true class exceeds this
+DECIDED = 0.9
 
 
 @dataclass
@@ -123,6 +132,48 @@ class MonteCarloResult:
             return 0.0
         return float(np.sum(g["pseudo_steps"]) / (self.runs * self.steps))
 
+    def classifiers(self) -> list[str]:
+        """The filters that classify (their results carry class probabilities)."""
+        return [name for name, f in self.filters.items() if f.classes]
+
+    def true_class_percentiles(self, name: str, q: tuple[float, ...] = (10.0, 50.0, 90.0)
+                               ) -> Array:
+        """Percentiles ``q`` over runs of filter ``name``'s probability of the true class at
+        each step, ``(len(q), steps)``."""
+        c = self.filters[name].classes
+        if not c or c.get("true") is None:
+            raise ValueError(f"filter {name!r} has no probability of a true class (it does not "
+                             "classify, or the scenario has no report.true_class)")
+        return np.percentile(c["true"], q, axis=0)
+
+    def classification(self, name: str) -> dict:
+        """Filter ``name``'s classification summary (empty when it does not classify):
+        ``classes``, ``final_mean`` (each class's last probability averaged over runs) and,
+        with a true class, ``true_class``, ``final_true_mean``, ``final_true_p10`` (the 10th
+        percentile over runs), ``above`` (the fraction of runs whose last probability of it
+        exceeds ``DECIDED``) and ``decided_s`` (the median over runs of the time from which
+        that probability stays above ``DECIDED``; nan when most runs never get there)."""
+        c = self.filters[name].classes
+        if not c:
+            return {}
+        final = np.asarray(c["final"], dtype=float)
+        out: dict = {"classes": list(c["names"]), "final_mean": final.mean(0).tolist()}
+        if c.get("true") is None:
+            return out
+        t = list(c["names"]).index(c["true_class"])
+        p = final[:, t]
+        hist = np.asarray(c["true"], dtype=float)
+        below = hist <= DECIDED
+        # the step after the last one at or below the threshold (steps: never decided)
+        last = np.where(below.any(1), hist.shape[1] - np.argmax(below[:, ::-1], 1), 0)
+        times = np.append(np.asarray(self.times, dtype=float), np.inf)[last]
+        median = float(np.median(times))
+        out.update(true_class=c["true_class"], final_true_mean=float(p.mean()),
+                   final_true_p10=float(np.percentile(p, 10.0)),
+                   above=float(np.mean(p > DECIDED)),
+                   decided_s=median if np.isfinite(median) else float("nan"))
+        return out
+
     def efficiency(self, name: str, group: str) -> float:
         """RMSE / PCRLB (time averaged): 1 is efficient, larger is further from the bound."""
         bound = self.pcrlb_mean.get(group, float("nan"))
@@ -150,7 +201,16 @@ class MonteCarloResult:
             "pcrlb": {g: float(v) for g, v in self.pcrlb_mean.items()},
             **self._matching_json(),
             **self._gaps_json(),
+            **self._classification_json(),
         }
+
+    def _classification_json(self) -> dict:
+        """The classification block, when a filter classifies."""
+        names = self.classifiers()
+        if not names:
+            return {}
+        return {"classification": {"threshold": DECIDED,
+                                   "filters": {n: self.classification(n) for n in names}}}
 
     def _gaps_json(self) -> dict:
         """The missing-measurement block, when the scenario has [gaps] or handlers."""

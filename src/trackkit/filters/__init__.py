@@ -3,9 +3,18 @@
 
 from trackkit.filters.adaptive import AEKF, AMCEKF, MCEKF, AdaptiveBelief, SageHusaBelief
 from trackkit.filters.alphabeta import AlphaBeta, AlphaBetaBelief, AlphaBetaGamma
+from trackkit.filters.bearings_only import (
+    MPEKF,
+    RPEKF,
+    MPBelief,
+    PendingParticles,
+    RangeBankBelief,
+    RangePF,
+)
 from trackkit.filters.fuzzy import FuzzyAdaptive, FuzzyBelief
 from trackkit.filters.imm import IMM, IMMBelief
 from trackkit.filters.initialise import dbt_prior_cov, ga_initial_position, ga_prior
+from trackkit.filters.jtc import JTC, JTCBelief, MultiFilterBelief, MultiFilterJTC
 from trackkit.filters.kalman import EKF, IEKF, KF
 from trackkit.filters.particle import PF
 from trackkit.filters.run import run_filter
@@ -19,6 +28,16 @@ __all__ = [
     "UKF",
     "CKF",
     "PF",
+    "JTC",
+    "JTCBelief",
+    "MultiFilterJTC",
+    "MultiFilterBelief",
+    "RPEKF",
+    "RangeBankBelief",
+    "MPEKF",
+    "MPBelief",
+    "RangePF",
+    "PendingParticles",
     "AlphaBeta",
     "AlphaBetaGamma",
     "AlphaBetaBelief",

@@ -1,5 +1,6 @@
 """Motion and sensor models."""
 
+from trackkit.models import classes
 from trackkit.models.discretize import discretize
 from trackkit.models.motion import (
     Augmented,
@@ -27,6 +28,7 @@ from trackkit.models.sensors import (
 )
 
 __all__ = [
+    "classes",
     "discretize",
     "MotionModel",
     "LinearMotion",

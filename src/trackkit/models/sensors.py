@@ -231,16 +231,20 @@ class Bearing(SensorModel):
 
     Nautical (default): ``b = atan2(x - xo, y - yo)``, clockwise from north.
     ``convention="math"``: ``b = atan2(y - yo, x - xo)``, counter-clockwise from east.
+    ``velocity`` is the observer's velocity (default at rest): h does not use it, but a filter
+    whose state is relative to the observer does (the modified-polar EKF).
     """
 
     origin: ArrayLike = (0.0, 0.0)
     sigma: float = 0.01
     convention: str = "nautical"
+    velocity: ArrayLike = (0.0, 0.0)
     dim_z: int = field(default=1, init=False)
     angular: tuple[bool, ...] = field(default=(True,), init=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "origin", _pose(self.origin, "origin", 2))
+        object.__setattr__(self, "velocity", _pose(self.velocity, "velocity", 2))
         object.__setattr__(self, "sigma", float(_positive(self.sigma, "sigma")))
         _check_convention(self.convention)
 

@@ -62,6 +62,13 @@ _MATCHING_UNITS = {
 }
 
 
+_CLASSIFICATION_UNITS = (
+    "final_mean, final_true_mean, final_true_p10: probabilities, 0 to 1 (the last step's; "
+    "mean and 10th percentile over runs); above: fraction of runs whose last probability of "
+    "the true class exceeds threshold; decided_s: s, the median over runs of the time from "
+    "which it stays above threshold")
+
+
 def _finite_or_none(obj: Any) -> Any:
     """JSON has no NaN/Infinity: non-finite floats become null."""
     if isinstance(obj, dict):
@@ -81,6 +88,8 @@ def _units(result: MonteCarloResult, doc: dict) -> dict:
     for per_filter in doc.get("J", {}).values():
         present |= set(per_filter)
     units.update({k: v for k, v in _MATCHING_UNITS.items() if k in present})
+    if "classification" in doc:
+        units["classification"] = _CLASSIFICATION_UNITS
     return units
 
 
@@ -144,9 +153,10 @@ def metrics_table(result: MonteCarloResult) -> pa.Table:
     """Per-step metrics, one row per (filter, step), SI units (radians for angle groups).
 
     Columns: ``filter, step, time, rmse_<group>..., nees, nis, nees_lo, nees_hi, nis_lo,
-    nis_hi, pcrlb_<group>...`` (nan where a value does not exist). The units of each group
-    are in the field metadata (``unit``) and the run settings in the schema metadata
-    (``trackkit``, JSON)."""
+    nis_hi, pcrlb_<group>...`` and, when a filter classifies, ``class_prob_<class>...`` and
+    ``p_true_p10, p_true_p50, p_true_p90`` (nan where a value does not exist). The units of
+    each group are in the field metadata (``unit``) and the run settings in the schema
+    metadata (``trackkit``, JSON)."""
     steps = result.steps
     nan = np.full(steps, np.nan)
     names = list(result.filters)
@@ -171,6 +181,7 @@ def metrics_table(result: MonteCarloResult) -> pa.Table:
     for g in result.groups:
         bound = _column(result.pcrlb.get(g, nan), steps, f"pcrlb {g}")
         cols[f"pcrlb_{g}"] = np.tile(bound, len(names))
+    cols.update(_class_columns(result, stack))
 
     fields = []
     for name, values in cols.items():
@@ -184,6 +195,36 @@ def metrics_table(result: MonteCarloResult) -> pa.Table:
             "steps": steps, "dt": result.dt, "start": result.start, "groups": result.groups}
     schema = pa.schema(fields, metadata={"trackkit": json.dumps(meta)})
     return pa.Table.from_arrays([pa.array(v) for v in cols.values()], schema=schema)
+
+
+def _class_columns(result: MonteCarloResult, stack: Any) -> dict[str, np.ndarray]:
+    """With a filter that classifies: ``class_prob_<class>``, each class's probability per
+    step averaged over runs, and (with a true class) ``p_true_p10``, ``p_true_p50`` and
+    ``p_true_p90``, its percentiles over runs; nan for the other filters."""
+    classifiers = result.classifiers()
+    if not classifiers:
+        return {}
+    nan = np.full(result.steps, np.nan)
+    classes = list(dict.fromkeys(k for n in classifiers
+                                 for k in result.filters[n].classes["names"]))
+
+    def mean_of(f: Any, k: str) -> np.ndarray:
+        c = f.classes
+        if not c or k not in c["names"]:
+            return nan
+        return np.asarray(c["mean"])[:, list(c["names"]).index(k)]
+
+    cols = {f"class_prob_{k}": stack(lambda f, k=k: mean_of(f, k), f"class {k}")
+            for k in classes}
+    if any(result.filters[n].classes.get("true") is not None for n in classifiers):
+        def pct(f: Any, i: int) -> np.ndarray:
+            if not f.classes or f.classes.get("true") is None:
+                return nan
+            return result.true_class_percentiles(f.name)[i]
+
+        for i, q in enumerate((10, 50, 90)):
+            cols[f"p_true_p{q}"] = stack(lambda f, i=i: pct(f, i), f"P(true) p{q}")
+    return cols
 
 
 def write_metrics_parquet(result: MonteCarloResult, path: str | Path) -> Path:

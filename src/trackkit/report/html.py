@@ -13,6 +13,7 @@ from trackkit import __version__
 from trackkit.eval.results import MonteCarloResult
 from trackkit.report.glossary import glossary_html
 from trackkit.report.tables import (
+    classification_summary,
     gap_summary,
     html_table,
     matching_html_tables,
@@ -35,6 +36,10 @@ _CAPTIONS = {
     "time": "Run 0 against time: the first state component's truth and each filter's estimate "
             "(top), and the measurements with each filter's pseudo-measurements (bottom); the "
             "gaps shaded.",
+    "classes": "Class probability against time (seed 002 paper a, Fig. 4): each classifying "
+               "filter's probability of the true class, mean over runs with the 10-90th "
+               "percentile band (or, without a true class, the mean probability of each "
+               "class).",
     "convergence": "Optimiser convergence: best-so-far DOM cost against iteration, median over "
                    "the independent runs with the min-max band.",
 }
@@ -112,6 +117,9 @@ def render_html(result: MonteCarloResult, images: Mapping[str, str | Path | byte
     gap = gap_summary(result)
     if gap is not None:
         parts += [f"<h2>{esc(gap.title)}</h2>", summary_html_table(gap)]
+    classes = classification_summary(result)
+    if classes is not None:
+        parts += [f"<h2>{esc(classes.title)}</h2>", summary_html_table(classes)]
     parts += notes_and_figures(result.notes, images, _CAPTIONS)
     parts += ["<h2>Glossary</h2>", glossary_html()]
     parts += ["</body>", "</html>", ""]

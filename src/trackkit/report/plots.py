@@ -25,12 +25,12 @@ __all__ = [
     "geometry_figure", "rmse_figure", "nees_figure", "plot_geometry", "plot_rmse", "plot_nees",
     "matching_figure", "membership_figure", "convergence_figure", "plot_matching",
     "plot_membership", "plot_convergence", "make_plots", "PLOT_FILES", "time_figure",
-    "plot_time",
+    "plot_time", "classes_figure", "plot_classes",
 ]
 
 PLOT_FILES = {"geometry": "geometry.png", "rmse": "rmse.png", "nees": "nees.png",
               "matching": "matching.png", "membership": "membership.png",
-              "convergence": "convergence.png", "time": "time.png"}
+              "convergence": "convergence.png", "time": "time.png", "classes": "classes.png"}
 _DPI = 110
 
 
@@ -461,6 +461,52 @@ def plot_time(result: MonteCarloResult, path: str | Path) -> Path | None:
     return None if fig is None else _save(fig, path)
 
 
+def classes_figure(result: MonteCarloResult) -> Figure | None:
+    """Class probability against time (seed 002 paper a, Fig. 4): for each filter that
+    classifies, its probability of the true class, mean over runs with the 10-90th percentile
+    band shaded; without a true class, the mean probability of each of its classes (one line
+    style per class). None when no filter classifies."""
+    names = result.classifiers()
+    if not names:
+        return None
+    t = np.asarray(result.times, dtype=float)
+    fig = Figure(figsize=(8, 4.2), layout="constrained")
+    ax = fig.add_subplot()
+    true = None
+    for name in names:
+        c = result.filters[name].classes
+        color = _color(result, name)
+        if c.get("true") is not None:
+            true = c["true_class"]
+            mean = np.asarray(c["mean"])[:, list(c["names"]).index(true)]
+            lo, hi = result.true_class_percentiles(name, (10.0, 90.0))
+            ax.fill_between(t, lo, hi, color=color, alpha=0.2, lw=0)
+            ax.plot(t, mean, color=color, lw=1.5, label=f"{name}: P({true}), mean")
+            continue
+        for j, k in enumerate(c["names"]):
+            ax.plot(t, np.asarray(c["mean"])[:, j], color=color, lw=1.3,
+                    ls=("-", "--", ":", "-.")[j % 4], label=f"{name}: P({k}), mean")
+    ax.axhline(0.9, color="0.4", lw=0.8, ls=":")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("class probability [-]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower right", fontsize="small",
+              title=None if true is None else "shaded: 10-90th percentile over runs",
+              title_fontsize="small")
+    what = f"the true class ({true})" if true is not None else "each class"
+    fig.suptitle(f"{result.scenario}: probability of {what} over {result.runs} runs",
+                 fontsize="medium")
+    return fig
+
+
+def plot_classes(result: MonteCarloResult, path: str | Path) -> Path | None:
+    """Write :func:`classes_figure` as a PNG; None (nothing written) when no filter
+    classifies."""
+    fig = classes_figure(result)
+    return None if fig is None else _save(fig, path)
+
+
 def _wants_time_plot(result: MonteCarloResult) -> bool:
     return (result.gap_steps is not None or not result.kinematic
             or any(f.gaps.get("handler") for f in result.filters.values()))
@@ -484,7 +530,7 @@ def make_plots(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Path]
     written["rmse"] = plot_rmse(result, out / PLOT_FILES["rmse"])
     written["nees"] = plot_nees(result, out / PLOT_FILES["nees"])
     for name, plot in (("matching", plot_matching), ("membership", plot_membership),
-                       ("convergence", plot_convergence)):
+                       ("convergence", plot_convergence), ("classes", plot_classes)):
         path = plot(result, out / PLOT_FILES[name])
         if path is not None:
             written[name] = path

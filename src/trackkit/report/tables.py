@@ -29,7 +29,7 @@ __all__ = [
     "averaging_window", "display_unit", "Summary", "summary", "rich_table", "html_table", "short",
     "channel_labels", "state_labels", "matching_values", "matching_summary", "tuning_summary",
     "matching_summaries", "summary_rich_table", "summary_html_table", "matching_rich_tables",
-    "matching_html_tables",
+    "matching_html_tables", "classification_summary",
 ]
 
 _DEG = 180.0 / math.pi
@@ -351,11 +351,51 @@ def summary_html_table(s: Summary) -> str:
 
 
 def matching_rich_tables(result: MonteCarloResult) -> list[Table]:
-    """:func:`matching_summaries` and the missing-measurement table (:func:`gap_summary`),
-    when present, as ``rich`` tables (printed after :func:`rich_table`)."""
-    gap = gap_summary(result)
-    return [summary_rich_table(s) for s in matching_summaries(result)
-            + ([] if gap is None else [gap])]
+    """:func:`matching_summaries`, the missing-measurement table (:func:`gap_summary`) and
+    the classification table (:func:`classification_summary`), when present, as ``rich``
+    tables (printed after :func:`rich_table`)."""
+    extra = [t for t in (gap_summary(result), classification_summary(result)) if t is not None]
+    return [summary_rich_table(s) for s in matching_summaries(result) + extra]
+
+
+def classification_summary(result: MonteCarloResult) -> Summary | None:
+    """"Classification": one row per filter that classifies (JTC, MultiFilterJTC). With a
+    true class: its probability at the end (mean and 10th percentile over runs), the share of
+    runs that end above 0.9, the median time from which it stays above 0.9, and the filter's
+    time per run-step; without one, each class's mean probability at the end. None when no
+    filter classifies."""
+    names = result.classifiers()
+    if not names:
+        return None
+    summaries = {n: result.classification(n) for n in names}
+    truths = {c.get("true_class") for c in summaries.values()}
+    if truths != {None}:
+        headers = ["filter", "true class", "P(true) at\nthe end, mean", "P(true) at the\n"
+                   "end, 10th pct.", "runs ending\nabove 0.9", "decided\n(median) [s]",
+                   "time\nper step"]
+        rows = []
+        for n, c in summaries.items():
+            if c.get("true_class") is None:
+                rows.append([n, "n/a", "", "", "", "",
+                             _seconds(result.filters[n].seconds_per_step)])
+                continue
+            rows.append([n, c["true_class"], _num(c["final_true_mean"], 4),
+                         _num(c["final_true_p10"], 4), f"{100 * c['above']:.1f}%",
+                         _num(c["decided_s"], 4),
+                         _seconds(result.filters[n].seconds_per_step)])
+        caption = (f"{result.scenario}: the probability each filter puts on the true class, "
+                   f"over {result.runs} runs; decided: the time from which it stays above "
+                   "0.9 (n/a when most runs never get there).")
+    else:
+        classes = sorted({k for c in summaries.values() for k in c["classes"]})
+        headers = ["filter", *[f"P({k}) at\nthe end, mean" for k in classes], "time\nper step"]
+        rows = [[n, *[_num(dict(zip(c["classes"], c["final_mean"], strict=True)).get(
+            k, math.nan), 4) for k in classes], _seconds(result.filters[n].seconds_per_step)]
+            for n, c in summaries.items()]
+        caption = (f"{result.scenario}: each class's probability at the end, mean over "
+                   f"{result.runs} runs (the scenario names no true class: report.true_class)."
+                   )
+    return Summary(headers, rows, caption, title="Classification")
 
 
 def gap_summary(result: MonteCarloResult) -> Summary | None:

@@ -80,7 +80,12 @@ class WiderState:
         self.extra_mean = np.asarray(extra_mean, dtype=float)
         self.extra_cov = np.asarray(extra_cov, dtype=float)
 
-    def init(self, prior: Gaussian):
+    @property
+    def stochastic(self) -> bool:
+        """Whether the inner filter draws random numbers (then ``init`` takes its ``rng``)."""
+        return getattr(self.f, "stochastic", False)
+
+    def init(self, prior: Gaussian, rng: np.random.Generator | None = None):
         x, P = np.asarray(prior.mean, dtype=float), np.asarray(prior.cov, dtype=float)
         if x.shape[-1] != self.n:
             raise ValueError(f"WiderState.init: prior.mean has {x.shape[-1]} components; "
@@ -90,7 +95,8 @@ class WiderState:
         PX = np.zeros(batch + (self.n + e, self.n + e))
         PX[..., : self.n, : self.n] = P
         PX[..., self.n:, self.n:] = self.extra_cov
-        return self.f.init(Gaussian(X, PX))
+        wide = Gaussian(X, PX)
+        return self.f.init(wide, rng=rng) if self.stochastic else self.f.init(wide)
 
     def predict(self, belief: Any, motion: Any, dt: float):
         return self.f.predict(belief, None, dt)
@@ -142,7 +148,8 @@ def build_sensor(spec: SensorSpec, position: Array, velocity: Array, sigma: list
     each measurement channel (from units, ``r_diag_si`` or the SNR)."""
     m = spec.model
     if m == "Bearing":
-        return models.Bearing(position[:2], sigma[0], convention=spec.convention)
+        return models.Bearing(position[:2], sigma[0], convention=spec.convention,
+                              velocity=velocity[:2])
     if m == "RangeBearing":
         return models.RangeBearing(position[:2], sigma[0], sigma[1],
                                    convention=spec.convention)

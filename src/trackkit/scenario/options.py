@@ -16,7 +16,10 @@ from typing import Any, Literal
 
 from trackkit import filters as tkf
 from trackkit.filters.adaptive import Q_FORMS
+from trackkit.filters.bearings_only import MPEKF, RPEKF, RangePF
 from trackkit.filters.fuzzy import DEFAULT_PARAMS, N_PARAMS
+from trackkit.filters.jtc import JTC, RECURSIONS, SPEEDS, MultiFilterJTC
+from trackkit.models.classes import ALONG, PAPER_CLASSES
 
 __all__ = ["Option", "FilterType", "FILTER_TYPES", "FUZZY_TYPES", "CONSTANT_GAIN_TYPES",
            "IMM_INNER_TYPES", "IMMSettings", "alpha_beta", "alpha_beta_gamma", "check_options",
@@ -253,6 +256,20 @@ _GAIN_XI = Option("xi", "float", None, "the fading-memory discount: every root o
                   "characteristic polynomial at xi (fading-memory)", low=0, high=1,
                   open_high=True, default_text="none")
 
+_JTC_OPTIONS = (
+    Option("particles_per_class", "int", 5000, "particles per class, N_c (N = 2 N_c in all)",
+           low=1),
+    Option("sigma", "float", 10.0, "standard deviation of every mode's white acceleration noise "
+           "(m/s^2)", low=0),
+    Option("diagonal", "float", None, "the mode transition's diagonal (the rest shared equally "
+           "off it) for both classes", low=0, high=1, default_text="none: the paper's 0.6"),
+    Option("speed", "choice", "estimate", "the speed the class speed likelihood g(v | c) is "
+           "evaluated at: the previous estimate's (the paper's), or each particle's own",
+           choices=SPEEDS),
+    Option("acceleration", "choice", "velocity", "a CA mode's input u: along the velocity, or "
+           "on both axes (the paper's literal G u)", choices=ALONG),
+)
+
 #: Every filter type of a scenario, in the order the reference lists them.
 FILTER_TYPES: dict[str, FilterType] = {
     "KF": FilterType(tkf.KF, "linear Kalman filter (linear motion and sensor models)"),
@@ -278,6 +295,45 @@ FILTER_TYPES: dict[str, FilterType] = {
                allowed_text="a number > -n (n the state length)"),
     )),
     "CKF": FilterType(tkf.CKF, "cubature Kalman filter (third-degree spherical-radial rule)"),
+    "RPEKF": FilterType(RPEKF, "range-parameterised EKF: a bank of EKFs over a geometric "
+                        "range grid along the first line of sight, weighted by their "
+                        "likelihoods (one bearing sensor)", (
+        Option("components", "int", 16, "EKFs in the bank (range cells)", low=1),
+        Option("n_sigma", "float", 4.0, "the range interval: the prior's range +- n_sigma "
+               "of its standard deviation along the line of sight", low=0, open_low=True),
+        Option("r_min", "float", None, "lowest range of the interval (m)", low=0,
+               open_low=True, default_text="none: the prior's, at least 0.05 of its range"),
+        Option("r_max", "float", None, "highest range of the interval (m)", low=0,
+               open_low=True, default_text="none: the prior's"),
+        Option("prune", "float", 0.0, "components whose weight falls below it are dropped "
+               "(weight 0 for good); 0 keeps them all", low=0, high=1, open_high=True,
+               allowed_text="a number in [0, 1 / components)"),
+    )),
+    "MPEKF": FilterType(MPEKF, "modified-polar-coordinates EKF: [bearing, bearing rate, "
+                        "range rate / range, 1 / range] relative to the observer (one "
+                        "bearing sensor, a ConstantVelocity target)"),
+    "PF": FilterType(RangePF, "bootstrap particle filter (regularised with regularise = "
+                     "true); its particles drawn from the Gaussian prior or, with prior = "
+                     "\"range\", along the first bearing over a range interval", (
+        Option("n_particles", "int", 1000, "particles per run", low=1),
+        Option("resampler", "choice", "systematic", "the resampling scheme",
+               choices=("systematic", "stratified", "residual", "multinomial")),
+        Option("ess_threshold", "float", 0.5, "resample when the effective sample size is "
+               "below this fraction of n_particles (0 never, 1 at every step)", low=0, high=1),
+        Option("regularise", "bool", False, "Gaussian-kernel jitter after resampling (the "
+               "regularised PF, Musso et al.)"),
+        Option("roughening", "float", 0.0, "Gordon-Salmond-Smith roughening constant K after "
+               "resampling (0 off; not with regularise)", low=0),
+        Option("prior", "choice", "gaussian", "gaussian: particles drawn from the scenario's "
+               "prior; range: at the first bearing, along it, log-uniform in range over "
+               "[r_min, r_max], velocity from the prior", choices=("gaussian", "range")),
+        Option("r_min", "float", None, "with prior = \"range\": lowest range (m)", low=0,
+               open_low=True, default_text="none: the prior's range - 4 sigma along the "
+               "bearing, at least 0.05 of it"),
+        Option("r_max", "float", None, "with prior = \"range\": highest range (m)", low=0,
+               open_low=True, default_text="none: the prior's range + 4 sigma along the "
+               "bearing"),
+    )),
     "MCEKF": FilterType(tkf.MCEKF, "modified-covariance EKF (seed 002 paper b)", (
         Option("second_order", "bool", False, "H = J_h + 1/2 diag(Hess h) (eqs. 12-13)"),)),
     "AMCEKF": FilterType(tkf.AMCEKF, "adaptive modified-covariance EKF (seed 002 paper b)", (
@@ -335,6 +391,24 @@ FILTER_TYPES: dict[str, FilterType] = {
                "lacks (a CV model and omega): others (the carriers' estimate) or zero",
                choices=("others", "zero")),
     )),
+    "JTC": FilterType(JTC, "joint tracking and classification: one multiple-model particle "
+                      "filter whose particles carry a class label, airliner or fighter (seed "
+                      "002 paper a; a 2-D [x, y, vx, vy] state; the classes' own motion modes)",
+                      _JTC_OPTIONS[:1] + (
+        Option("floor", "float", 0.1, "the fraction of particles_per_class every class keeps "
+               "(the paper's N_Thr = 0.1 N_c)", low=0, high=1, open_low=True,
+               allowed_text="a number in (0, 1] with floor x particles_per_class >= 1"),
+    ) + _JTC_OPTIONS[1:3] + (
+        Option("recursion", "choice", "bayes", "the class posterior: bayes (the class "
+               "likelihood from weights normalised within each class) or paper (Table 1's "
+               "sum of globally normalised weights, which counts p(c) twice)",
+               choices=RECURSIONS),
+    ) + _JTC_OPTIONS[3:], fixed={"classes": PAPER_CLASSES, "class_prior": None}),
+    "MultiFilterJTC": FilterType(MultiFilterJTC, "the multi-filter JTC baseline: one "
+                                 "multiple-model particle filter per class, combined by Bayes' "
+                                 "rule (seed 002 paper a; a 2-D [x, y, vx, vy] state)",
+                                 _JTC_OPTIONS,
+                                 fixed={"classes": PAPER_CLASSES, "class_prior": None}),
     "OFKF": FilterType(tkf.FuzzyAdaptive, "KF with fuzzy-adaptive R or Q (seed 000)",
                        _FUZZY_OPTIONS, base="KF"),
     "OFEKF": FilterType(tkf.FuzzyAdaptive, "EKF with fuzzy-adaptive R or Q (seed 000)",
@@ -342,6 +416,9 @@ FILTER_TYPES: dict[str, FilterType] = {
     "OFUKF": FilterType(tkf.FuzzyAdaptive, "UKF with fuzzy-adaptive R or Q (seed 000)",
                         _FUZZY_OPTIONS, base="UKF"),
 }
+
+#: the types that classify as they track (their beliefs carry class probabilities)
+CLASS_TYPES = ("JTC", "MultiFilterJTC")
 
 #: constant-gain types -> the number of state blocks (2: [pos, vel], 3: with acceleration)
 CONSTANT_GAIN_TYPES = {"AlphaBeta": 2, "AlphaBetaGamma": 3}

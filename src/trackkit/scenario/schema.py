@@ -24,7 +24,9 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from trackkit.models.classes import CLASSES
 from trackkit.scenario.options import (
+    CLASS_TYPES,
     CONSTANT_GAIN_TYPES,
     FILTER_TYPES,
     FUZZY_TYPES,
@@ -776,6 +778,10 @@ class ReportSpec(_Strict):
         "wrapped to (-pi, pi] in every metric (e.g. the phase theta of seed 001's sine, which "
         "a measurement of sin(theta) cannot tell from theta + 2 pi)", json_schema_extra=_unit(
             "index"))
+    true_class: Literal[tuple(CLASSES)] | None = Field(  # type: ignore[valid-type]
+        None, description="the target's class, for the filters that classify (JTC, "
+        "MultiFilterJTC): the report gives the probability they put on it against time and "
+        "the runs that end above 0.9", json_schema_extra=_unit("class name"))
     after_gap_s: NonNegFloat = Field(1.0, description="with [gaps]: the window after each "
                                      "gap over which the recovery's RMSE is reported (the "
                                      "round(after_gap_s / step_s) measurements that follow "
@@ -899,6 +905,14 @@ class Scenario(_Strict):
         gives the rest."""
         n, dim = self.state_dim, self.dim
         who = f"filters[{i}] {f.name!r} ({f.type})"
+        if f.type in CLASS_TYPES and (dim != 2 or n != 4):
+            raise ValueError(f"{who}: the scenario's state has {n} components (dim = {dim}); "
+                             "a classifying particle filter moves [x, y, vx, vy] by its "
+                             "classes' modes, so expected dim = 2 and no extras")
+        if f.type in CLASS_TYPES and f.gaps is not None:
+            raise ValueError(f"{who}: gaps = {{handler = {f.gaps.handler!r}}}; a classifying "
+                             "particle filter takes no gap handler (it coasts through a "
+                             "missing plot by itself); expected no gaps table")
         blocks = CONSTANT_GAIN_TYPES.get(f.type)
         if blocks is not None:
             sensors = [o.sensor.model for o in self.observers]

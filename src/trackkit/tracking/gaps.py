@@ -823,11 +823,20 @@ class WithGaps:
     def _estimate(self, inner: Any) -> Gaussian:
         return self.f.estimate(inner) if hasattr(self.f, "estimate") else inner
 
-    def init(self, prior: Any) -> GapBelief:
-        """The belief from a Gaussian prior (through the inner filter's ``init``) or from the
-        inner filter's own belief."""
-        inner = self.f.init(prior) if isinstance(prior, Gaussian) and hasattr(
-            self.f, "init") else prior
+    @property
+    def stochastic(self) -> bool:
+        """Whether the inner filter draws random numbers (then ``init`` takes its ``rng``)."""
+        return getattr(self.f, "stochastic", False)
+
+    def init(self, prior: Any, rng: np.random.Generator | None = None) -> GapBelief:
+        """The belief from a Gaussian prior (through the inner filter's ``init``, given
+        ``rng`` when the inner filter is stochastic) or from the inner filter's own belief."""
+        if not (isinstance(prior, Gaussian) and hasattr(self.f, "init")):
+            inner = prior
+        elif self.stochastic:
+            inner = self.f.init(prior, rng=rng)
+        else:
+            inner = self.f.init(prior)
         batch = np.shape(self._estimate(inner).mean)[:-1]
         dstate = self.detector.init(batch) if self.detector is not None else None
         return GapBelief(inner, None, dstate, np.full(batch, self.t0), np.zeros(batch, bool),

@@ -1,0 +1,769 @@
+"""Bearings-only specialists: the range-parameterised EKF and the modified-polar EKF.
+
+Bearings-only tracking from one observer leaves range unobservable until the observer
+manoeuvres, and a Cartesian EKF linearised at a wrong range drifts and becomes overconfident.
+The two filters here are the classic cures (Arulampalam and Ristic 2000 compare them with a
+particle filter):
+
+* :class:`RPEKF`, the range-parameterised EKF (Peach 1995): a bank of EKFs whose initial
+  ranges lie on a geometric grid, each with a range spread proportional to its range, so that
+  each one is linearised well; the bank's weights follow each filter's measurement
+  likelihood, and the estimate is the Gaussian of the mixture.
+* :class:`MPEKF`, the modified-polar-coordinates EKF (Aidala and Hammel 1983): the state
+  ``y = [beta, beta_dot, r_dot / r, 1 / r]`` relative to the observer, in which the bearing
+  update is linear and the (unobservable) inverse range stays apart from what is observed.
+* :class:`RangePF`, the bootstrap particle filter (:class:`~trackkit.filters.particle.PF`)
+  with its particles drawn from the Gaussian prior, or spread over a range interval along the
+  first bearing (for a user whose prior says little about range).
+
+Both receive a Cartesian prior ``N(x0, P0)`` over ``[x, y, vx, vy]`` (what a scenario gives
+every filter) and learn the observer's pose only from the sensor of the first update, so both
+build their own representation there, lazily, row by row. Their ``estimate`` is a Cartesian
+Gaussian, so the metrics and the PCRLB treat them like every other filter.
+
+Bearings are nautical (clockwise from north) inside the MPEKF's state; a sensor with
+``convention="math"`` is measured as ``pi/2 - beta``. Every kernel is batched over leading
+axes; the RPEKF's components sit on the axis after the batch axes.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from trackkit.angles import wrap
+from trackkit.belief import Gaussian, Innovation, Particles
+from trackkit.filters.base import (
+    Filter,
+    check_belief,
+    check_dt,
+    check_measurement,
+    keep_prior_where_missing,
+    missing_rows,
+    output,
+    register,
+)
+from trackkit.filters.imm import combine, mixture_innovation
+from trackkit.filters.kalman import EKF, _condition, _predict
+from trackkit.filters.particle import PF
+from trackkit.linalg import cholesky, gaussian_loglik, mm, mmT, symmetrize
+from trackkit.models.motion import ConstantVelocity
+
+__all__ = [
+    "RangePF",
+    "PendingParticles",
+    "RPEKF",
+    "RangeBankBelief",
+    "range_split",
+    "MPEKF",
+    "MPBelief",
+    "mpc_transition",
+    "mpc_from_relative",
+    "mpc_to_cartesian",
+    "cartesian_to_mpc",
+]
+
+Array = NDArray[np.float64]
+
+#: without ``r_min``, the bank's lowest range is at least this fraction of the prior's range
+MIN_RANGE_FRACTION = 0.05
+
+_EKF = EKF()  # the RPEKF's components (a stateless strategy: one serves every bank)
+
+
+# --------------------------------------------------------------------------------------------
+# Shared checks
+# --------------------------------------------------------------------------------------------
+
+
+def _origin(sensor, where: str) -> Array:
+    """The sensor's 2-D origin (..., 2); a sensor without one cannot anchor a line of sight."""
+    o = getattr(sensor, "origin", None)
+    if o is None or np.shape(o)[-1:] != (2,):
+        raise ValueError(f"{where}: sensor {type(sensor).__name__} has no 2-D origin; expected "
+                         "a bearing sensor from one observer (trackkit.models.Bearing)")
+    return np.asarray(o, dtype=float)
+
+
+def _bearing_sensor(sensor, where: str) -> tuple[Array, Array, float]:
+    """``(origin, velocity, sign)`` of a single-bearing sensor: the measured bearing is
+    ``sign * beta + offset`` with beta nautical (sign -1 and offset pi/2 for "math")."""
+    if getattr(sensor, "dim_z", None) != 1 or tuple(getattr(sensor, "angular", ())) != (True,):
+        raise ValueError(f"{where}: sensor {type(sensor).__name__} measures "
+                         f"{getattr(sensor, 'dim_z', '?')} components; expected one bearing "
+                         "(trackkit.models.Bearing)")
+    o = _origin(sensor, where)
+    v = np.asarray(getattr(sensor, "velocity", np.zeros(2)), dtype=float)
+    if v.shape[-1:] != (2,):
+        raise ValueError(f"{where}: sensor velocity has shape {v.shape}; expected (..., 2)")
+    convention = getattr(sensor, "convention", "nautical")
+    return o, v, (1.0 if convention == "nautical" else -1.0)
+
+
+def _constant_velocity(motion, where: str) -> None:
+    if not (isinstance(getattr(motion, "motion", motion), ConstantVelocity)
+            and motion.dim_x == 4):
+        raise ValueError(f"{where}: motion is {type(motion).__name__}; expected a 2-D "
+                         "ConstantVelocity (the exact polar prediction assumes it)")
+
+
+# --------------------------------------------------------------------------------------------
+# Range-parameterised EKF
+# --------------------------------------------------------------------------------------------
+
+
+class RangeBankBelief(NamedTuple):
+    """Belief of the RPEKF: ``mean (..., C, n)`` and ``cov (..., C, n, n)`` of the C
+    component EKFs, ``log_weights (..., C)`` (normalised; ``-inf`` for a pruned component)
+    and ``split (...)``, whether the row's bank is built. Until its first bearing a row holds
+    its Gaussian in component 0 (the others are copies with weight 0)."""
+
+    mean: Array
+    cov: Array
+    log_weights: Array
+    split: Array
+
+    def at(self, index) -> RangeBankBelief:
+        """The belief at a batch index (every field indexed alike)."""
+        return RangeBankBelief(*(np.asarray(a)[index] for a in self))
+
+
+#: Gauss-Legendre rule for the moments of a normal density over a range cell
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(64)
+
+
+def _cell_moments(a_lo: Array, a_hi: Array) -> tuple[Array, Array, Array]:
+    """``log Z``, mean and variance of a standard normal restricted to ``[a_lo, a_hi]``
+    (``Z = Phi(a_hi) - Phi(a_lo)``).
+
+    With the cell's centre c and half-width h, ``s = c + t`` and the density over the cell
+    is ``phi(c) exp(-c t - t^2 / 2)``: its moments about c by 64-point Gauss-Legendre, in
+    log space. The closed forms (``mu = (phi(a) - phi(b)) / Z``, ...) cancel catastrophically
+    for a cell narrow against the prior's spread, where the variance is ``h^2 / 3`` beside
+    terms of order 1; the rule is exact to rounding for any cell of up to tens of sigma.
+    """
+    c = 0.5 * (a_lo + a_hi)
+    h = 0.5 * (a_hi - a_lo)
+    t = h[..., None] * _GL_NODES
+    ell = -c[..., None] * t - 0.5 * t * t
+    top = ell.max(-1, keepdims=True)
+    g = _GL_WEIGHTS * np.exp(ell - top)
+    S0 = g.sum(-1)
+    mean_t = (g * t).sum(-1) / S0
+    v = (g * (t - mean_t[..., None]) ** 2).sum(-1) / S0
+    logZ = -0.5 * c * c - 0.5 * math.log(2 * math.pi) + top[..., 0] + np.log(h * S0)
+    return logZ, c + mean_t, v
+
+
+def range_split(mean: ArrayLike, cov: ArrayLike, origin: ArrayLike, components: int = 16,
+                n_sigma: float = 4.0, r_min: float | None = None,
+                r_max: float | None = None) -> tuple[Array, Array, Array]:
+    """Split ``N(mean, cov)`` into a Gaussian sum along its line of sight from ``origin``.
+
+    With ``e`` the unit vector from ``origin`` through the prior's position (padded with
+    zeros to the state), ``s = e^T (x - mean)`` has variance ``sigma^2 = e^T P e`` and
+    ``x | s ~ N(mean + k s, P - sigma^2 k k^T)``, ``k = P e / sigma^2``. The range
+    ``r = rbar + s`` (``rbar = e^T (mean - origin)``) is cut into C cells whose edges are the
+    geometric grid ``r_j = r_lo (r_hi / r_lo)^(j / C)`` over ``[r_lo, r_hi]`` =
+    ``[rbar - n_sigma sigma, rbar + n_sigma sigma]`` (at least ``MIN_RANGE_FRACTION rbar``,
+    or clipped to ``[r_min, r_max]``); component i takes the prior's mass in its cell as its
+    weight and the prior's mean ``mu_i`` and variance ``v_i`` of s within it:
+    ``x_i = mean + k mu_i``, ``P_i = P - (sigma^2 - v_i) k k^T``.
+
+    So the mixture keeps the prior's mean and covariance (up to the mass outside the
+    interval, 6e-5 at 4 sigma), and each component's range spread is about its cell's,
+    ``(rho - 1) / ((rho + 1) sqrt 3)`` of its range with ``rho = (r_hi / r_lo)^(1 / C)``:
+    the constant coefficient of variation of the range-parameterised EKF.
+    Returns ``(means (..., C, n), covs (..., C, n, n), log_weights (..., C))``.
+    """
+    x = np.asarray(mean, dtype=float)
+    P = np.asarray(cov, dtype=float)
+    o = np.asarray(origin, dtype=float)
+    n = x.shape[-1]
+    d = x[..., :2] - o
+    rbar = np.hypot(d[..., 0], d[..., 1])
+    if not np.all(rbar > 0):
+        raise ValueError("range_split: the prior's mean position is on the observer "
+                         "(range 0); expected a target away from the origin")
+    e = np.zeros(np.broadcast_shapes(x.shape, d.shape[:-1] + (n,)))
+    e[..., :2] = d / rbar[..., None]
+    Pe = mm(P, e[..., None])[..., 0]
+    var = (e * Pe).sum(-1)
+    sigma = np.sqrt(var)
+    k = Pe / var[..., None]
+    lo = rbar - n_sigma * sigma
+    lo = np.maximum(lo, MIN_RANGE_FRACTION * rbar if r_min is None else r_min)
+    hi = rbar + n_sigma * sigma
+    if r_max is not None:
+        hi = np.minimum(hi, r_max)
+    if not np.all(hi > lo):
+        i = np.argwhere(~(hi > lo))[0] if np.ndim(hi) else ()
+        raise ValueError(
+            f"range_split: the range interval is empty at batch index {tuple(i)} "
+            f"([{float(lo[tuple(i)]):.6g}, {float(hi[tuple(i)]):.6g}] m): the prior's "
+            f"range {float(rbar[tuple(i)]):.6g} +- {n_sigma} x {float(sigma[tuple(i)]):.6g} m "
+            f"does not meet [r_min, r_max] = [{r_min}, {r_max}]")
+    edges = lo[..., None] * (hi / lo)[..., None] ** (np.arange(components + 1) / components)
+    a = (edges - rbar[..., None]) / sigma[..., None]
+    logZ, mu, v = _cell_moments(a[..., :-1], a[..., 1:])
+    logw = _normalise(logZ)
+    means = x[..., None, :] + (sigma[..., None] * mu)[..., None] * k[..., None, :]
+    kk = k[..., :, None] * k[..., None, :]
+    shrink = (var[..., None] * (1.0 - v))[..., None, None]  # sigma^2 - v_i, v_i in sigma^2
+    covs = P[..., None, :, :] - shrink * kk[..., None, :, :]
+    return means, symmetrize(covs), logw
+
+
+def _normalise(logw: Array) -> Array:
+    """Log weights shifted so that they sum to one (rows of -inf stay -inf)."""
+    top = logw.max(-1, keepdims=True)
+    with np.errstate(invalid="ignore"):
+        return logw - (top + np.log(np.exp(logw - top).sum(-1, keepdims=True)))
+
+
+class RPEKF(Filter):
+    """Range-parameterised EKF (Peach 1995; Arulampalam and Ristic 2000).
+
+    A bank of ``components`` EKFs. At a row's first bearing the Gaussian prior is split
+    along its line of sight from the sensor (:func:`range_split`): geometric range cells
+    over ``rbar -+ n_sigma sigma`` (clipped to ``[r_min, r_max]``), each component holding
+    the prior's mass, mean and spread within its cell, so the prior's information is kept
+    (its mean and covariance, up to the mass beyond ``n_sigma``) while each component's
+    range spread is a fixed fraction of its range. Then every component is an EKF and
+
+        w_i <- w_i N(z; h(x_i-), S_i) / sum_j w_j N(z; h(x_j-), S_j)
+
+    Components whose weight falls below ``prune`` get weight 0 for good (they are still
+    carried, so the arrays keep their shape). ``estimate`` is the moment-matched Gaussian
+    ``x = sum_i w_i x_i``, ``P = sum_i w_i (P_i + (x_i - x)(x_i - x)^T)``; the innovation is
+    the moment-matched one of the predicted measurement mixture.
+    """
+
+    name = "RPEKF"
+
+    def __init__(self, components: int = 16, n_sigma: float = 4.0, r_min: float | None = None,
+                 r_max: float | None = None, prune: float = 0.0) -> None:
+        if not (isinstance(components, int | np.integer) and components >= 1):
+            raise ValueError(f"RPEKF components = {components!r}; expected an integer >= 1")
+        if not (np.isfinite(n_sigma) and n_sigma > 0):
+            raise ValueError(f"RPEKF n_sigma = {n_sigma!r}; expected a number > 0 (prior "
+                             "standard deviations each side of its range)")
+        for name, value in (("r_min", r_min), ("r_max", r_max)):
+            if value is not None and not (np.isfinite(value) and value > 0):
+                raise ValueError(f"RPEKF {name} = {value!r}; expected a range > 0 m or None")
+        if r_min is not None and r_max is not None and not r_max > r_min:
+            raise ValueError(f"RPEKF r_max = {r_max!r}; expected a range > r_min = {r_min!r}")
+        if not (np.isfinite(prune) and 0 <= prune < 1.0 / components):
+            raise ValueError(f"RPEKF prune = {prune!r}; expected a weight in [0, "
+                             f"1 / components) = [0, {1.0 / components:.6g})")
+        self.components = int(components)
+        self.n_sigma = float(n_sigma)
+        self.r_min = None if r_min is None else float(r_min)
+        self.r_max = None if r_max is None else float(r_max)
+        self.prune = float(prune)
+
+    def init(self, prior: Gaussian) -> RangeBankBelief:
+        """Component 0 holds the prior until the row's first bearing (weight 1)."""
+        x, P = check_belief(prior, None, f"{self.name}.init prior")
+        C = self.components
+        batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2])
+        n = x.shape[-1]
+        X = np.broadcast_to(x[..., None, :], batch + (C, n)).copy()
+        PX = np.broadcast_to(P[..., None, :, :], batch + (C, n, n)).copy()
+        logw = np.full(batch + (C,), -np.inf)
+        logw[..., 0] = 0.0
+        return RangeBankBelief(X, register(PX), logw, np.zeros(batch, bool))
+
+    def _belief(self, belief, where: str) -> RangeBankBelief:
+        if isinstance(belief, RangeBankBelief):
+            return belief
+        if isinstance(belief, Gaussian):
+            return self.init(belief)
+        raise ValueError(f"{where}: belief is {type(belief).__name__}; expected a "
+                         "RangeBankBelief (RPEKF.init) or a Gaussian")
+
+    def estimate(self, belief: RangeBankBelief) -> Gaussian:
+        b = self._belief(belief, f"{self.name}.estimate")
+        w = np.exp(b.log_weights)
+        live = (w > 0)[..., None]
+        X = np.where(live, b.mean, 0.0)  # a pruned component may hold anything
+        P = np.where(live[..., None], b.cov, 0.0)
+        return Gaussian._make(combine(w, X, P))
+
+    def predict(self, belief: RangeBankBelief, motion, dt: ArrayLike) -> RangeBankBelief:
+        """Every component's EKF prediction; the weights do not change."""
+        b = self._belief(belief, f"{self.name}.predict belief")
+        g = _EKF.predict(Gaussian._make((b.mean, b.cov)), motion, dt)
+        return RangeBankBelief(g.mean, g.cov, b.log_weights, b.split)
+
+    def update(self, belief: RangeBankBelief, z: ArrayLike,
+               sensor) -> tuple[RangeBankBelief, Innovation]:
+        """Build the bank where this is the row's first bearing, then update every component
+        and reweight by its likelihood."""
+        b = self._belief(belief, f"{self.name}.update belief")
+        where = f"{self.name}.update"
+        z = check_measurement(z, sensor.dim_z, where, b.mean.shape[:-2])
+        miss = missing_rows(z)
+        X, PX, logw, split = b
+        build = ~split if miss is None else ~split & ~miss
+        if build.any():
+            o = np.broadcast_to(_origin(sensor, where), build.shape + (2,))
+            if build.all():
+                X, PX, logw = range_split(X[..., 0, :], PX[..., 0, :, :], o, self.components,
+                                          self.n_sigma, self.r_min, self.r_max)
+            else:  # only those rows: the others' component 0 is no prior any more
+                X, PX, logw = X.copy(), PX.copy(), logw.copy()
+                X[build], PX[build], logw[build] = range_split(
+                    X[build][:, 0], PX[build][:, 0], o[build], self.components, self.n_sigma,
+                    self.r_min, self.r_max)
+            split = split | build
+        # components lead while the sensor sees them: its pose broadcasts over the batch axes
+        g = Gaussian._make((np.moveaxis(X, -2, 0), register(np.moveaxis(PX, -3, 0))))
+        post, innov = _EKF.update(g, z, sensor)
+        nu, S = np.moveaxis(innov.residual, 0, -2), np.moveaxis(innov.cov, 0, -3)
+        c = np.exp(logw)
+        if miss is None:
+            loglik = gaussian_loglik(nu, S)
+        else:
+            loglik = gaussian_loglik(np.where(np.isnan(nu), 0.0, nu), S)
+            loglik = np.where(miss[..., None], 0.0, loglik)
+        new = _normalise(logw + loglik)
+        if self.prune > 0:
+            new = _normalise(np.where(np.exp(new) < self.prune, -np.inf, new))
+        v, Sm = mixture_innovation(c, np.where(c[..., None] > 0, nu, 0.0),
+                                   np.where(c[..., None, None] > 0, S, 0.0))
+        if miss is not None:
+            v = np.where(miss[..., None], np.nan, v)
+        out = RangeBankBelief(np.moveaxis(post.mean, 0, -2),
+                              register(np.moveaxis(post.cov, 0, -3)), new, split)
+        return out, Innovation(v, Sm)
+
+
+# --------------------------------------------------------------------------------------------
+# Modified polar coordinates: kernels
+# --------------------------------------------------------------------------------------------
+
+
+def _unit(beta: Array) -> tuple[Array, Array]:
+    """Line-of-sight unit vector ``u = (sin b, cos b)`` (nautical) and ``u' = du/db``."""
+    s, c = np.sin(beta), np.cos(beta)
+    return np.stack([s, c], -1), np.stack([c, -s], -1)
+
+
+def _polar(s1: Array, s2: Array, w: Array) -> tuple[Array, Array, Array, Array]:
+    """MPC of a relative position ``s1`` and velocity ``s2`` both divided by a range r0,
+    with ``w = 1 / r0``: ``beta = atan2(s1x, s1y)``, ``beta_dot = (s1y s2x - s1x s2y) /
+    |s1|^2``, ``r_dot / r = s1 . s2 / |s1|^2``, ``1 / r = w / |s1|``; and the derivatives
+    ``dy/ds1 (..., 4, 2)``, ``dy/ds2 (..., 4, 2)``, ``dy/dw (..., 4)``."""
+    x1, y1, x2, y2 = s1[..., 0], s1[..., 1], s2[..., 0], s2[..., 1]
+    rho2 = x1 * x1 + y1 * y1
+    rho = np.sqrt(rho2)
+    c = y1 * x2 - x1 * y2
+    d = x1 * x2 + y1 * y2
+    y = np.stack([np.arctan2(x1, y1), c / rho2, d / rho2, w / rho], -1)
+    r4 = rho2 * rho2
+    zero = np.zeros_like(rho)
+    d1 = np.stack([
+        np.stack([y1 / rho2, -x1 / rho2], -1),
+        np.stack([-y2 / rho2 - 2 * c * x1 / r4, x2 / rho2 - 2 * c * y1 / r4], -1),
+        np.stack([x2 / rho2 - 2 * d * x1 / r4, y2 / rho2 - 2 * d * y1 / r4], -1),
+        np.stack([-w * x1 / (rho2 * rho), -w * y1 / (rho2 * rho)], -1),
+    ], -2)
+    d2 = np.stack([
+        np.stack([zero, zero], -1),
+        np.stack([y1 / rho2, -x1 / rho2], -1),
+        np.stack([x1 / rho2, y1 / rho2], -1),
+        np.stack([zero, zero], -1),
+    ], -2)
+    dw = np.stack([zero, zero, zero, 1.0 / rho], -1)
+    return y, d1, d2, dw
+
+
+def mpc_from_relative(rel: ArrayLike) -> tuple[Array, Array]:
+    """MPC ``[beta, beta_dot, r_dot / r, 1 / r]`` of a relative state ``[x, y, vx, vy]``
+    (target minus observer) and its Jacobian ``(..., 4, 4)``:
+    ``beta = atan2(x, y)``, ``beta_dot = (y vx - x vy) / r^2``, ``r_dot / r = (x vx + y vy)
+    / r^2``."""
+    rel = np.asarray(rel, dtype=float)
+    y, d1, d2, _ = _polar(rel[..., :2], rel[..., 2:4], np.ones(rel.shape[:-1]))
+    return y, np.concatenate([d1, d2], -1)
+
+
+def mpc_to_cartesian(y: ArrayLike, origin: ArrayLike = (0.0, 0.0),
+                     velocity: ArrayLike = (0.0, 0.0)) -> tuple[Array, Array]:
+    """The target's ``[x, y, vx, vy]`` from MPC ``y`` relative to an observer at ``origin``
+    moving at ``velocity``, and the Jacobian ``d x / d y`` ``(..., 4, 4)``:
+    ``p = o + u / w``, ``v = v_o + (r_dot/r u + beta_dot u') / w`` with ``u = (sin b, cos b)``,
+    ``u' = (cos b, -sin b)`` and ``w = 1 / r``."""
+    y = np.asarray(y, dtype=float)
+    b, bd, rd, w = y[..., 0], y[..., 1], y[..., 2], y[..., 3]
+    u, up = _unit(b)
+    vr = rd[..., None] * u + bd[..., None] * up
+    inv = (1.0 / w)[..., None]
+    x = np.concatenate([np.asarray(origin, dtype=float) + u * inv,
+                        np.asarray(velocity, dtype=float) + vr * inv], -1)
+    zero = np.zeros(u.shape)
+    dpos = np.stack([up * inv, zero, zero, -u * inv**2], -1)  # (..., 2, 4)
+    dvel = np.stack([(rd[..., None] * up - bd[..., None] * u) * inv, up * inv, u * inv,
+                     -vr * inv**2], -1)
+    return x, np.concatenate([dpos, dvel], -2)
+
+
+def cartesian_to_mpc(x: ArrayLike, origin: ArrayLike = (0.0, 0.0),
+                     velocity: ArrayLike = (0.0, 0.0)) -> tuple[Array, Array]:
+    """MPC of the target state ``x = [x, y, vx, vy]`` relative to the observer (``origin``,
+    ``velocity``), and its Jacobian ``d y / d x``: :func:`mpc_from_relative` of
+    ``x - [origin, velocity]``."""
+    x = np.asarray(x, dtype=float)
+    ov = np.concatenate([np.broadcast_to(np.asarray(origin, dtype=float), x.shape[:-1] + (2,)),
+                         np.broadcast_to(np.asarray(velocity, dtype=float),
+                                         x.shape[:-1] + (2,))], -1)
+    return mpc_from_relative(x - ov)
+
+
+def mpc_transition(y: ArrayLike, dt: ArrayLike, dp: ArrayLike = (0.0, 0.0),
+                   dv: ArrayLike = (0.0, 0.0)) -> tuple[Array, Array]:
+    """The exact MPC prediction of a constant-velocity target over ``dt`` (Aidala and Hammel
+    1983), and its Jacobian ``d y' / d y`` ``(..., 4, 4)``.
+
+    ``dp`` and ``dv`` are the observer's deviation from constant velocity over the step
+    (its displacement minus ``v_o dt``, and its velocity change). With ``w = 1 / r``,
+    ``u = (sin b, cos b)`` and ``u' = du/db``, the relative position and velocity at the end
+    of the step, divided by the range at its start, are
+
+        s1 = u + dt (r_dot/r u + beta_dot u') - w dp
+        s2 = r_dot/r u + beta_dot u' - w dv
+
+    and ``y' = [atan2(s1x, s1y), (s1y s2x - s1x s2y) / |s1|^2, s1 . s2 / |s1|^2,
+    w / |s1|]``: no range is needed except where the observer manoeuvres (the ``w dp``,
+    ``w dv`` terms, through which range becomes observable).
+    """
+    y = np.asarray(y, dtype=float)
+    dp, dv = np.asarray(dp, dtype=float), np.asarray(dv, dtype=float)
+    dt = np.asarray(dt, dtype=float)[..., None]
+    b, bd, rd, w = y[..., 0], y[..., 1], y[..., 2], y[..., 3]
+    u, up = _unit(b)
+    vr = rd[..., None] * u + bd[..., None] * up
+    s1 = u + dt * vr - w[..., None] * dp
+    s2 = vr - w[..., None] * dv
+    yn, d1, d2, dw = _polar(s1, s2, w)
+    dvr_db = rd[..., None] * up - bd[..., None] * u  # du'/db = -u
+    shape = np.broadcast_shapes(s1.shape, dp.shape)
+    ds1 = np.stack([up + dt * dvr_db, dt * up, dt * u,
+                    np.broadcast_to(-dp, shape)], -1)  # (..., 2, 4)
+    ds2 = np.stack([dvr_db, up, u, np.broadcast_to(-dv, shape)], -1)
+    J = mm(d1, ds1) + mm(d2, ds2)
+    J[..., :, 3] += dw
+    return yn, J
+
+
+def _cubature(g, x: Array, P: Array, name: str) -> tuple[Array, Array]:
+    """Moments of ``g(x)``, x ~ N(x, P), by the third-degree cubature rule (2n points
+    ``x +- sqrt(n) L_j``, equal weights), with a circular mean and wrapped deviations for
+    the first output component (a bearing)."""
+    n = x.shape[-1]
+    L = cholesky(P, name)
+    cols = np.sqrt(n) * np.moveaxis(L, -1, 0)  # (n, ..., n): column j of L
+    Y = g(np.concatenate([x + cols, x - cols]))  # (2n, ..., 4)
+    b = np.arctan2(np.sin(Y[..., 0]).mean(0), np.cos(Y[..., 0]).mean(0))
+    y = Y.mean(0)
+    y[..., 0] = b
+    D = Y - y
+    D[..., 0] = wrap(D[..., 0])
+    return y, np.einsum("k...i,k...j->...ij", D, D) / (2 * n)
+
+
+# --------------------------------------------------------------------------------------------
+# Modified polar coordinates: the filter
+# --------------------------------------------------------------------------------------------
+
+
+class MPBelief(NamedTuple):
+    """Belief of the MPEKF. Where ``polar`` (a row has seen its first bearing), ``mean
+    (..., 4)`` and ``cov`` are the MPC state ``[beta, beta_dot, r_dot / r, 1 / r]`` relative
+    to an observer at ``origin (..., 2)`` moving at ``velocity (..., 2)``: the observer's
+    pose at the last update, carried forward at constant velocity by ``predict`` (the next
+    update shifts the frame to the observer's true pose, which is where its manoeuvre
+    enters). Elsewhere ``mean`` and ``cov`` are the Cartesian prior ``[x, y, vx, vy]``."""
+
+    mean: Array
+    cov: Array
+    origin: Array
+    velocity: Array
+    polar: Array
+
+    def at(self, index) -> MPBelief:
+        """The belief at a batch index (every field indexed alike)."""
+        return MPBelief(*(np.asarray(a)[index] for a in self))
+
+
+def _shifted(y: Array, P: Array, dt: ArrayLike, dp: Array, dv: Array) -> tuple[Array, Array]:
+    """``y' = f(y)`` and ``P' = J P J^T`` through :func:`mpc_transition`."""
+    yn, J = mpc_transition(y, dt, dp, dv)
+    return yn, symmetrize(mm(mm(J, P), J.mT))
+
+
+def _rows(mask: Array, *arrays: Array) -> list[Array]:
+    return [np.broadcast_to(a, mask.shape + a.shape[mask.ndim:])[mask] for a in arrays]
+
+
+class MPEKF(Filter):
+    """Modified-polar-coordinates EKF (Aidala and Hammel 1983) for a constant-velocity
+    target seen by one bearing sensor.
+
+    State ``y = [beta, beta_dot, r_dot / r, 1 / r]`` relative to the observer (beta
+    nautical). Prediction is exact for the target (:func:`mpc_transition`, with ``dp = dv =
+    0``: the observer assumed to keep its velocity), ``P- = F P F^T + G Q G^T`` with F its
+    Jacobian and G the Jacobian of the MPC of the relative Cartesian state at the predicted
+    point (Q the motion model's, Cartesian). At an update the frame moves to the sensor's
+    pose (``origin``, ``velocity``: the observer's manoeuvre since the last update, exact in
+    the mean, linearised in the covariance), then the bearing update is linear, ``H = [1, 0,
+    0, 0]`` (``-1`` for a "math" sensor), with the Joseph form.
+
+    Before a row's first bearing it carries the Cartesian prior (a KF prediction); at the
+    first bearing that Gaussian is carried into MPC at the sensor's pose by the cubature
+    rule (``1 / r`` is far from linear over a wide range prior, and a mean through the
+    Jacobian would be biased). ``estimate`` converts back: ``p = o + u / w``,
+    ``v = v_o + (r_dot/r u + beta_dot u') / w`` with its Jacobian for the covariance.
+
+    The sensor must carry the observer's ``velocity`` (``trackkit.models.Bearing(...,
+    velocity=...)``; the scenario engine sets it): a sensor without one says the observer is
+    at rest.
+    """
+
+    name = "MPEKF"
+
+    def init(self, prior: Gaussian) -> MPBelief:
+        x, P = check_belief(prior, 4, f"{self.name}.init prior")
+        batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2])
+        return MPBelief(np.broadcast_to(x, batch + (4,)).copy(),
+                        register(np.broadcast_to(P, batch + (4, 4)).copy()),
+                        np.zeros(batch + (2,)), np.zeros(batch + (2,)), np.zeros(batch, bool))
+
+    def _belief(self, belief, where: str) -> MPBelief:
+        if isinstance(belief, MPBelief):
+            return belief
+        if isinstance(belief, Gaussian):
+            return self.init(belief)
+        raise ValueError(f"{where}: belief is {type(belief).__name__}; expected an MPBelief "
+                         "(MPEKF.init) or a Gaussian")
+
+    def estimate(self, belief: MPBelief) -> Gaussian:
+        b = self._belief(belief, f"{self.name}.estimate")
+        if not b.polar.any():
+            return Gaussian._make((b.mean, b.cov))
+        if b.polar.all():
+            x, J = mpc_to_cartesian(b.mean, b.origin, b.velocity)
+            return Gaussian._make((x, symmetrize(mm(mm(J, b.cov), J.mT))))
+        x, P = b.mean.copy(), b.cov.copy()
+        y, Py, o, v = _rows(b.polar, b.mean, b.cov, b.origin, b.velocity)
+        xp, J = mpc_to_cartesian(y, o, v)
+        x[b.polar], P[b.polar] = xp, symmetrize(mm(mm(J, Py), J.mT))
+        return Gaussian._make((x, P))
+
+    def predict(self, belief: MPBelief, motion, dt: ArrayLike) -> MPBelief:
+        b = self._belief(belief, f"{self.name}.predict belief")
+        where = f"{self.name}.predict"
+        _constant_velocity(motion, where)
+        check_dt(dt, where)
+        y, P = check_belief(Gaussian._make((b.mean, b.cov)), 4, f"{where} belief")
+        polar = b.polar
+        origin = b.origin + np.asarray(dt, dtype=float)[..., None] * b.velocity
+        mean, cov = y.copy(), P.copy()
+        if polar.any():
+            if np.ndim(dt) == 0:
+                step = float(dt)
+            else:
+                step = np.broadcast_to(dt, polar.shape)[polar]
+            yp, Pp = _rows(polar, y, P)
+            yn, Pn = _shifted(yp, Pp, step, np.zeros(2), np.zeros(2))
+            yn[..., 0] = wrap(yn[..., 0])
+            # the target's process noise, Cartesian, carried into MPC at the predicted point
+            rel, _ = mpc_to_cartesian(yn)
+            _, G = mpc_from_relative(rel)
+            Q = np.asarray(motion.noise(rel, step), dtype=float)
+            mean[polar], cov[polar] = yn, symmetrize(Pn + mmT(mm(G, Q), G))
+        if not polar.all():
+            cart = ~polar
+            xc, Pc = _rows(cart, y, P)
+            step = dt if np.ndim(dt) == 0 else np.broadcast_to(dt, cart.shape)[cart]
+            g = _predict(xc, Pc, motion, step)
+            mean[cart], cov[cart] = g.mean, g.cov
+        return MPBelief(mean, register(symmetrize(cov)), origin, b.velocity, polar)
+
+    def update(self, belief: MPBelief, z: ArrayLike, sensor) -> tuple[MPBelief, Innovation]:
+        b = self._belief(belief, f"{self.name}.update belief")
+        where = f"{self.name}.update"
+        o, vo, sign = _bearing_sensor(sensor, where)
+        y, P = check_belief(Gaussian._make((b.mean, b.cov)), 4, f"{where} belief")
+        batch = y.shape[:-1]
+        z = check_measurement(z, 1, where, batch)
+        miss = missing_rows(z)
+        o = np.broadcast_to(o, batch + (2,))
+        vo = np.broadcast_to(vo, batch + (2,))
+        polar = b.polar
+        y, P = y.copy(), P.copy()
+        if polar.any():
+            # the frame moves to the observer's true pose: its manoeuvre since the last update
+            yp, Pp, dp, dv = _rows(polar, y, P, o - b.origin, vo - b.velocity)
+            yn, Pn = _shifted(yp, Pp, 0.0, dp, dv)
+            yn[..., 0] = wrap(yn[..., 0])
+            y[polar], P[polar] = yn, Pn
+        first = ~polar if miss is None else ~polar & ~np.broadcast_to(miss, batch)
+        if first.any():
+            xc, Pc, of, vf = _rows(first, y, P, o, vo)
+            y[first], P[first] = _cubature(
+                lambda X: cartesian_to_mpc(X, of, vf)[0], xc, Pc, f"{where} prior cov")
+        now_polar = polar | first
+        origin = np.where(now_polar[..., None], o, b.origin)
+        velocity = np.where(now_polar[..., None], vo, b.velocity)
+        H = np.array([[sign, 0.0, 0.0, 0.0]])
+        zhat = sign * y[..., :1] + (0.0 if sign > 0 else 0.5 * np.pi)
+        r = sensor.residual(z, zhat)
+        if miss is not None:
+            r = np.where(np.isnan(r), 0.0, r)
+        yn, Pn, S = _condition(y, P, r, H, sensor.noise)
+        yn[..., 0] = wrap(yn[..., 0])
+        post, innov = keep_prior_where_missing(miss, (y, P), output(yn, Pn, symmetric=True),
+                                               Innovation(r, S))
+        if not now_polar.all():  # rows still Cartesian have seen nothing
+            keep = ~now_polar
+            post = Gaussian._make((np.where(keep[..., None], y, post.mean),
+                                   register(np.where(keep[..., None, None], P, post.cov))))
+        return MPBelief(post.mean, post.cov, origin, velocity, now_polar), innov
+
+
+# --------------------------------------------------------------------------------------------
+# Particle filter with a range-interval prior
+# --------------------------------------------------------------------------------------------
+
+
+class PendingParticles(NamedTuple):
+    """Belief of a :class:`RangePF` drawing at its first bearing, until then: the Gaussian
+    prior (``mean (..., n)``, ``cov (..., n, n)``, predicted by an EKF step) and the
+    generator the particles will be drawn from."""
+
+    mean: Array
+    cov: Array
+    rng: np.random.Generator
+
+
+def _log_uniform_ranges(lo: Array, hi: Array, shape: tuple[int, ...],
+                        rng: np.random.Generator) -> Array:
+    """Ranges with ``log r ~ U(log lo, log hi)``, ``(..., N)``."""
+    u = rng.random(shape)
+    return lo[..., None] * (hi / lo)[..., None] ** u
+
+
+class RangePF(Filter):
+    """The bootstrap particle filter (:class:`~trackkit.filters.particle.PF`, whose options
+    the first five are) with a choice of prior.
+
+    ``prior="gaussian"``: the particles are drawn from the Gaussian prior at ``init``, as
+    ``PF.init`` does: the same information as every other filter and the PCRLB.
+    ``prior="range"``: at the row's first bearing z (sensor at o, noise sigma), particle
+    i is ``o + r_i (sin b_i, cos b_i)`` with ``b_i ~ N(z, sigma^2)`` (nautical) and
+    ``log r_i`` uniform over ``[r_min, r_max]`` (default: the prior's range along that line
+    of sight +- 4 of its standard deviations, at least 0.05 of the range, as the RPEKF), and
+    velocity drawn from the prior's velocity marginal; the weights are uniform, since the
+    bearing was used in the draw (the update at that step changes nothing else). This is the
+    prior of Arulampalam and Ristic (2000): it ignores what the Gaussian prior says about
+    range and cross-range, so against a PCRLB that includes that prior it gives information
+    away; it is for a user whose prior is only a range interval.
+    """
+
+    name = "PF"
+    stochastic = True
+
+    def __init__(self, n_particles: int = 1000, resampler: str = "systematic",
+                 ess_threshold: float = 0.5, regularise: bool = False,
+                 roughening: float = 0.0, prior: str = "gaussian", r_min: float | None = None,
+                 r_max: float | None = None) -> None:
+        self.pf = PF(n_particles, resampler, ess_threshold, regularise, roughening)
+        if prior not in ("gaussian", "range"):
+            raise ValueError(f"PF prior = {prior!r}; expected 'gaussian' or 'range'")
+        for name, value in (("r_min", r_min), ("r_max", r_max)):
+            if value is not None and not (np.isfinite(value) and value > 0):
+                raise ValueError(f"PF {name} = {value!r}; expected a range > 0 m or None")
+        if r_min is not None and r_max is not None and not r_max > r_min:
+            raise ValueError(f"PF r_max = {r_max!r}; expected a range > r_min = {r_min!r}")
+        if prior == "gaussian" and (r_min is not None or r_max is not None):
+            raise ValueError(f"PF r_min = {r_min!r}, r_max = {r_max!r}: the range interval is "
+                             "only for prior = 'range'")
+        self.prior = prior
+        self.r_min = None if r_min is None else float(r_min)
+        self.r_max = None if r_max is None else float(r_max)
+
+    def __repr__(self) -> str:
+        return (f"RangePF(pf={self.pf!r}, prior={self.prior!r}, r_min={self.r_min!r}, "
+                f"r_max={self.r_max!r})")
+
+    def init(self, prior: Gaussian, rng: np.random.Generator | None = None
+             ) -> Particles | PendingParticles:
+        if self.prior == "gaussian" or isinstance(prior, Particles):
+            return self.pf.init(prior, rng)
+        if rng is not None and not isinstance(rng, np.random.Generator):
+            raise ValueError(f"PF.init: rng is a {type(rng).__name__}; expected a "
+                             "numpy.random.Generator or None")
+        x, P = check_belief(prior, None, "PF.init prior")
+        batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2])
+        return PendingParticles(np.broadcast_to(x, batch + x.shape[-1:]).copy(),
+                                register(np.broadcast_to(P, batch + P.shape[-2:]).copy()),
+                                np.random.default_rng() if rng is None else rng)
+
+    def estimate(self, belief: Particles | PendingParticles) -> Gaussian:
+        if isinstance(belief, PendingParticles):
+            return Gaussian._make((belief.mean, belief.cov))
+        return self.pf.estimate(belief)
+
+    def predict(self, belief: Particles | PendingParticles, motion, dt: ArrayLike
+                ) -> Particles | PendingParticles:
+        if isinstance(belief, PendingParticles):
+            g = _EKF.predict(Gaussian._make((belief.mean, belief.cov)), motion, dt)
+            return PendingParticles(g.mean, g.cov, belief.rng)
+        return self.pf.predict(belief, motion, dt)
+
+    def update(self, belief: Particles | PendingParticles, z: ArrayLike,
+               sensor) -> tuple[Particles | PendingParticles, Innovation]:
+        if not isinstance(belief, PendingParticles):
+            return self.pf.update(belief, z, sensor)
+        where = "PF.update"
+        x, P = check_belief(Gaussian._make((belief.mean, belief.cov)), None, f"{where} belief")
+        o, _, sign = _bearing_sensor(sensor, where)
+        batch = x.shape[:-1]
+        z = check_measurement(z, 1, where, batch)
+        miss = missing_rows(z)
+        # the innovation of this step: the Gaussian prior's, as an EKF would report it
+        _, innov = _EKF.update(Gaussian._make((x, P)), z, sensor)
+        if miss is not None and miss.all():
+            return PendingParticles(x, P, belief.rng), innov
+        rng, N, n = belief.rng, self.pf.n_particles, x.shape[-1]
+        Xg = self.pf.init(Gaussian._make((x, P)), rng).states  # rows without a bearing
+        zb = np.broadcast_to(z[..., 0] if miss is None else np.where(miss, 0.0, z[..., 0]),
+                             batch)
+        beta = sign * (zb - (0.0 if sign > 0 else 0.5 * np.pi))  # nautical bearing of z
+        u = np.stack([np.sin(beta), np.cos(beta)], -1)
+        o = np.broadcast_to(o, batch + (2,))
+        rbar = ((x[..., :2] - o) * u).sum(-1)
+        sigma = np.sqrt(np.einsum("...i,...ij,...j->...", u, P[..., :2, :2], u))
+        lo = np.maximum(rbar - 4.0 * sigma, MIN_RANGE_FRACTION * np.abs(rbar))
+        lo = lo if self.r_min is None else np.full(batch, self.r_min)
+        hi = rbar + 4.0 * sigma if self.r_max is None else np.full(batch, self.r_max)
+        if not np.all(hi > lo):
+            raise ValueError(f"{where}: the range interval [r_min, r_max] = [{self.r_min}, "
+                             f"{self.r_max}] is empty for the prior's line of sight; "
+                             "expected r_max > r_min > 0")
+        r = _log_uniform_ranges(lo, hi, batch + (N,), rng)
+        b = beta[..., None] + sign * np.sqrt(sensor.noise[..., 0, 0]) * rng.standard_normal(
+            batch + (N,))
+        X = np.empty(batch + (N, n))
+        X[..., 0] = o[..., None, 0] + r * np.sin(b)
+        X[..., 1] = o[..., None, 1] + r * np.cos(b)
+        X[..., 2:] = Xg[..., 2:]  # velocity (and any extras) from the Gaussian prior
+        lw = np.full(batch + (N,), -math.log(N))
+        if miss is not None:  # those rows keep the Gaussian draw, as the PF would make it
+            X = np.where(miss[..., None, None], Xg, X)
+        return Particles._make((register(X), lw, rng, None)), innov
