@@ -1,17 +1,112 @@
-"""Shared helpers for the core tests: finite differences, random SPD matrices, tolerances.
+"""Shared helpers for the core tests: finite differences, random SPD matrices, tolerances; and
+how many processes run the suite.
 
 The helpers are handed to tests through the session fixture ``num`` (not imported by module
 name, so that another ``conftest.py`` under ``tests/`` can never shadow them); session scope
 keeps them usable inside hypothesis tests.
+
+``pytest`` runs the files on pytest-xdist workers (``-n auto --dist loadfile`` in
+pyproject.toml): one worker per CPU this process may really use, none (in-process) on one CPU.
+Each worker's BLAS gets its share of the CPUs, so that two workers do not each start a thread
+per core and fight over them.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
+# --- parallel runs (pytest-xdist) -----------------------------------------------------------
+
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _cgroup_cpus() -> int | None:
+    """Whole CPUs allowed by a cgroup CPU quota (v2, then v1), or None without a quota: a
+    container on a large host sees every host core in ``os.cpu_count()``."""
+    try:
+        quota, period = Path("/sys/fs/cgroup/cpu.max").read_text().split()
+    except (OSError, ValueError):
+        try:
+            quota = Path("/sys/fs/cgroup/cpu/cpu.cfs_quota_us").read_text().strip()
+            period = Path("/sys/fs/cgroup/cpu/cpu.cfs_period_us").read_text().strip()
+        except OSError:
+            return None
+    if quota in ("max", "-1"):
+        return None
+    return max(1, int(quota) // int(period))
+
+
+def usable_cpus(logical: bool = False) -> int:
+    """CPUs this process may use: the least of the (physical, unless ``logical``) core count,
+    the affinity mask and the cgroup quota."""
+    counts = [os.cpu_count() or 1]
+    try:
+        import psutil  # a dask.distributed dependency
+    except ImportError:  # pragma: no cover
+        pass
+    else:
+        counts.append(psutil.cpu_count(logical=logical) or counts[0])
+    if hasattr(os, "sched_getaffinity"):
+        counts.append(len(os.sched_getaffinity(0)))
+    counts.append(_cgroup_cpus() or counts[0])
+    return max(1, min(counts))
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto``: one worker per usable CPU; 0 (run in this process) on one CPU, where a
+    lone worker would only add its start-up. ``PYTEST_XDIST_AUTO_NUM_WORKERS`` still wins."""
+    forced = os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS")
+    if forced:
+        return int(forced)
+    n = usable_cpus(logical=config.option.numprocesses == "logical")
+    return n if n > 1 else 0
+
+
+# Tests that fill the same costly per-process cache go to one worker as one unit: the seed-000
+# tunings, which trackkit.eval.tuning caches per scenario per process, take about 5 min of CPU;
+# on two workers they would be computed twice. Keys are node-id prefixes.
+SHARED_CACHE_UNITS = {
+    "tests/report/test_show_roundtrip.py::test_show_then_compare_gives_the_same_results_tuned":
+        "seed-000 tunings",
+    "tests/statistical/test_seed000.py::": "seed-000 tunings",
+}
+
+
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """``--dist loadfile`` with the units of ``SHARED_CACHE_UNITS``: a file's tests stay on one
+    worker (its module fixtures, Monte Carlo runs, are computed once), and so do the tests
+    sharing a cache across files."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class SharedCacheScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            for prefix, unit in SHARED_CACHE_UNITS.items():
+                if nodeid.startswith(prefix):
+                    return unit
+            return super()._split_scope(nodeid)
+
+    return SharedCacheScheduling(config, log)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # the controller sets this before it starts the workers, which inherit it (as do the Dask
+    # and CLI processes they start); a value the user exported is kept
+    workers = getattr(config.option, "numprocesses", None)
+    if isinstance(workers, int) and workers > 1 and "PYTEST_XDIST_WORKER" not in os.environ:
+        share = str(max(1, usable_cpus() // workers))
+        for var in BLAS_THREADS:
+            os.environ.setdefault(var, share)
+
 
 
 def fd_jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, h: float = 1e-6,
