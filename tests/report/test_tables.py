@@ -84,3 +84,22 @@ def test_html_table_is_escaped_markup():
     assert "RMSE course<br>[deg]" in out
     assert out.count("<tr") == 1 + len(r.filters) + 1  # header, filters, PCRLB
     assert '<tr class="bound"><th>PCRLB</th>' in out
+
+
+def test_summary_ranks_the_filters_by_rmse_over_the_bound():
+    """The rank column orders the filters by the first bounded group's RMSE/PCRLB (1 the
+    best), rows staying in the scenario's order; without a bound, by the first group's RMSE."""
+    from trackkit.report.tables import ranks
+
+    r = fake_result()
+    s = summary(r)
+    col = s.headers.index("rank")
+    g = next(g for g in r.groups if math.isfinite(r.pcrlb_mean.get(g, math.nan)))
+    by_efficiency = sorted(r.filters, key=lambda n: r.efficiency(n, g))
+    got = {row[0]: row[col] for row in s.rows}
+    assert [got[n] for n in by_efficiency] == [str(i + 1) for i in range(len(by_efficiency))]
+    assert got["PCRLB"] == ""
+    r.pcrlb, r.pcrlb_mean = {}, {}
+    first = next(iter(r.groups))
+    assert sorted(ranks(r), key=ranks(r).get) == sorted(
+        r.filters, key=lambda n: r.filters[n].rmse_mean[first])

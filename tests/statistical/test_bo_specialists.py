@@ -159,3 +159,6 @@ def test_the_report_ranks_them_and_gives_their_nees(bo_cv):
         assert float(row[col["ANEES"]]) == pytest.approx(result.filters[name].anees, rel=1e-2)
     for name in ("RPEKF", "MPEKF"):
         assert 3.0 < result.filters[name].anees < 5.0
+    place = {n: int(rows[n][col["rank"]]) for n in result.filters if rows[n][col["rank"]] != "-"}
+    assert sorted(place, key=place.get) == sorted(place, key=lambda n: efficiency(result, n))
+    assert place["MPEKF"] == 1

@@ -76,16 +76,17 @@ def summary(result: MonteCarloResult) -> Summary:
     """The summary table of ``result`` as display strings (angle groups in degrees)."""
     groups = [g for g in result.groups if any(g in f.rmse_mean for f in result.filters.values())]
     bounded = [g for g in groups if math.isfinite(result.pcrlb_mean.get(g, math.nan))]
-    headers = ["filter"]
+    headers = ["filter", "rank"]
     for g in groups:
         label, _ = display_unit(result.groups[g])
         headers.append(f"RMSE {g}\n[{label}]")
     headers += [f"RMSE/PCRLB\n{g}" for g in bounded]
     headers += ["ANEES", "ANIS", "NEES in\n95% bounds", "diverged\nruns", "time\nper step"]
 
+    rank = ranks(result)
     rows: list[list[str]] = []
     for name, f in result.filters.items():
-        row = [name]
+        row = [name, str(rank[name]) if name in rank else "-"]
         for g in groups:
             _, factor = display_unit(result.groups[g])
             row.append(_num(f.rmse_mean.get(g, math.nan) * factor))
@@ -95,7 +96,7 @@ def summary(result: MonteCarloResult) -> Summary:
                 _seconds(f.seconds_per_step)]
         rows.append(row)
     if bounded:
-        row = ["PCRLB"]
+        row = ["PCRLB", ""]
         for g in groups:
             _, factor = display_unit(result.groups[g])
             row.append(_num(result.pcrlb_mean.get(g, math.nan) * factor))
@@ -108,6 +109,22 @@ def summary(result: MonteCarloResult) -> Summary:
     caption = (f"{result.scenario}: {result.runs} runs, seed {result.seed}, {result.steps} steps "
                f"of {result.dt:g} s; averages over {span}")
     return Summary(headers, rows, caption)
+
+
+def ranks(result: MonteCarloResult) -> dict[str, int]:
+    """Each filter's place, 1 the best: by RMSE over the PCRLB of the first group that has a
+    bound (else by the first group's RMSE), time-averaged as in the summary; a filter whose
+    number is not finite (no steps, or diverged to nan) gets no place."""
+    groups = [g for g in result.groups if any(g in f.rmse_mean for f in result.filters.values())]
+    if not groups:
+        return {}
+    bounded = [g for g in groups if math.isfinite(result.pcrlb_mean.get(g, math.nan))]
+    if bounded:
+        score = {n: result.efficiency(n, bounded[0]) for n in result.filters}
+    else:
+        score = {n: f.rmse_mean.get(groups[0], math.nan) for n, f in result.filters.items()}
+    placed = sorted((v, n) for n, v in score.items() if math.isfinite(v))
+    return {n: i + 1 for i, (_, n) in enumerate(placed)}
 
 
 def averaging_window(result: MonteCarloResult) -> dict:
