@@ -509,3 +509,69 @@ def test_range_pf_spreads_its_particles_along_the_first_bearing():
         RangePF(prior="uniform")
     with pytest.raises(ValueError, match="r_max = 1000.0"):
         RangePF(prior="range", r_min=2e3, r_max=1e3)
+
+
+def test_the_prior_conditioned_on_a_bearing_is_the_bayes_posterior():
+    """prior = "bearing" (conditioned_on_bearing): the weighted particles' moments equal
+    those of the exact posterior after one bearing, here computed by brute-force importance
+    sampling of 4 million prior draws weighted by the bearing's likelihood, for a prior with
+    position-velocity correlation and a bearing 2.5 prior sigmas off its mean. Tolerance: 5
+    combined standard errors of the two estimates' means (ESS 365 000 and 49 000); the spreads
+    to 2 %. Its effective sample size is 91 % of its 400 000 draws, where drawing from the
+    prior keeps 1.2 %."""
+    import math
+
+    from trackkit.filters import resample as rs
+    from trackkit.filters.bearings_only import conditioned_on_bearing
+
+    rng = np.random.default_rng(1)
+    x = np.array([1000.0, 12000.0, -3.0, 2.0])
+    P = np.diag([2000.0, 2500.0, 4.0, 4.0]) ** 2
+    P[0, 2] = P[2, 0] = 0.3 * 2000.0 * 4.0
+    beta = math.atan2(5000.0, 10000.0) + 0.005
+    N = 400_000
+    X, lw = conditioned_on_bearing(x[None], P[None], np.zeros((1, 2)), np.array([beta]),
+                                   np.array([SIGMA]), N, rng)
+    w = np.exp(lw)
+    np.testing.assert_allclose(w.sum(), 1.0, rtol=1e-12)
+    ess = float(rs.effective_sample_size(lw)[0])
+    assert ess > 0.9 * N
+    m, C = rs.weighted_mean_cov(X, w)
+    Y = rng.multivariate_normal(x, P, size=4_000_000)
+    ll = -0.5 * (tk.angles.wrap(np.arctan2(Y[:, 0], Y[:, 1]) - beta) / SIGMA) ** 2
+    v = np.exp(ll - ll.max())
+    v /= v.sum()
+    ess_brute = 1.0 / np.sum(v * v)
+    assert ess_brute < 0.02 * len(Y)  # the prior's draws: about 1 in 80 kept
+    m2, C2 = rs.weighted_mean_cov(Y[None], v[None])
+    sd = np.sqrt(np.diag(C2[0]))
+    se = sd * np.sqrt(1 / ess + 1 / ess_brute)
+    assert np.all(np.abs(m[0] - m2[0]) < 5 * se), (m[0] - m2[0]) / se
+    np.testing.assert_allclose(np.sqrt(np.diag(C[0])), sd, rtol=0.02)
+    # every particle lies on the bearing's rays: its bearing ~ N(beta, sigma^2)
+    b = np.arctan2(X[0, :, 0], X[0, :, 1])
+    assert abs(b.mean() - beta) < 5 * SIGMA / math.sqrt(N) and abs(b.std() / SIGMA - 1) < 0.01
+
+
+def test_range_pf_conditioned_on_the_first_bearing():
+    """prior = "bearing" waits for the first bearing as "range" does, then draws there (rows
+    without it draw from their Gaussian), resamples a row whose ESS is low and keeps the
+    filter's options; r_min and r_max are refused with it."""
+    f = RangePF(2000, prior="bearing", ess_threshold=1.0, regularise=True, shrink=True)
+    x0 = np.array([[0.0, 1.2e4, 2.0, -1.0], [1e3, 9e3, 0.0, 1.0]])
+    b = f.init(tk.Gaussian(x0, np.tile(P0, (2, 1, 1))), np.random.default_rng(8))
+    assert isinstance(b, PendingParticles)
+    b = f.predict(b, CV, 5.0)
+    sensor = tk.models.Bearing([100.0, -200.0], SIGMA)
+    p, innov = f.update(b, np.array([[0.05], [np.nan]]), sensor)
+    assert isinstance(p, tk.Particles) and np.isnan(innov.residual[1]).all()
+    np.testing.assert_allclose(np.exp(p.log_weights).sum(-1), 1.0, rtol=1e-12)
+    d = p.states[0, :, :2] - [100.0, -200.0]
+    assert np.abs(tk.angles.wrap(np.arctan2(d[:, 0], d[:, 1]) - 0.05)).max() < 8 * SIGMA
+    assert np.ptp(p.states[1, :, 0]) > 5000  # row 1: the Gaussian draw, km wide
+    g = f.estimate(f.predict(p, CV, 5.0))
+    assert np.isfinite(g.cov).all()
+    with pytest.raises(ValueError, match="only for prior = 'range'"):
+        RangePF(prior="bearing", r_max=1e4)
+    with pytest.raises(ValueError, match="'gaussian', 'bearing' or 'range'"):
+        RangePF(prior="uniform")

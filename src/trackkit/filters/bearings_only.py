@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation, Particles
+from trackkit.filters import resample as rs
 from trackkit.filters.base import (
     Filter,
     check_belief,
@@ -48,7 +49,7 @@ from trackkit.filters.base import (
 )
 from trackkit.filters.imm import combine, mixture_innovation
 from trackkit.filters.kalman import EKF, _condition, _predict
-from trackkit.filters.particle import PF
+from trackkit.filters.particle import PF, resample_rows
 from trackkit.linalg import cholesky, gaussian_loglik, mm, mmT, symmetrize
 from trackkit.models.motion import ConstantVelocity
 
@@ -658,12 +659,68 @@ def _log_uniform_ranges(lo: Array, hi: Array, shape: tuple[int, ...],
     return lo[..., None] * (hi / lo)[..., None] ** u
 
 
+def conditioned_on_bearing(x: Array, P: Array, origin: Array, beta: Array, sigma: Array,
+                           n_particles: int, rng: np.random.Generator) -> tuple[Array, Array]:
+    """Particles and log-weights of the Gaussian prior ``N(x, P)`` conditioned on one
+    bearing, by importance sampling along the bearing's rays (exact for any Gaussian prior).
+
+    With ``u(b) = (sin b, cos b)`` (nautical), a position on the ray of bearing b from the
+    sensor o is ``p = o + r u``, and along that ray the prior's position density is Gaussian
+    in r: with ``Lambda = P_pp^-1``, ``d = x_p - o``, ``a = u^T Lambda u`` and
+    ``mu = u^T Lambda d / a``, ``N(p; x_p, P_pp) = K(b) N(r; mu, 1/a) / Phi(mu sqrt(a))``,
+    ``K(b) = exp(-(d^T Lambda d - a mu^2) / 2) Phi(mu sqrt(a)) / (2 pi sqrt(a |P_pp|))``.
+    The proposal draws ``b ~ N(beta, sigma^2)`` (beta the measured bearing), then
+    ``r ~ N(mu, 1/a)`` truncated to ``r > 0``, then the other components from the prior
+    conditioned on the position, ``N(x_v + P_vp Lambda (p - x_p), P_vv - P_vp Lambda P_pv)``.
+    Its density in Cartesian coordinates carries the polar Jacobian ``1 / r``, and the
+    bearing's likelihood ``N(beta; b, sigma^2)`` equals the proposal's ``N(b; beta,
+    sigma^2)``, so the weight ``prior x likelihood / proposal`` is ``K(b) r``.
+
+    ``x (..., n)``, ``P (..., n, n)`` (positions first), ``origin (..., 2)``, ``beta (...)``
+    nautical, ``sigma (...)``; returns ``(states (..., N, n), log_weights (..., N))``,
+    normalised.
+    """
+    from scipy.special import log_ndtr, ndtr, ndtri
+
+    batch, n, N = x.shape[:-1], x.shape[-1], n_particles
+    b = beta[..., None] + sigma[..., None] * rng.standard_normal(batch + (N,))
+    u = np.stack([np.sin(b), np.cos(b)], -1)  # (..., N, 2)
+    Lam = np.linalg.inv(P[..., :2, :2])
+    d = x[..., :2] - origin
+    Lu = u @ Lam  # Lambda is symmetric: rows u^T Lambda
+    a = (Lu * u).sum(-1)
+    mu = (Lu * d[..., None, :]).sum(-1) / a
+    s = 1.0 / np.sqrt(a)
+    # r = mu + s Y, Y > -mu / s: Y = -ndtri(V Phi(mu / s)), V ~ U(0, 1] (the upper tail's
+    # form stays accurate when the ray points away from the prior and Phi(mu / s) is tiny)
+    v = 1.0 - rng.random(batch + (N,))
+    r = np.maximum(mu - s * ndtri(v * ndtr(mu / s)), 1e-9 * np.abs(mu) + 1e-300)
+    X = np.empty(batch + (N, n))
+    X[..., :2] = origin[..., None, :] + r[..., None] * u
+    if n > 2:
+        G = P[..., 2:, :2] @ Lam  # P_vp Lambda
+        Xv = x[..., None, 2:] + (X[..., :2] - x[..., None, :2]) @ G.mT
+        L = rs.psd_factor(P[..., 2:, 2:] - G @ P[..., :2, 2:], "PF.update: prior velocity")
+        X[..., 2:] = Xv + rng.standard_normal(batch + (N, n - 2)) @ L.mT
+    dLd = (d * (Lam @ d[..., None])[..., 0]).sum(-1)
+    lw = -0.5 * (dLd[..., None] - a * mu * mu) + log_ndtr(mu / s) - 0.5 * np.log(a) + np.log(r)
+    lw, _ = rs.normalise_log_weights(lw)
+    return X, lw
+
+
 class RangePF(Filter):
     """The bootstrap particle filter (:class:`~trackkit.filters.particle.PF`, whose options
-    the first five are) with a choice of prior.
+    the first five and ``shrink`` are) with a choice of prior.
 
     ``prior="gaussian"``: the particles are drawn from the Gaussian prior at ``init``, as
     ``PF.init`` does: the same information as every other filter and the PCRLB.
+    ``prior="bearing"``: the same Gaussian prior, but drawn at the row's first bearing and
+    conditioned on it (:func:`conditioned_on_bearing`: along the bearing's rays, ranges from
+    the prior's density on each ray, the rest from the prior given the position, weighted
+    exactly). A prior that is wide across the line of sight (km, against a bearing's tens of
+    metres) leaves only a few of its draws near the bearing, and fewer still when the target
+    lies in the prior's tail; this puts every particle where the bearing allows, with the
+    same information as ``"gaussian"``.
     ``prior="range"``: at the row's first bearing z (sensor at o, noise sigma), particle
     i is ``o + r_i (sin b_i, cos b_i)`` with ``b_i ~ N(z, sigma^2)`` (nautical) and
     ``log r_i`` uniform over ``[r_min, r_max]`` (default: the prior's range along that line
@@ -681,16 +738,17 @@ class RangePF(Filter):
     def __init__(self, n_particles: int = 1000, resampler: str = "systematic",
                  ess_threshold: float = 0.5, regularise: bool = False,
                  roughening: float = 0.0, prior: str = "gaussian", r_min: float | None = None,
-                 r_max: float | None = None) -> None:
-        self.pf = PF(n_particles, resampler, ess_threshold, regularise, roughening)
-        if prior not in ("gaussian", "range"):
-            raise ValueError(f"PF prior = {prior!r}; expected 'gaussian' or 'range'")
+                 r_max: float | None = None, shrink: bool = False) -> None:
+        self.pf = PF(n_particles, resampler, ess_threshold, regularise, roughening,
+                     shrink=shrink)
+        if prior not in ("gaussian", "bearing", "range"):
+            raise ValueError(f"PF prior = {prior!r}; expected 'gaussian', 'bearing' or 'range'")
         for name, value in (("r_min", r_min), ("r_max", r_max)):
             if value is not None and not (np.isfinite(value) and value > 0):
                 raise ValueError(f"PF {name} = {value!r}; expected a range > 0 m or None")
         if r_min is not None and r_max is not None and not r_max > r_min:
             raise ValueError(f"PF r_max = {r_max!r}; expected a range > r_min = {r_min!r}")
-        if prior == "gaussian" and (r_min is not None or r_max is not None):
+        if prior != "range" and (r_min is not None or r_max is not None):
             raise ValueError(f"PF r_min = {r_min!r}, r_max = {r_max!r}: the range interval is "
                              "only for prior = 'range'")
         self.prior = prior
@@ -745,8 +803,18 @@ class RangePF(Filter):
         zb = np.broadcast_to(z[..., 0] if miss is None else np.where(miss, 0.0, z[..., 0]),
                              batch)
         beta = sign * (zb - (0.0 if sign > 0 else 0.5 * np.pi))  # nautical bearing of z
-        u = np.stack([np.sin(beta), np.cos(beta)], -1)
         o = np.broadcast_to(o, batch + (2,))
+        sigma_b = np.broadcast_to(np.sqrt(sensor.noise[..., 0, 0]), batch)
+        if self.prior == "bearing":
+            X, lw = conditioned_on_bearing(x, P, o, beta, sigma_b, N, rng)
+            if miss is not None:  # those rows keep the Gaussian draw, as the PF would make it
+                X = np.where(miss[..., None, None], Xg, X)
+                lw = np.where(miss[..., None], -math.log(N), lw)
+            pf = self.pf
+            X, lw, _ = resample_rows(X, lw, rng, pf.ess_threshold, pf.resampler, pf.regularise,
+                                     pf.roughening, (), miss, None, pf.shrink)
+            return Particles._make((register(X), lw, rng, None)), innov
+        u = np.stack([np.sin(beta), np.cos(beta)], -1)
         rbar = ((x[..., :2] - o) * u).sum(-1)
         sigma = np.sqrt(np.einsum("...i,...ij,...j->...", u, P[..., :2, :2], u))
         lo = np.maximum(rbar - 4.0 * sigma, MIN_RANGE_FRACTION * np.abs(rbar))
@@ -757,8 +825,7 @@ class RangePF(Filter):
                              f"{self.r_max}] is empty for the prior's line of sight; "
                              "expected r_max > r_min > 0")
         r = _log_uniform_ranges(lo, hi, batch + (N,), rng)
-        b = beta[..., None] + sign * np.sqrt(sensor.noise[..., 0, 0]) * rng.standard_normal(
-            batch + (N,))
+        b = beta[..., None] + sign * sigma_b[..., None] * rng.standard_normal(batch + (N,))
         X = np.empty(batch + (N, n))
         X[..., 0] = o[..., None, 0] + r * np.sin(b)
         X[..., 1] = o[..., None, 1] + r * np.cos(b)

@@ -11,8 +11,8 @@ draws from. With the motion model as the proposal, one step is
   ``log w_i <- log w_i - L``, ``L = logsumexp_i(log w_i)``;
 * resample the rows whose effective sample size ``ESS = 1 / sum_i w_i^2`` is below
   ``ess_threshold * N`` (only those rows), with uniform weights afterwards, then optionally
-  regularise (a Gaussian-kernel jitter, Musso et al.) or roughen them (see
-  :mod:`trackkit.filters.resample`).
+  regularise (a Gaussian-kernel jitter, Musso et al., with or without Liu and West's
+  shrinkage towards the mean) or roughen them (see :mod:`trackkit.filters.resample`).
 
 Weights stay in log space throughout, so a measurement that every particle finds very
 unlikely still gives finite, normalised weights. If no particle can explain a measurement at
@@ -307,12 +307,14 @@ def resample_rows(states: Array, log_weights: Array, rng: np.random.Generator,
                   ess_threshold: float = 0.5, resampler: str = "systematic",
                   regularise: bool = False, roughening: float = 0.0,
                   angles: Sequence[int] = (), keep: NDArray[np.bool_] | None = None,
-                  weights: Array | None = None) -> tuple[Array, Array, NDArray[np.bool_]]:
+                  weights: Array | None = None,
+                  shrink: bool = False) -> tuple[Array, Array, NDArray[np.bool_]]:
     """Resample the rows whose ``ESS < ess_threshold * N`` (except rows marked in ``keep``);
     returns ``(states, log_weights, resampled)`` with ``resampled (...)`` the rows that were.
     Resampled rows get uniform weights and, with ``regularise``, the Gaussian-kernel jitter
-    scaled by their weighted covariance before resampling, or with ``roughening = K > 0`` the
-    Gordon-Salmond-Smith jitter. ``weights``: ``exp(log_weights)`` if already computed. The
+    scaled by their weighted covariance before resampling (with ``shrink``, after a pull
+    towards their weighted mean that keeps that covariance), or with ``roughening = K > 0``
+    the Gordon-Salmond-Smith jitter. ``weights``: ``exp(log_weights)`` if already computed. The
     inputs are not modified."""
     N, n = states.shape[-2:]
     w = np.exp(log_weights) if weights is None else weights
@@ -327,12 +329,13 @@ def resample_rows(states: Array, log_weights: Array, rng: np.random.Generator,
     w = w.reshape(-1, N)
     if rows.size < w.shape[0]:
         w = w[rows]
-    S = rs.weighted_mean_cov(X2[rows], w, angles)[1] if regularise else None
+    m, S = rs.weighted_mean_cov(X2[rows], w, angles) if regularise else (None, None)
     a = rs.KERNELS[resampler](w, rng, N)
     flat_rows = X2.reshape(-1, n)
     Xr = np.take(flat_rows, (a + (rows * N)[:, None]).ravel(), axis=0).reshape(rows.size, N, n)
     if regularise:
-        Xr = rs.regularise(Xr, np.full((rows.size, N), 1.0 / N), rng, cov=S, angles=angles)
+        Xr = rs.regularise(Xr, np.full((rows.size, N), 1.0 / N), rng, cov=S, angles=angles,
+                           shrink=shrink, mean=m, cov_is_sample=True)
     elif roughening > 0:
         Xr = rs.roughen(Xr, rng, roughening, angles)
     flat = -math.log(N)
@@ -407,9 +410,12 @@ class PF(Filter):
     ``resampler``: "systematic" (default), "stratified", "residual" or "multinomial";
     ``ess_threshold``: resample a row when its ESS is below ``ess_threshold * N`` (0 never,
     1 whenever the weights are not uniform); ``regularise``: Gaussian-kernel jitter after
-    resampling (the regularised PF); ``roughening``: Gordon-Salmond-Smith's K (0 off; at
-    most one of the two); ``angles``: state components that are angles (wrapped after every
-    move, averaged circularly by ``estimate``).
+    resampling (the regularised PF); ``shrink``: with ``regularise``, pull the resampled
+    particles towards their mean by ``sqrt(1 - h^2)`` first (Liu and West), so the jitter
+    keeps the cloud's covariance instead of widening it by ``1 + h^2`` at every resampling;
+    ``roughening``: Gordon-Salmond-Smith's K (0 off; at most one of it and regularise);
+    ``angles``: state components that are angles (wrapped after every move, averaged
+    circularly by ``estimate``).
 
     ``init(prior, rng)`` draws the particles from a Gaussian prior (or takes a
     :class:`~trackkit.belief.Particles`); every later draw comes from the generator carried
@@ -421,7 +427,8 @@ class PF(Filter):
 
     def __init__(self, n_particles: int = 1000, resampler: str = "systematic",
                  ess_threshold: float = 0.5, regularise: bool = False,
-                 roughening: float = 0.0, angles: tuple[int, ...] = ()) -> None:
+                 roughening: float = 0.0, angles: tuple[int, ...] = (),
+                 shrink: bool = False) -> None:
         if (isinstance(n_particles, bool) or not isinstance(n_particles, int | np.integer)
                 or n_particles < 1):
             raise ValueError(f"PF n_particles = {n_particles!r}; expected an integer >= 1")
@@ -437,6 +444,14 @@ class PF(Filter):
                 and roughening >= 0):
             raise ValueError(f"PF roughening = {roughening!r}; expected a number >= 0 "
                              "(Gordon's K, 0 for none)")
+        if not isinstance(shrink, bool | np.bool_):
+            raise ValueError(f"PF shrink = {shrink!r}; expected True or False")
+        if shrink and not regularise:
+            raise ValueError("PF shrink = True without regularise; expected regularise = True "
+                             "(shrinkage is part of the regularised PF's kernel move)")
+        if shrink and rs.optimal_bandwidth(int(n_particles), 1) >= 1:
+            raise ValueError(f"PF shrink = True with n_particles = {n_particles!r}; expected "
+                             "at least 2 particles (the kernel's bandwidth must be below 1)")
         if regularise and roughening > 0:
             raise ValueError(f"PF regularise = True and roughening = {roughening!r}; expected "
                              "at most one of the two jitters after resampling")
@@ -444,6 +459,7 @@ class PF(Filter):
         self.resampler = resampler
         self.ess_threshold = float(ess_threshold)
         self.regularise = bool(regularise)
+        self.shrink = bool(shrink)
         self.roughening = float(roughening)
         self.angles = _check_angles(angles, "PF")
 
@@ -529,7 +545,8 @@ class PF(Filter):
             v = np.where(keep[..., None], 1.0 / X.shape[-2] if w is None else w, v)
         Xn, lwn, _ = resample_rows(X, a, gen, self.ess_threshold, self.resampler,
                                    self.regularise, self.roughening,
-                                   self._angles_for(X.shape[-1], "PF.update"), keep, v)
+                                   self._angles_for(X.shape[-1], "PF.update"), keep, v,
+                                   self.shrink)
         return Particles._make((register(Xn), lwn, gen, lost)), Innovation(rbar, S)
 
     def estimate(self, belief: Particles) -> Gaussian:

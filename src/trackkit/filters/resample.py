@@ -42,7 +42,10 @@ Regularisation (Musso, Oudjane and Le Gland 2001): after resampling, ``x_i <- x_
 ``e_i ~ N(0, I)``, with ``D D^T = S`` the weighted covariance of the particles and the
 bandwidth optimal for a Gaussian kernel and a Gaussian density,
 ``h = A N^(-1/(n+4))``, ``A = (4 / (n + 2))^(1/(n+4))``. The jitter keeps the mean and
-inflates the covariance to ``(1 + h^2) S`` in expectation.
+inflates the covariance to ``(1 + h^2) S`` in expectation. With shrinkage (Liu and West
+2001) each particle is first pulled towards the mean ``m``,
+``x_i <- m + a (x_i - m) + h D e_i``, ``a = sqrt(1 - h^2)``, so the jittered cloud keeps both
+the mean and the covariance ``a^2 S + h^2 S = S``: repeated resampling no longer widens it.
 
 Roughening (Gordon, Salmond and Smith 1993): ``x_ij <- x_ij + sigma_j e_ij`` with
 ``sigma_j = K E_j N^(-1/n)``, ``E_j`` the range (max - min) of component j over the particles
@@ -330,13 +333,15 @@ def weighted_mean_cov(states: ArrayLike, weights: ArrayLike | None,
     return m, P
 
 
-def psd_factor(P: ArrayLike, name: str = "covariance") -> Array:
+def psd_factor(P: ArrayLike, name: str = "covariance", sample: bool = False) -> Array:
     """A factor ``L`` with ``L L^T = P`` for symmetric positive semi-definite ``P``
     ``(..., n, n)``: the Cholesky factor for one matrix when it exists, else (and always for
     a stack, so that each row's factor depends on that row alone) ``V sqrt(diag(lambda))`` from
     the eigen-decomposition, with eigenvalues down to ``-1e-10 max|P|`` taken as 0. A
     singular P (a component without noise) is fine; an indefinite one raises ValueError
-    naming ``name``."""
+    naming ``name``. ``sample``: P is a weighted sample covariance (PSD by construction), so
+    a negative eigenvalue is the rounding of its sums and is taken as 0 whatever its size: a
+    cloud collapsed to a point has ``max|P|`` at the rounding level of its offsets."""
     P = np.asarray(P, dtype=float)
     if P.ndim == 2:
         try:
@@ -346,7 +351,7 @@ def psd_factor(P: ArrayLike, name: str = "covariance") -> Array:
     lam, V = np.linalg.eigh(P)
     scale = np.abs(P).max(axis=(-2, -1)) if P.size else np.zeros(P.shape[:-2])
     bad = lam[..., 0] < -1e-10 * scale
-    if np.any(bad):
+    if not sample and np.any(bad):
         raise ValueError(f"{name} is not positive semi-definite: smallest eigenvalue "
                          f"{float(lam[..., 0].min()):.3g} in {int(np.sum(bad))} of "
                          f"{max(1, bad.size)} matrices; expected a symmetric PSD matrix")
@@ -361,13 +366,18 @@ def optimal_bandwidth(n_particles: int, dim: int) -> float:
 
 def regularise(states: ArrayLike, weights: ArrayLike, rng: np.random.Generator | None,
                bandwidth: float | None = None, cov: ArrayLike | None = None,
-               angles: Sequence[int] = ()) -> Array:
-    """Gaussian-kernel jitter ``x_i + h D e_i``, ``D D^T = S``, ``e_i ~ N(0, I)``.
+               angles: Sequence[int] = (), shrink: bool = False,
+               mean: ArrayLike | None = None, cov_is_sample: bool = False) -> Array:
+    """Gaussian-kernel jitter ``x_i + h D e_i``, ``D D^T = S``, ``e_i ~ N(0, I)``; with
+    ``shrink``, ``m + a (x_i - m) + h D e_i``, ``a = sqrt(1 - h^2)`` (Liu and West).
 
-    ``S`` is the weighted covariance of ``(states, weights)`` unless ``cov`` (``(..., n, n)``)
-    is given (a filter passes the covariance of its particles before resampling); ``h`` is
-    ``bandwidth`` or :func:`optimal_bandwidth`. The expected weighted mean is unchanged and the
-    expected covariance becomes ``(1 + h^2) S``. Angle components are wrapped afterwards.
+    ``m`` and ``S`` are the weighted mean and covariance of ``(states, weights)`` unless
+    ``mean`` (``(..., n)``) and ``cov`` (``(..., n, n)``) are given (a filter passes those of
+    its particles before resampling; with ``cov_is_sample`` that covariance is taken as
+    :func:`weighted_mean_cov` made it, PSD but for rounding); ``h`` is ``bandwidth`` or
+    :func:`optimal_bandwidth`, below 1 with ``shrink``. The expected weighted mean is unchanged; the expected covariance
+    becomes ``(1 + h^2) S``, or stays ``S`` with ``shrink``. Angle components are shrunk along
+    their wrapped deviations from the circular mean and wrapped afterwards.
     """
     X = np.asarray(states, dtype=float)
     w = np.asarray(weights, dtype=float)
@@ -376,12 +386,30 @@ def regularise(states: ArrayLike, weights: ArrayLike, rng: np.random.Generator |
         bandwidth = optimal_bandwidth(N, n)
     if not (math.isfinite(bandwidth) and bandwidth >= 0):
         raise ValueError(f"regularise: bandwidth = {bandwidth!r}; expected a finite value >= 0")
+    if shrink and not bandwidth < 1:
+        raise ValueError(f"regularise: bandwidth = {bandwidth!r} with shrink; expected a value "
+                         "below 1 (the shrink factor is sqrt(1 - h^2))")
     ang = _angle_list(angles, n, "regularise")
-    S = weighted_mean_cov(X, w, ang)[1] if cov is None else np.asarray(cov, dtype=float)
-    D = psd_factor(S, "regularise: the particles' covariance")
+    if cov is None or (shrink and mean is None):
+        m, S = weighted_mean_cov(X, w, ang)
+    if cov is not None:
+        S = np.asarray(cov, dtype=float)
+    D = psd_factor(S, "regularise: the particles' covariance",
+                   sample=cov is None or cov_is_sample)
     rng = np.random.default_rng() if rng is None else rng
     e = rng.standard_normal(X.shape)
-    out = X + bandwidth * (e @ D.mT if D.ndim > 2 else e @ D.T)
+    out = bandwidth * (e @ D.mT if D.ndim > 2 else e @ D.T)
+    if shrink:
+        if mean is not None:
+            m = np.asarray(mean, dtype=float)
+        d = X - m[..., None, :]
+        if ang:
+            d[..., ang] = wrap(d[..., ang])
+        d *= math.sqrt(1.0 - bandwidth**2)
+        out += d
+        out += m[..., None, :]
+    else:
+        out += X
     if ang:
         out[..., ang] = wrap(out[..., ang])
     return out

@@ -325,14 +325,19 @@ FILTER_TYPES: dict[str, FilterType] = {
         Option("roughening", "float", 0.0, "Gordon-Salmond-Smith roughening constant K after "
                "resampling (0 off; not with regularise)", low=0),
         Option("prior", "choice", "gaussian", "gaussian: particles drawn from the scenario's "
-               "prior; range: at the first bearing, along it, log-uniform in range over "
-               "[r_min, r_max], velocity from the prior", choices=("gaussian", "range")),
+               "prior; bearing: the same prior conditioned on the first bearing (drawn along "
+               "its rays, weighted exactly); range: at the first bearing, along it, "
+               "log-uniform in range over [r_min, r_max], velocity from the prior",
+               choices=("gaussian", "bearing", "range")),
         Option("r_min", "float", None, "with prior = \"range\": lowest range (m)", low=0,
                open_low=True, default_text="none: the prior's range - 4 sigma along the "
                "bearing, at least 0.05 of it"),
         Option("r_max", "float", None, "with prior = \"range\": highest range (m)", low=0,
                open_low=True, default_text="none: the prior's range + 4 sigma along the "
                "bearing"),
+        Option("shrink", "bool", False, "with regularise: pull the resampled particles "
+               "towards their mean by sqrt(1 - h^2) before the jitter, so the cloud keeps its "
+               "covariance (Liu and West)"),
     )),
     "MCEKF": FilterType(tkf.MCEKF, "modified-covariance EKF (seed 002 paper b)", (
         Option("second_order", "bool", False, "H = J_h + 1/2 diag(Hess h) (eqs. 12-13)"),)),
