@@ -134,7 +134,7 @@ def test_the_best_specialist_is_within_1_15_of_the_pcrlb(bo_cv):
 def test_every_filter_drifts_from_the_bound(bo_cv):
     """Why the window's average misses 1.15: each filter's RMSE over the PCRLB is lowest
     just after the manoeuvre and grows along the second leg. Measured (t = 900, 1 795 s):
-    MPEKF 1.11, 1.46; PF 1.16, 1.50; RPEKF 1.18, 1.51; CKF 1.27, 1.64. The best is within
+    MPEKF 1.11, 1.46; PF 1.17, 1.53; RPEKF 1.18, 1.51; CKF 1.27, 1.64. The best is within
     1.15 at 900 s, and every ratio at the end exceeds its value there by over 20 %."""
     result, _ = bo_cv
     t = np.asarray(result.times)

@@ -172,7 +172,16 @@ class SensorModel:
             return r
         if mask is True:
             return _wrap_small(r)
-        return np.where(mask, wrap(r), r)
+        if r.ndim == 0 or r.shape[-1] != mask.size:
+            return np.where(mask, wrap(r), r)
+        # r is a fresh array: wrap only its angle columns, in place (a range or a Doppler
+        # column is left alone rather than wrapped and then thrown away)
+        for j in np.flatnonzero(mask):
+            a = r[..., j]
+            w = _wrap_small(a)
+            if w is not a:
+                r[..., j] = w
+        return r
 
     def linearize(self, x: Array) -> tuple[Array, Array]:
         """``(h(x), jacobian(x))`` together (sensors override it to share the work)."""
