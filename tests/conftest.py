@@ -8,7 +8,9 @@ keeps them usable inside hypothesis tests.
 ``pytest`` runs the files on pytest-xdist workers (``-n auto --dist loadfile`` in
 pyproject.toml): one worker per CPU this process may really use, none (in-process) on one CPU.
 Each worker's BLAS gets its share of the CPUs, so that two workers do not each start a thread
-per core and fight over them.
+per core and fight over them: on a busy two-core machine a tall product such as
+``(500 000, 4) @ (4, 4)`` (particles through a transition) took 7 to 10 times longer with two
+OpenBLAS threads than with one.
 """
 
 from __future__ import annotations
@@ -62,40 +64,52 @@ def usable_cpus(logical: bool = False) -> int:
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     """``-n auto``: one worker per usable CPU; 0 (run in this process) on one CPU, where a
     lone worker would only add its start-up. ``PYTEST_XDIST_AUTO_NUM_WORKERS`` still wins."""
-    forced = os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS")
-    if forced:
+    forced = os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS", "")
+    if forced.isdigit():
         return int(forced)
     n = usable_cpus(logical=config.option.numprocesses == "logical")
     return n if n > 1 else 0
 
 
-# Tests that fill the same costly per-process cache go to one worker as one unit: the seed-000
-# tunings, which trackkit.eval.tuning caches per scenario per process, take about 5 min of CPU;
-# on two workers they would be computed twice. Keys are node-id prefixes.
-SHARED_CACHE_UNITS = {
+# Scheduling units other than the file, by node-id prefix (the first match wins); None makes
+# each test a unit of its own.
+SCHEDULING_UNITS = {
+    # the seed-000 tunings, cached per scenario per process (trackkit.eval.tuning), take about
+    # 5 min of CPU: the tests that use them share a worker, or the tunings run twice
     "tests/report/test_show_roundtrip.py::test_show_then_compare_gives_the_same_results_tuned":
         "seed-000 tunings",
     "tests/statistical/test_seed000.py::": "seed-000 tunings",
+    # the uw-ch5 goldens share uw-ch5-fixed's (short) tuning through tune.on: about 30 s
+    "tests/goldens/test_goldens.py::test_bundled_scenario_matches_golden[uw-ch5-":
+        "uw-ch5 goldens",
+    # minutes of independent tests (no fixture or cache between them): spread one by one
+    "tests/report/test_show_roundtrip.py::": None,
+    "tests/goldens/test_goldens.py::": None,
 }
 
 
 @pytest.hookimpl(tryfirst=True, optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log):
-    """``--dist loadfile`` with the units of ``SHARED_CACHE_UNITS``: a file's tests stay on one
+    """``--dist loadfile`` with the units of ``SCHEDULING_UNITS``: a file's tests stay on one
     worker (its module fixtures, Monte Carlo runs, are computed once), and so do the tests
-    sharing a cache across files."""
+    that fill one cache from several files."""
     if config.getvalue("dist") != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
 
-    class SharedCacheScheduling(LoadFileScheduling):
+    # units go out in collection order, where the long statistical files come before the many
+    # short unit-test files that then even out the workers' ends; xdist's default order (most
+    # tests first) would leave the long few-test files to the end, one worker running alone
+    config.option.loadscopereorder = False
+
+    class UnitScheduling(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            for prefix, unit in SHARED_CACHE_UNITS.items():
+            for prefix, unit in SCHEDULING_UNITS.items():
                 if nodeid.startswith(prefix):
-                    return unit
+                    return nodeid if unit is None else unit
             return super()._split_scope(nodeid)
 
-    return SharedCacheScheduling(config, log)
+    return UnitScheduling(config, log)
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -106,7 +120,6 @@ def pytest_configure(config: pytest.Config) -> None:
         share = str(max(1, usable_cpus() // workers))
         for var in BLAS_THREADS:
             os.environ.setdefault(var, share)
-
 
 
 def fd_jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, h: float = 1e-6,

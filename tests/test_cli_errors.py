@@ -107,10 +107,11 @@ CASES = {
         ["notanaddress"], after=set()),
 }
 SLOW_CASES = {
-    # Dask waits 30 s for a scheduler before giving up
+    # Dask waits 30 s for a scheduler before giving up; 2 s takes the same path
     "scheduler-not-answering": Case(
         ["run", "cv-position", "--runs", "2", "--out", "o", "--scheduler", "tcp://127.0.0.1:1"],
-        1, ["tcp://127.0.0.1:1"], after=set()),
+        1, ["tcp://127.0.0.1:1"], after=set(),
+        env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "2s"}),
 }
 
 
