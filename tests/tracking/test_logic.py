@@ -387,3 +387,71 @@ def test_ids_default_start_and_bad_input():
         IdCounter(-5)
     with pytest.raises(ValueError, match="overflow"):
         IdCounter(np.iinfo(np.int64).max).issue(2)
+
+
+# --------------------------------------------------------------------------------------------
+# Seed 004's timer logic
+
+
+def test_timer_logic_walks_query_track_lost_deleted():
+    """One track through every state: Query at birth, Track once confirm_after has passed
+    with a recent measurement, Lost after lost_after without one (still confirmed), back to
+    Track on a measurement, deleted after delete_after without one, and deleted stays."""
+    from trackkit.tracking.logic import TimerLogic, lost
+
+    logic = TimerLogic(confirm_after=30.0, lost_after=20.0, delete_after=100.0)
+    s = logic.init(0.0, 1)
+    seen = []
+    for t, hit in [(10, True), (29, True), (30, False), (45, False), (50, False),
+                   (60, True), (159, False), (160, False), (300, True)]:
+        s = logic.step(s, float(t), np.array([hit]))
+        seen.append((t, int(s.status[0]), bool(lost(s)[0])))
+    T, C, D = TrackStatus.TENTATIVE, TrackStatus.CONFIRMED, TrackStatus.DELETED
+    assert seen == [(10, T, False), (29, T, False), (30, C, False), (45, C, False),
+                    (50, C, True), (60, C, False), (159, C, True), (160, D, False),
+                    (300, D, False)]
+
+
+def test_timer_logic_is_batched_and_a_quiet_query_is_not_confirmed():
+    """Rows with their own birth times and hits step together (equal to one at a time); a
+    Query track whose last measurement is older than lost_after is not confirmed when its
+    confirmation time comes, and is deleted after delete_after like any track."""
+    from trackkit.tracking.logic import TimerLogic
+
+    logic = TimerLogic(confirm_after=30.0, lost_after=20.0, delete_after=50.0)
+    s = logic.init(np.array([0.0, 5.0, 10.0]), 3)
+    hits = [np.array([True, False, True]), np.array([False, False, True]),
+            np.array([True, False, False])]
+    rows = [logic.init(b, 1) for b in (0.0, 5.0, 10.0)]
+    for t, h in zip((20.0, 40.0, 56.0), hits, strict=True):
+        s = logic.step(s, t, h)
+        rows = [logic.step(r, t, h[i:i + 1]) for i, r in enumerate(rows)]
+    for i, r in enumerate(rows):
+        for a, b in zip(s, r, strict=True):
+            assert a[i] == b[0]
+    assert s.status.tolist() == [TrackStatus.CONFIRMED, TrackStatus.DELETED,
+                                 TrackStatus.CONFIRMED]
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"lost_after": 0.0}, "expected 0 < lost_after < delete_after"),
+    ({"lost_after": 100.0, "delete_after": 50.0}, "expected 0 < lost_after < delete_after"),
+    ({"confirm_after": -1.0}, "confirm_after = -1.0; expected seconds >= 0"),
+    ({"delete_after": float("inf")}, "delete_after = inf"),
+])
+def test_timer_logic_refuses_bad_times(kwargs, message):
+    from trackkit.tracking.logic import TimerLogic
+
+    with pytest.raises(ValueError, match=message):
+        TimerLogic(**kwargs)
+
+
+def test_timer_logic_refuses_time_going_back():
+    from trackkit.tracking.logic import TimerLogic
+
+    logic = TimerLogic()
+    s = logic.step(logic.init(0.0, 2), 10.0, np.array([True, True]))
+    with pytest.raises(ValueError, match="not before each track's last measurement"):
+        logic.step(s, 5.0, np.array([False, False]))
+    with pytest.raises(ValueError, match="expected bool"):
+        logic.step(s, 20.0, np.array([1, 0]))

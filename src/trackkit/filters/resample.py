@@ -375,8 +375,9 @@ def regularise(states: ArrayLike, weights: ArrayLike, rng: np.random.Generator |
     ``mean`` (``(..., n)``) and ``cov`` (``(..., n, n)``) are given (a filter passes those of
     its particles before resampling; with ``cov_is_sample`` that covariance is taken as
     :func:`weighted_mean_cov` made it, PSD but for rounding); ``h`` is ``bandwidth`` or
-    :func:`optimal_bandwidth`, below 1 with ``shrink``. The expected weighted mean is unchanged; the expected covariance
-    becomes ``(1 + h^2) S``, or stays ``S`` with ``shrink``. Angle components are shrunk along
+    :func:`optimal_bandwidth`, below 1 with ``shrink``. The expected weighted mean is
+    unchanged; the expected covariance becomes ``(1 + h^2) S``, or stays ``S`` with
+    ``shrink``. Angle components are shrunk along
     their wrapped deviations from the circular mean and wrapped afterwards.
     """
     X = np.asarray(states, dtype=float)

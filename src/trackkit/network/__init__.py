@@ -1,6 +1,7 @@
 """Decentralised cooperative tracking (seed 004): composite measurements from asynchronous
-bearings (:mod:`~trackkit.network.composite`) and diffusion Kalman filtering over a network
-of agents (:mod:`~trackkit.network.diffusion`)."""
+bearings (:mod:`~trackkit.network.composite`), diffusion Kalman filtering over a network of
+agents (:mod:`~trackkit.network.diffusion`), and tracks across agents: similarity, matching,
+duplicate pruning and the memory of neighbours' messages (:mod:`~trackkit.network.tracks`)."""
 
 from trackkit.network.composite import (
     CONVERGED,
@@ -21,10 +22,28 @@ from trackkit.network.diffusion import (
     neighbourhood,
     uniform_weights,
 )
+from trackkit.network.tracks import (
+    DEFAULT_GATE,
+    Matches,
+    Message,
+    MessageMemory,
+    duplicates,
+    match_tracks,
+    similarity,
+    uncertainty,
+)
 
 __all__ = [
     "COMBINATIONS",
     "CONVERGED",
+    "DEFAULT_GATE",
+    "Matches",
+    "Message",
+    "MessageMemory",
+    "duplicates",
+    "match_tracks",
+    "similarity",
+    "uncertainty",
     "NOT_CONVERGED",
     "SINGULAR",
     "Composite",

@@ -1,4 +1,5 @@
-"""Track life cycle: M-of-N history logic, SPRT score logic and stable track IDs.
+"""Track life cycle: M-of-N history logic, SPRT score logic, seed 004's timer logic and
+stable track IDs.
 
 Every live track is a row of one batched state (axis 0 = track, any leading axes allowed).
 The logics are small frozen dataclasses holding parameters; their methods are pure kernels
@@ -20,6 +21,7 @@ rows of any of these states; ``IdCounter`` issues track IDs that are never reuse
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
@@ -41,6 +43,9 @@ __all__ = [
     "select",
     "concatenate",
     "IdCounter",
+    "TimerState",
+    "TimerLogic",
+    "lost",
 ]
 
 Array = NDArray[np.float64]
@@ -375,6 +380,85 @@ class ScoreLogic:
         drop = score - max_score < self.delete_threshold
         out = np.where(drop, _DEL, np.where(conf, _CONF, _TENT))
         return np.where(status == _DEL, _DEL, out).astype(np.int8)
+
+
+# ------------------------------------------------------------------------------------------
+# Timer logic (seed 004, section 2.6)
+
+
+class TimerState(NamedTuple):
+    """Batched clocks of the timer logic: ``born`` and ``last_hit``, the times (s) the track
+    started and last had a measurement assigned; ``status`` the ``TrackStatus`` code;
+    ``lost`` True for a confirmed track without a measurement for ``lost_after`` seconds."""
+
+    born: Array
+    last_hit: Array
+    status: NDArray[np.int8]
+    lost: Bool
+
+
+def lost(state: TimerState) -> Bool:
+    """Confirmed tracks that are Lost (coasting on pseudo-measurements)."""
+    return np.asarray(state.lost) & (np.asarray(state.status) == _CONF)
+
+
+@dataclass(frozen=True)
+class TimerLogic:
+    """Seed 004's track states on elapsed times (its section 2.6; the seed gives no values):
+
+    - Query (``TENTATIVE``) from birth; Track (``CONFIRMED``) once ``t - born >=
+      confirm_after`` with a measurement within the last ``lost_after`` seconds;
+    - Lost: a confirmed track whose ``t - last_hit >= lost_after`` (it stays confirmed; the
+      agent feeds it its own predicted measurement);
+    - deleted, whatever the state, once ``t - last_hit >= delete_after``.
+
+    Times are absolute simulated seconds, so agents that run at random instants need no
+    common scan. ``confirm_after >= 0``, ``0 < lost_after < delete_after``.
+    """
+
+    confirm_after: float = 60.0
+    lost_after: float = 60.0
+    delete_after: float = 300.0
+
+    def __post_init__(self) -> None:
+        for name in ("confirm_after", "lost_after", "delete_after"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"TimerLogic {name} = {v!r}; expected seconds >= 0")
+        if not 0 < self.lost_after < self.delete_after:
+            raise ValueError(f"TimerLogic lost_after = {self.lost_after!r}, delete_after = "
+                             f"{self.delete_after!r}; expected 0 < lost_after < delete_after")
+
+    def init(self, t: float | ArrayLike, n: int | tuple[int, ...]) -> TimerState:
+        """``n`` new tracks (a count or a batch shape) started at time ``t`` by a
+        measurement (their first hit)."""
+        shape = (n,) if isinstance(n, int | np.integer) else tuple(n)
+        if any(int(k) < 0 for k in shape):
+            raise ValueError(f"n = {n!r}; expected a non-negative count or batch shape")
+        born = np.broadcast_to(np.asarray(t, dtype=float), shape).copy()
+        if not np.isfinite(born).all():
+            raise ValueError(f"TimerLogic.init: t = {t!r}; expected finite times")
+        return self._decide(born, born.copy(), np.full(shape, _TENT, dtype=np.int8), born)
+
+    def step(self, state: TimerState, t: float | ArrayLike, hit: ArrayLike) -> TimerState:
+        """The tracks' states at time ``t`` (not before their last update), ``hit`` True
+        where a measurement was assigned at t."""
+        h = _hits(hit, state.born.shape)
+        now = np.broadcast_to(np.asarray(t, dtype=float), state.born.shape)
+        if not (np.isfinite(now).all() and (now >= state.last_hit).all()):
+            raise ValueError(f"TimerLogic.step: t = {t!r}; expected finite times not before "
+                             "each track's last measurement")
+        last = np.where(h, now, state.last_hit)
+        return self._decide(state.born, last, state.status, now)
+
+    def _decide(self, born: Array, last: Array, status: NDArray[np.int8],
+                now: Array) -> TimerState:
+        quiet = now - last
+        conf = (status == _CONF) | ((now - born >= self.confirm_after)
+                                    & (quiet < self.lost_after))
+        out = np.where(quiet >= self.delete_after, _DEL, np.where(conf, _CONF, _TENT))
+        out = np.where(status == _DEL, _DEL, out).astype(np.int8)
+        return TimerState(born, last, out, (out == _CONF) & (quiet >= self.lost_after))
 
 
 # ------------------------------------------------------------------------------------------
