@@ -1,6 +1,7 @@
 """Decentralised cooperative tracking (seed 004): composite measurements from asynchronous
 bearings (:mod:`~trackkit.network.composite`), diffusion Kalman filtering over a network of
-agents (:mod:`~trackkit.network.diffusion`), and tracks across agents: similarity, matching,
+agents (:mod:`~trackkit.network.diffusion`), randomised initiation from bearings
+(:mod:`~trackkit.network.initiate`), and tracks across agents: similarity, matching,
 duplicate pruning and the memory of neighbours' messages (:mod:`~trackkit.network.tracks`)."""
 
 from trackkit.network.composite import (
@@ -22,6 +23,7 @@ from trackkit.network.diffusion import (
     neighbourhood,
     uniform_weights,
 )
+from trackkit.network.initiate import Bearings, Initiation, initiate
 from trackkit.network.tracks import (
     DEFAULT_GATE,
     Matches,
@@ -37,6 +39,9 @@ __all__ = [
     "COMBINATIONS",
     "CONVERGED",
     "DEFAULT_GATE",
+    "Bearings",
+    "Initiation",
+    "initiate",
     "Matches",
     "Message",
     "MessageMemory",
