@@ -1,7 +1,8 @@
 """Decentralised cooperative tracking (seed 004): composite measurements from asynchronous
 bearings (:mod:`~trackkit.network.composite`), diffusion Kalman filtering over a network of
 agents (:mod:`~trackkit.network.diffusion`), randomised initiation from bearings
-(:mod:`~trackkit.network.initiate`), and tracks across agents: similarity, matching,
+(:mod:`~trackkit.network.initiate`), the agents' course control
+(:mod:`~trackkit.network.steering`), and tracks across agents: similarity, matching,
 duplicate pruning and the memory of neighbours' messages (:mod:`~trackkit.network.tracks`)."""
 
 from trackkit.network.composite import (
@@ -24,6 +25,16 @@ from trackkit.network.diffusion import (
     uniform_weights,
 )
 from trackkit.network.initiate import Bearings, Initiation, initiate
+from trackkit.network.steering import (
+    TURN_RATE,
+    CourseCommand,
+    Steering,
+    admissible_courses,
+    blend_courses,
+    move,
+    steer,
+    swarm_neighbours,
+)
 from trackkit.network.tracks import (
     DEFAULT_GATE,
     Matches,
@@ -39,6 +50,14 @@ __all__ = [
     "COMBINATIONS",
     "CONVERGED",
     "DEFAULT_GATE",
+    "TURN_RATE",
+    "CourseCommand",
+    "Steering",
+    "admissible_courses",
+    "blend_courses",
+    "move",
+    "steer",
+    "swarm_neighbours",
     "Bearings",
     "Initiation",
     "initiate",
