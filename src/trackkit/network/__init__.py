@@ -1,10 +1,21 @@
-"""Decentralised cooperative tracking (seed 004): composite measurements from asynchronous
-bearings (:mod:`~trackkit.network.composite`), diffusion Kalman filtering over a network of
-agents (:mod:`~trackkit.network.diffusion`), randomised initiation from bearings
+"""Decentralised cooperative tracking (seed 004).
+
+The agents' program and an in-process network run (:mod:`~trackkit.network.agents`,
+:mod:`~trackkit.network.run`), built on composite measurements from asynchronous bearings
+(:mod:`~trackkit.network.composite`), diffusion Kalman filtering over a network of agents
+(:mod:`~trackkit.network.diffusion`), randomised initiation from bearings
 (:mod:`~trackkit.network.initiate`), the agents' course control
 (:mod:`~trackkit.network.steering`), and tracks across agents: similarity, matching,
-duplicate pruning and the memory of neighbours' messages (:mod:`~trackkit.network.tracks`)."""
+duplicate pruning and the memory of neighbours' messages (:mod:`~trackkit.network.tracks`).
+"""
 
+from trackkit.network.agents import (
+    PAYLOAD_VERSION,
+    Agent,
+    AgentSettings,
+    BearingSet,
+    Payload,
+)
 from trackkit.network.composite import (
     CONVERGED,
     NOT_CONVERGED,
@@ -25,6 +36,7 @@ from trackkit.network.diffusion import (
     uniform_weights,
 )
 from trackkit.network.initiate import Bearings, Initiation, initiate
+from trackkit.network.run import NetworkResult, Trace, run_network
 from trackkit.network.steering import (
     TURN_RATE,
     CourseCommand,
@@ -47,6 +59,14 @@ from trackkit.network.tracks import (
 )
 
 __all__ = [
+    "PAYLOAD_VERSION",
+    "Agent",
+    "AgentSettings",
+    "BearingSet",
+    "Payload",
+    "NetworkResult",
+    "Trace",
+    "run_network",
     "COMBINATIONS",
     "CONVERGED",
     "DEFAULT_GATE",

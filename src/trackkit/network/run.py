@@ -1,0 +1,249 @@
+"""An in-process network run of seed 004's agents (:mod:`trackkit.network.agents`).
+
+One run, one multi-target problem:
+
+* truth and execution schedule from ``sim.network.simulate_network`` (seed, run): the target
+  states at every execution, the execution times and the standard-normal bearing noise
+  (the same draws as ``sim.network.schedule``);
+* the agents execute one at a time in time order (ties: lower agent index first). At its
+  execution the agent is moved from its previous execution on its last commanded course
+  (``steering.move``; without steering, the straight line ``p0 + t v`` exactly, so that the
+  bearings equal ``simulate_network``'s bit for bit), takes its bearings with ``bearings_at``
+  at that position, runs ``Agent.step``, and broadcasts;
+* the message is delivered at once to every agent linked to the sender in the disk graph of
+  the agents' positions at that time (the others extrapolated on their current commands),
+  each delivery lost with probability ``loss`` (optional; default none). Delayed delivery is
+  not implemented;
+* optionally (``central=True``) a centralised reference: one more agent program (same
+  settings, no neighbours, no combination) that receives every agent's bearings at each
+  execution and runs after it.
+
+Randomness: the simulation's draws are ``simulate_network``'s (children 0..2 of
+``SeedSequence(seed, spawn_key=(run,))``); the agents' initiation streams are
+``SeedSequence(seed, spawn_key=(run, 3, a))`` and message loss ``(run, 4)``, so a run
+depends on (seed, run) alone.
+
+Recorded per agent and execution: the confirmed tracks (ids, states, covariances), the
+true target states at that time, and the agent's position (:class:`Trace`).
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import replace
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from trackkit.network.agents import (
+    Agent,
+    AgentSettings,
+    Payload,
+    StepReport,
+    empty_bearings,
+    own_bearings,
+)
+from trackkit.network.steering import TURN_RATE, Steering, move
+from trackkit.network.tracks import Message
+from trackkit.sim.network import (
+    NetworkRun,
+    bearings_at,
+    disk_graph,
+    schedule,
+    simulate_network,
+)
+
+__all__ = ["Trace", "NetworkResult", "run_network"]
+
+Array = NDArray[np.float64]
+
+
+class Trace(NamedTuple):
+    """One tracker's output over its E executions.
+
+    ``time (E,)``; the confirmed tracks of execution e are rows ``offsets[e]:offsets[e + 1]``
+    of ``ids (N,)``, ``mean (N, 4)``, ``cov (N, 4, 4)``; ``truth (E, Nt, 4)`` the true
+    target states at each execution; ``position (E, 2)`` the agent's position (nan for the
+    centralised node); ``reports``: the :class:`StepReport` of each execution.
+    """
+
+    time: Array
+    offsets: NDArray[np.int64]
+    ids: NDArray[np.int64]
+    mean: Array
+    cov: Array
+    truth: Array
+    position: Array
+    reports: list[StepReport]
+
+
+class NetworkResult(NamedTuple):
+    """``agents``: one :class:`Trace` per agent; ``central``: the centralised reference's
+    (None when not asked); ``sim``: the ``NetworkRun`` (one run); ``sent``, ``delivered``,
+    ``lost``: message counts; ``seconds``: wall-clock time of the run."""
+
+    agents: list[Trace]
+    central: Trace | None
+    sim: NetworkRun
+    sent: int
+    delivered: int
+    lost: int
+    seconds: float
+
+
+class _Recorder:
+    def __init__(self) -> None:
+        self.time: list[float] = []
+        self.sizes: list[int] = []
+        self.ids: list[Array] = []
+        self.mean: list[Array] = []
+        self.cov: list[Array] = []
+        self.truth: list[Array] = []
+        self.position: list[Array] = []
+        self.reports: list[StepReport] = []
+
+    def add(self, agent: Agent, truth: Array, position: Array, report: StepReport) -> None:
+        c = agent.confirmed()
+        self.time.append(agent.time)
+        self.sizes.append(c.size)
+        self.ids.append(c.ids)
+        self.mean.append(c.mean)
+        self.cov.append(c.cov)
+        self.truth.append(truth)
+        self.position.append(position)
+        self.reports.append(report)
+
+    def trace(self) -> Trace:
+        off = np.concatenate([[0], np.cumsum(self.sizes)]).astype(np.int64)
+        return Trace(np.asarray(self.time), off,
+                     np.concatenate(self.ids) if self.ids else np.zeros(0, np.int64),
+                     np.concatenate(self.mean) if self.mean else np.zeros((0, 4)),
+                     np.concatenate(self.cov) if self.cov else np.zeros((0, 4, 4)),
+                     np.asarray(self.truth), np.asarray(self.position), self.reports)
+
+
+def run_network(
+    seed: int,
+    run: int,
+    targets: ArrayLike,
+    agents: ArrayLike,
+    *,
+    duration: float,
+    period: float,
+    sigma: ArrayLike,
+    mr: ArrayLike = math.inf,
+    cr: ArrayLike = math.inf,
+    max_delay: float | None = None,
+    q: float = 0.0,
+    settings: AgentSettings | None = None,
+    steering: bool = False,
+    central: bool = False,
+    loss: float = 0.0,
+) -> NetworkResult:
+    """Run ``run`` of a network of agents (module docstring).
+
+    Args:
+        seed, run: the run's randomness comes from (seed, run) alone.
+        targets: ``(Nt, 4)`` target states at t = 0; agents: ``(A, 4)`` agent states at
+            t = 0 (position, velocity: the initial course and the constant speed).
+        duration, period, max_delay, q: the schedule and truth (``simulate_network``).
+        sigma, mr, cr: bearing std (rad), measurement and communication ranges (m), scalar
+            or per agent.
+        settings: the agents' ``AgentSettings`` (their ``comm_range`` and ``meas_range`` are
+            set per agent from cr and mr); with ``steering`` True, ``settings.steering``
+            (default ``Steering()``) steers the agents, else they run straight.
+        central: also run the centralised reference.
+        loss: probability that one delivery is lost (0 <= loss < 1).
+    """
+    if not 0.0 <= loss < 1.0:
+        raise ValueError(f"loss = {loss!r}; expected a probability in [0, 1)")
+    base = AgentSettings() if settings is None else settings
+    if steering and base.steering is None:
+        base = replace(base, steering=Steering())
+    if not steering and base.steering is not None:
+        base = replace(base, steering=None)
+    ag0 = np.asarray(agents, dtype=float)
+    if ag0.ndim != 2 or ag0.shape[1] != 4:
+        raise ValueError(f"agents has shape {ag0.shape}; expected (A, 4) states [x, y, vx, vy]")
+    A = ag0.shape[0]
+    sim = simulate_network(seed, 1, targets, ag0, duration=duration, period=period,
+                           sigma=sigma, mr=mr, max_delay=max_delay, q=q, first_run=run)
+    Nt = sim.target_at_bearing.shape[-2]
+    sch = schedule(seed, 1, A, Nt, duration, period, max_delay, first_run=run)
+    times, noise = sch.time[0], sch.noise[0]  # (A, E), (A, E, Nt)
+    E = times.shape[1]
+    sig = np.broadcast_to(np.asarray(sigma, dtype=float), (A,))
+    MR = np.broadcast_to(np.asarray(mr, dtype=float), (A,))
+    CR = np.broadcast_to(np.asarray(cr, dtype=float), (A,))
+
+    nodes = []
+    for a in range(A):
+        s = replace(base, comm_range=float(CR[a]), meas_range=float(MR[a]),
+                    r_max=min(base.r_max, float(MR[a])))
+        g = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 3, a)))
+        nodes.append(Agent(a, s, g))
+    hub = None
+    if central:
+        s = replace(base, combine_neighbours=False, steering=None,
+                    r_max=min(base.r_max, float(MR.max())))
+        hub = Agent(A, s, np.random.default_rng(np.random.SeedSequence(seed,
+                                                                       spawn_key=(run, 3, A))))
+    lose = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 4)))
+
+    # agent kinematics: position at last_t, course, speed, commanded course
+    pos = ag0[:, :2].copy()
+    speed = np.hypot(ag0[:, 2], ag0[:, 3])
+    course = np.arctan2(ag0[:, 2], ag0[:, 3])
+    cmd = course.copy()
+    last_t = np.zeros(A)
+
+    def where_at(t: float) -> Array:
+        if not steering:
+            return ag0[:, :2] + t * ag0[:, 2:]
+        return move(pos, course, speed, cmd, t - last_t, TURN_RATE)[0]
+
+    rec = [_Recorder() for _ in range(A)]
+    rec_c = _Recorder() if central else None
+    order = np.lexsort((np.repeat(np.arange(A), E), times.ravel()))
+    sent = delivered = lost = 0
+    t0 = _time.perf_counter()
+    for flat in order.tolist():
+        a, e = divmod(flat, E)
+        t = float(times[a, e])
+        if steering:
+            p, c = move(pos[a], course[a], speed[a], cmd[a], t - last_t[a], TURN_RATE)
+            pos[a], course[a], last_t[a] = p, float(c), t
+            here = pos[a].copy()
+        else:
+            here = ag0[a, :2] + t * ag0[a, 2:]
+        vel = speed[a] * np.array([math.sin(course[a]), math.cos(course[a])])
+        truth = sim.target_at_bearing[0, a, e]
+        z, _ = bearings_at(here, truth, noise[a, e], sig[a], MR[a])
+        own = own_bearings(z, t, here, float(sig[a]), a)
+        msg, rep = nodes[a].step(t, own, here, vel)
+        rec[a].add(nodes[a], truth, here, rep)
+        if steering:
+            dt_next = float(times[a, e + 1] - t) if e + 1 < E else period
+            cmd[a] = nodes[a].steer(here, float(course[a]), float(speed[a]), dt_next)
+
+        # delivery over the disk graph at time t
+        links = disk_graph(where_at(t), CR)[a]
+        for b in np.flatnonzero(links).tolist():
+            sent += 1
+            if loss > 0 and lose.random() < loss:
+                lost += 1
+                continue
+            nodes[b].receive(msg)
+            delivered += 1
+        if hub is not None and rec_c is not None:
+            p: Payload = msg.payload
+            bare = replace(p, ids=p.ids[:0], mean=p.mean[:0], cov=p.cov[:0],
+                           status=p.status[:0], lost=p.lost[:0])
+            hub.receive(Message(msg.sender, msg.time, bare))
+            _, rep_c = hub.step(t, empty_bearings())
+            rec_c.add(hub, truth, np.full(2, np.nan), rep_c)
+    seconds = _time.perf_counter() - t0
+    return NetworkResult([r.trace() for r in rec], rec_c.trace() if rec_c else None, sim,
+                         sent, delivered, lost, seconds)
