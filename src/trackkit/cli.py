@@ -4,6 +4,7 @@ recorded data.
     trackkit list
     trackkit show bo-cv [--format toml|json]
     trackkit run [NAME|FILE] [--runs N] [--seed S] [--out DIR] [--workers K] [--scheduler ADDR]
+    trackkit network NAME|FILE [--runs N] [--seed S] [--out DIR] [--straight]
     trackkit track FILE [--format ais|opensky|detections] [--as-radar] [radar, tracker and
                    input options] [--on-bad skip|stop] [--out DIR]
 
@@ -103,7 +104,10 @@ def _default_name() -> str:
 def _load(name_or_path: str) -> Any:
     from trackkit.scenario import load
     from trackkit.scenario.multitarget import is_multitarget, load_multitarget
+    from trackkit.scenario.network import is_network, load_network
 
+    if is_network(name_or_path):  # [[agents]]: a seed-004 network (trackkit network)
+        return load_network(name_or_path)
     if is_multitarget(name_or_path):  # a [scene] table: the multi-target tracker comparison
         return load_multitarget(name_or_path)
     return load(name_or_path)
@@ -111,6 +115,10 @@ def _load(name_or_path: str) -> Any:
 
 def _is_multitarget(scenario: Any) -> bool:
     return hasattr(scenario, "scene") and hasattr(scenario, "trackers")
+
+
+def _is_network(scenario: Any) -> bool:
+    return hasattr(scenario, "agents") and hasattr(scenario, "network")
 
 
 def _dumps(scenario: Any) -> str:
@@ -438,8 +446,9 @@ def list_scenarios() -> None:
     """List the bundled scenarios with one-line descriptions."""
     with _user_errors():
         from trackkit.scenario.multitarget import bundled_multitarget
+        from trackkit.scenario.network import bundled_network
 
-        scenarios = {**_bundled(), **bundled_multitarget()}
+        scenarios = {**_bundled(), **bundled_multitarget(), **bundled_network()}
         default = _default_name()
         table = Table("scenario", "description", title="bundled scenarios",
                       title_justify="left")
@@ -504,6 +513,9 @@ def run(
     "Determinism")."""
     with _user_errors() as state:
         sc = _load(scenario or _default_name())
+        if _is_network(sc):
+            raise ValueError(f"{scenario} is a network scenario (seed 004); run it with "
+                             f"`trackkit network {scenario}`")
         target, label = _output_dir(out, str(sc.name))
         total = runs or getattr(getattr(sc, "run", None), "runs", None) or 1
         with OutputDir(target, label) as where:
@@ -565,6 +577,120 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     console.print(Text(f"wrote {len(paths)} files to {out}", style="green"))
     if html is not None:
         console.print(Text(f"report: {html}", style="green"))
+
+
+@app.command()
+def network(
+    scenario: Annotated[str, typer.Argument(
+        help="Bundled network scenario name (net-baseline, net-limited, net-random; see "
+        "trackkit list) or TOML file.")],
+    runs: Annotated[int | None, typer.Option(
+        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs (at least 1).",
+        show_default="the scenario's run.runs")] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", "-s", callback=_at_least(0), help="Master seed (0 or more).",
+        show_default="the scenario's run.seed")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output directory (created if missing).",
+        show_default="trackkit-out/SCENARIO (trackkit-out/SCENARIO-straight with "
+        "--straight)")] = None,
+    straight: Annotated[bool, typer.Option(
+        "--straight", help="Straight courses: no steering, whatever the scenario says "
+        "(for comparison with the steered agents).")] = False,
+) -> None:
+    """Run a network scenario (seed 004: agents with bearing sensors that track targets
+    together): Monte Carlo runs of the agents beside the centralised reference and the
+    PCRLB; write results.json, timings.json, plots and report.html.
+
+    The same scenario and seed give byte-identical results.json on one machine."""
+    with _user_errors() as state:
+        from trackkit.scenario.network import is_network, load_network
+
+        if not is_network(scenario):
+            p = Path(scenario)
+            if p.suffix == ".toml" or p.exists():
+                if p.is_file():  # (a missing or unreadable file: load_network says so)
+                    raise ValueError(f"{scenario}: not a network scenario (it has no "
+                                     "[[agents]] tables); run it with `trackkit run "
+                                     f"{scenario}`, or see `trackkit show net-baseline` "
+                                     "for a network scenario's fields")
+            elif scenario in {**_bundled(), **_bundled_multitarget()}:
+                raise ValueError(f"{scenario!r} is not a network scenario; run it with "
+                                 f"`trackkit run {scenario}` (network scenarios: see "
+                                 "trackkit list)")
+        sc = load_network(scenario)
+        name = f"{sc.name}-straight" if straight else str(sc.name)
+        target, label = _output_dir(out, name)
+        with OutputDir(target, label) as where:
+            state.interrupted = f"interrupted; nothing was written to {target}"
+            if where.note:
+                _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
+            _run_network(sc, where.path, runs=runs, seed=seed,
+                         steering=False if straight else None)
+            state.interrupted = "interrupted"
+
+
+def _bundled_multitarget() -> dict[str, str]:
+    from trackkit.scenario.multitarget import bundled_multitarget
+
+    return bundled_multitarget()
+
+
+def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
+    """A network scenario's Monte Carlo (``eval.network_mc``) with a progress bar of runs,
+    its report written into ``out`` and a per-agent summary printed."""
+    from trackkit.eval.network_mc import run_network_mc
+    from trackkit.report.network_report import write_network_report
+
+    total = kwargs.get("runs") or sc.run.runs
+    with _progress_bar(_stderr()) as bar:
+        task = bar.add_task(str(sc.name), total=total, unit="runs")
+
+        def progress(done: float, of: int) -> None:
+            _deliver_interrupt()
+            bar.update(task, completed=done, total=of)
+
+        mc = run_network_mc(sc, progress=progress, **kwargs)
+        _deliver_interrupt()
+    with _stderr().status("writing the report"):
+        paths = write_network_report(mc, sc, out)
+    _print_network_summary(paths)
+
+
+def _print_network_summary(paths: dict[str, Path]) -> None:
+    from rich.markup import escape
+
+    doc = json.loads(paths["results"].read_text(encoding="utf-8"))
+    w = doc["windows"]["last"]
+    mode = "steering" if doc["steering"] else "straight courses"
+    headers = ["agent", "all held at the end", "GOSPA [m]",
+               f"pos. RMSE {w[0]:g}-{w[1]:g} s [m]", "centralised [m]", "PCRLB [m]",
+               "ratio to centralised", "ratio to PCRLB"]
+
+    def per_target(v: list, spec: str) -> str:
+        return " / ".join("-" if x is None else format(x, spec) for x in v)
+
+    table = Table(*(escape(h) for h in headers),  # "[m]" is a unit, not rich markup
+                  title=f"{doc['scenario']}: {doc['runs']} runs, seed {doc['seed']}, {mode} "
+                  "(per target: 1 / 2 / ...)", title_justify="left")
+    for e in doc["per_agent"]:
+        table.add_row(str(e["agent"]), f"{100 * e['all_held_final_fraction']:.0f}%",
+                      "-" if e["gospa_mean"] is None else f"{e['gospa_mean']:.0f}",
+                      per_target(e["rmse_pos_last"], ".0f"),
+                      per_target(e["central_rmse_pos_last"], ".0f"),
+                      per_target(e["pcrlb_pos_last"], ".0f"),
+                      per_target(e["ratio_to_central_pos_last"], ".2f"),
+                      per_target(e["ratio_to_pcrlb_pos_last"], ".2f"))
+    console = Console()
+    console.print(table)
+    m = doc["messages"]
+    console.print(Text(f"messages: {m['sent']} sent, {m['delivered']} delivered, "
+                       f"{m['lost']} lost"))
+    html = paths.get("html")
+    where = html.parent if html is not None else paths["results"].parent
+    console.print(Text(f"wrote {len(paths)} files to {where}", style="green"), soft_wrap=True)
+    if html is not None:
+        console.print(Text(f"report: {html}", style="green"), soft_wrap=True)
 
 
 def _print_summary(result: Any, paths: dict[str, Path]) -> None:

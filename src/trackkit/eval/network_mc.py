@@ -1,0 +1,369 @@
+"""Monte Carlo of a network scenario (seed 004, issue 14): runs of
+``network.run.run_network``, each agent scored against the true targets beside the
+centralised reference and the centralised PCRLB of that run.
+
+    sc = load_network("net-baseline")
+    mc = run_network_mc(sc, runs=20)           # NetworkMonteCarlo
+    mc.window_rmse("pos", "last")              # (A, Nt) per agent and target
+
+**Runs.** Run r is ``run_network(seed, r, ...)`` with the scenario's agents, targets (drawn
+for run r when random: ``NetworkScenario.target_states``), schedule and settings; it depends
+on (seed, r) alone, so a result is the same whatever else runs, and runs go through a plain
+Python loop (each run is one multi-target problem whose agents execute one at a time).
+
+**Time axis.** Every agent executes exactly once per period (``sim.network.schedule``), so
+execution e of every agent lies in slot e, ``[e P, (e + 1) P)``; series are indexed by e and
+plotted at the slot's expected time ``e P + jitter / 2``.
+
+**Scores** of one tracker's confirmed tracks at one execution (``eval.network_score``, cut-off
+``report.c_m``, GOSPA p = 2, alpha = 2): the number of confirmed tracks, GOSPA, and for every
+target assigned a track (the optimal assignment of ``eval.multitarget.assign``, pairs closer
+than c), the position error ``|p_hat - p|``, the velocity error ``|v_hat - v|`` and the range
+error ``| |p_hat - s| - |p - s| |`` (s: the agent's position); nan where the target has no
+track.
+
+**The centralised reference beside agent a.** ``run_network(central=True)`` runs one more
+tracker after every agent execution with every agent's bearings so far. Agent a's execution
+at time t is compared with the last central execution at that time (``searchsorted``: with
+jitter 0 several agents share a time, and the reference then holds all their bearings), and
+its range error is taken from agent a's position.
+
+**The bound.** The centralised bearings-only PCRLB of the run (``eval.network_bound
+.network_pcrlb``) on the agents' *actual* paths (steered, not the straight lines of
+``sim.network``): one event per agent execution with that agent's position, bearing std and
+the targets in its measurement range, the prior ``diag(sp^2, sp^2, sv^2, sv^2)`` at t = 0
+(``report.prior_pos_std_m``, ``prior_vel_std_mps``) and the scenario's q. Agent a's entry at
+execution e is the bound after that event, per target (position and velocity).
+
+**Reductions.** Over time, per agent and target: ``sqrt(mean over runs of e^2)`` over the
+runs where the target is held (RMSE), and the fraction of runs where it is held; the bound
+``sqrt(mean over runs of bound^2)`` (the mean of the per-run bounds, which
+docs/network-comparison.md explains is the one to report). Windows: the executions whose
+slot time lies in the first ``report.first_fraction`` or the last ``report.last_fraction``
+of the run, pooled over runs (and over targets for the per-agent numbers).
+"""
+
+from __future__ import annotations
+
+import time as _time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from trackkit.eval.multitarget import Frames, assign
+from trackkit.eval.network_bound import network_pcrlb
+from trackkit.eval.network_score import score_trace
+from trackkit.network.run import NetworkResult, Trace, run_network
+
+__all__ = ["NetworkMonteCarlo", "RunScores", "run_network_mc", "score_run"]
+
+Array = NDArray[np.float64]
+Kind = Literal["pos", "vel", "rng"]
+
+
+@dataclass
+class RunScores:
+    """One run's scores, A agents, E executions, Nt targets (module docstring).
+
+    ``count (A, E)``, ``gospa (A, E)``, ``err[kind] (A, E, Nt)`` for kind in pos, vel, rng;
+    ``central_*`` the same for the centralised reference beside each agent (None without
+    it); ``bound_pos``, ``bound_vel`` ``(A, E, Nt)`` the centralised PCRLB;
+    ``held_final (A,)`` whether the agent ends with exactly one confirmed track per target,
+    each assigned; ``sent``, ``delivered``, ``lost`` messages; ``seconds`` the network run's
+    wall-clock time (``NetworkResult.seconds``).
+    """
+
+    count: NDArray[np.int64]
+    gospa: Array
+    err: dict[str, Array]
+    central_count: NDArray[np.int64] | None
+    central_gospa: Array | None
+    central_err: dict[str, Array] | None
+    central_held_final: bool | None
+    bound_pos: Array
+    bound_vel: Array
+    held_final: NDArray[np.bool_]
+    sent: int
+    delivered: int
+    lost: int
+    seconds: float
+
+
+def _scores(time: Array, offsets: NDArray[np.int64], mean: Array, truth: Array,
+            where: Array, c: float) -> tuple[NDArray[np.int64], Array, dict[str, Array]]:
+    """count (E,), GOSPA (E,) and the errors (E, Nt) of one tracker's executions;
+    ``where (E, 2)`` the agent's positions for the range error."""
+    s = score_trace(time, offsets, mean, truth, c=c)
+    E, Nt = truth.shape[:2]
+    tru = Frames(np.arange(E + 1, dtype=np.int64) * Nt, truth[:, :, :2].reshape(E * Nt, 2))
+    est = Frames(offsets, np.ascontiguousarray(mean[:, :2]))
+    I, J = assign(tru, est, c)  # score_trace's assignment (same arguments, p = 2)
+    X, Y = truth.reshape(E * Nt, 4), mean
+    vel = np.full(E * Nt, np.nan)
+    vel[I] = np.hypot(*(Y[J, 2:4] - X[I, 2:4]).T)
+    s_of = np.repeat(where, Nt, axis=0)
+    rng = np.full(E * Nt, np.nan)
+    rng[I] = np.abs(np.hypot(*(Y[J, :2] - s_of[I]).T) - np.hypot(*(X[I, :2] - s_of[I]).T))
+    return s.count, s.gospa, {"pos": s.error, "vel": vel.reshape(E, Nt),
+                              "rng": rng.reshape(E, Nt)}
+
+
+def _held(count: NDArray[np.int64], pos: Array, n_targets: int) -> bool:
+    """Exactly one confirmed track per target at the last execution, each assigned."""
+    return bool(count[-1] == n_targets and not np.isnan(pos[-1]).any())
+
+
+def _at_times(trace: Trace, times: Array) -> tuple[Array, NDArray[np.int64], Array, Array]:
+    """The central trace at the last of its executions at each of ``times`` (module
+    docstring): (time, offsets, mean, truth)."""
+    idx = np.searchsorted(trace.time, times, side="right") - 1
+    if np.any(idx < 0) or not np.array_equal(trace.time[idx], times):
+        raise ValueError("the centralised trace has no execution at some agent's execution "
+                         "time; expected one after every agent execution")
+    lo, hi = trace.offsets[idx], trace.offsets[idx + 1]
+    rows = np.concatenate([np.arange(a, b) for a, b in zip(lo, hi, strict=True)]).astype(
+        np.int64) if idx.size else np.zeros(0, np.int64)
+    off = np.concatenate([[0], np.cumsum(hi - lo)]).astype(np.int64)
+    return trace.time[idx], off, trace.mean[rows].reshape(-1, 4), trace.truth[idx]
+
+
+def score_run(result: NetworkResult, sigma: Array, meas_range: Array, prior_cov: Array,
+              q: float, c: float) -> RunScores:
+    """Score one ``run_network`` result (module docstring)."""
+    A = len(result.agents)
+    E = result.agents[0].time.shape[0]
+    if any(tr.time.shape[0] != E for tr in result.agents):
+        raise ValueError("the agents' traces have different numbers of executions; expected "
+                         "one execution per agent and period")
+    Nt = result.agents[0].truth.shape[1]
+    count = np.zeros((A, E), np.int64)
+    gospa = np.zeros((A, E))
+    err = {k: np.zeros((A, E, Nt)) for k in ("pos", "vel", "rng")}
+    have_c = result.central is not None
+    c_count = np.zeros((A, E), np.int64) if have_c else None
+    c_gospa = np.zeros((A, E)) if have_c else None
+    c_err = {k: np.zeros((A, E, Nt)) for k in ("pos", "vel", "rng")} if have_c else None
+    held = np.zeros(A, bool)
+    for a, tr in enumerate(result.agents):
+        n, g, e = _scores(tr.time, tr.offsets, tr.mean, tr.truth, tr.position, c)
+        count[a], gospa[a] = n, g
+        for k in err:
+            err[k][a] = e[k]
+        held[a] = _held(n, e["pos"], Nt)
+        if have_c:
+            t, off, mean, truth = _at_times(result.central, tr.time)
+            n, g, e = _scores(t, off, mean, truth, tr.position, c)
+            c_count[a], c_gospa[a] = n, g
+            for k in c_err:
+                c_err[k][a] = e[k]
+    c_held = None
+    if have_c:
+        ct = result.central
+        n, _, e = _scores(ct.time, ct.offsets, ct.mean, ct.truth,
+                          np.zeros((ct.time.shape[0], 2)), c)
+        c_held = _held(n, e["pos"], Nt)
+
+    # the centralised PCRLB on the actual paths: one event per agent execution
+    t = np.stack([tr.time for tr in result.agents])  # (A, E)
+    pos = np.stack([tr.position for tr in result.agents])  # (A, E, 2)
+    truth = np.stack([tr.truth for tr in result.agents])  # (A, E, Nt, 4)
+    valid = np.hypot(truth[..., 0] - pos[..., None, 0],
+                     truth[..., 1] - pos[..., None, 1]) <= meas_range[:, None, None]
+    sig = np.broadcast_to(sigma[:, None], (A, E))
+    b = network_pcrlb(prior_cov, t.reshape(A * E), pos.reshape(A * E, 2),
+                      truth.reshape(A * E, Nt, 4), sig.reshape(A * E),
+                      valid.reshape(A * E, Nt), q=q)
+    back = np.empty(A * E, np.intp)
+    back[b.order] = np.arange(A * E)  # sorted position of every input event
+    bound_pos = b.position_rmse[back].reshape(A, E, Nt)
+    bound_vel = b.velocity_rmse[back].reshape(A, E, Nt)
+    return RunScores(count, gospa, err, c_count, c_gospa, c_err, c_held, bound_pos, bound_vel,
+                     held, int(result.sent), int(result.delivered), int(result.lost),
+                     float(result.seconds))
+
+
+def _rms(x: Array, axis) -> Array:
+    """sqrt(mean x^2) over ``axis`` ignoring nan (nan where nothing is there)."""
+    have = ~np.isnan(x)
+    n = have.sum(axis)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, np.sqrt(np.nansum(x * x, axis) / np.maximum(n, 1)), np.nan)
+
+
+@dataclass
+class NetworkMonteCarlo:
+    """A network Monte Carlo: the per-run scores stacked over runs R (run order), and the
+    example run (run 0) for the pictures.
+
+    ``time (E,)``: the slot times ``e P + jitter / 2`` (s). Arrays of :class:`RunScores`
+    with a leading runs axis: ``count``, ``gospa`` ``(R, A, E)``; ``err[kind]``
+    ``(R, A, E, Nt)``; ``central_*`` likewise (None without the reference);
+    ``bound_pos``, ``bound_vel``; ``held_final (R, A)``, ``central_held_final (R,)``;
+    ``sent``, ``delivered``, ``lost`` ``(R,)``; ``seconds (R,)`` (network run) and
+    ``wall (R,)`` (run, scores and bound).
+    """
+
+    name: str
+    runs: int
+    seed: int
+    steering: bool
+    duration: float
+    period: float
+    jitter: float
+    first_fraction: float
+    last_fraction: float
+    c: float
+    time: Array
+    count: NDArray[np.int64]
+    gospa: Array
+    err: dict[str, Array]
+    central_count: NDArray[np.int64] | None
+    central_gospa: Array | None
+    central_err: dict[str, Array] | None
+    central_held_final: NDArray[np.bool_] | None
+    bound_pos: Array
+    bound_vel: Array
+    held_final: NDArray[np.bool_]
+    sent: NDArray[np.int64]
+    delivered: NDArray[np.int64]
+    lost: NDArray[np.int64]
+    seconds: Array
+    wall: Array
+    example: NetworkResult | None = field(default=None, repr=False)
+    example_targets: Array | None = field(default=None, repr=False)
+
+    @property
+    def n_agents(self) -> int:
+        return int(self.count.shape[1])
+
+    @property
+    def n_targets(self) -> int:
+        return int(self.err["pos"].shape[-1])
+
+    @property
+    def has_central(self) -> bool:
+        return self.central_err is not None
+
+    def window(self, which: Literal["first", "last", "all"]) -> NDArray[np.bool_]:
+        """``(E,)``: the executions whose slot time lies in the window."""
+        if which == "all":
+            return np.ones(self.time.shape, bool)
+        if which == "first":
+            return self.time <= self.first_fraction * self.duration
+        return self.time >= (1.0 - self.last_fraction) * self.duration
+
+    def window_s(self, which: Literal["first", "last"]) -> tuple[float, float]:
+        """The window's [from, to] in seconds."""
+        if which == "first":
+            return 0.0, self.first_fraction * self.duration
+        return (1.0 - self.last_fraction) * self.duration, self.duration
+
+    # -- over time ------------------------------------------------------------------------
+
+    def rmse_over_time(self, kind: Kind, central: bool = False,
+                       pooled: bool = False) -> Array:
+        """RMSE over runs ``(A, E, Nt)`` (``pooled``: over runs and targets, ``(A, E)``)."""
+        e = self.central_err[kind] if central else self.err[kind]
+        return _rms(e, (0, 3) if pooled else 0)
+
+    def bound_over_time(self, kind: Literal["pos", "vel"], pooled: bool = False) -> Array:
+        """The PCRLB, ``sqrt(mean over runs of bound^2)``, ``(A, E, Nt)`` or pooled over
+        targets ``(A, E)``."""
+        b = self.bound_pos if kind == "pos" else self.bound_vel
+        return _rms(b, (0, 3) if pooled else 0)
+
+    def held_over_time(self, central: bool = False) -> Array:
+        """Fraction of runs where each target has a track, ``(A, E, Nt)``."""
+        e = self.central_err["pos"] if central else self.err["pos"]
+        return (~np.isnan(e)).mean(0)
+
+    # -- windows ----------------------------------------------------------------------------
+
+    def window_rmse(self, kind: Kind, which: Literal["first", "last", "all"],
+                    central: bool = False, pooled: bool = False) -> Array:
+        """RMSE over the runs and the window's executions, per agent and target ``(A, Nt)``
+        (``pooled``: over targets too, ``(A,)``)."""
+        e = (self.central_err[kind] if central else self.err[kind])[:, :, self.window(which)]
+        return _rms(e, (0, 2, 3) if pooled else (0, 2))
+
+    def window_bound(self, kind: Literal["pos", "vel"], which: Literal["first", "last", "all"],
+                     pooled: bool = False) -> Array:
+        """The PCRLB's RMS over the runs and the window's executions, ``(A, Nt)`` or
+        ``(A,)``."""
+        b = (self.bound_pos if kind == "pos" else self.bound_vel)[:, :, self.window(which)]
+        return _rms(b, (0, 2, 3) if pooled else (0, 2))
+
+
+def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
+                   steering: bool | None = None,
+                   progress: Callable[[float, int], None] | None = None,
+                   keep_example: bool = True) -> NetworkMonteCarlo:
+    """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
+    ``runs``, ``seed`` and ``steering`` override the file's; ``progress(done, runs)`` after
+    every run; ``keep_example`` keeps run 0's ``NetworkResult`` for the pictures."""
+    from dataclasses import replace
+
+    from trackkit.network.agents import AgentSettings
+
+    runs = scenario.run.runs if runs is None else int(runs)
+    seed = scenario.run.seed if seed is None else int(seed)
+    steer = scenario.settings.steering if steering is None else bool(steering)
+    if runs < 1:
+        raise ValueError(f"runs = {runs}; expected at least 1")
+    if seed < 0:
+        raise ValueError(f"seed = {seed}; expected an integer >= 0")
+    net, rep = scenario.network, scenario.report
+    settings = AgentSettings(combination=scenario.settings.combination)
+    if scenario.settings.q is not None:
+        settings = replace(settings, q=scenario.settings.q)
+    agents = scenario.agent_states()
+    sigma, mr, cr = scenario.sigma_rad(), scenario.meas_range(), scenario.comm_range()
+    prior = np.diag([rep.prior_pos_std_m**2] * 2 + [rep.prior_vel_std_mps**2] * 2)
+    per_run: list[RunScores] = []
+    wall: list[float] = []
+    example = example_targets = None
+    for r in range(runs):
+        t0 = _time.perf_counter()
+        targets = scenario.target_states(seed, r)
+        res = run_network(seed, r, targets, agents, duration=net.duration_s,
+                          period=net.period_s, sigma=sigma, mr=mr, cr=cr,
+                          max_delay=net.max_delay_s, q=net.q, settings=settings,
+                          steering=steer, central=scenario.run.central, loss=net.loss)
+        per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m))
+        wall.append(_time.perf_counter() - t0)
+        if r == 0 and keep_example:
+            example, example_targets = res, targets
+        if progress is not None:
+            progress(r + 1, runs)
+
+    E = per_run[0].count.shape[1]
+    have_c = per_run[0].central_err is not None
+
+    def stack(get) -> np.ndarray:
+        return np.stack([get(s) for s in per_run])
+
+    return NetworkMonteCarlo(
+        name=scenario.name, runs=runs, seed=seed, steering=steer, duration=net.duration_s,
+        period=net.period_s, jitter=net.max_delay_s, first_fraction=rep.first_fraction,
+        last_fraction=rep.last_fraction, c=rep.c_m,
+        time=net.period_s * np.arange(E) + 0.5 * net.max_delay_s,
+        count=stack(lambda s: s.count), gospa=stack(lambda s: s.gospa),
+        err={k: stack(lambda s, k=k: s.err[k]) for k in ("pos", "vel", "rng")},
+        central_count=stack(lambda s: s.central_count) if have_c else None,
+        central_gospa=stack(lambda s: s.central_gospa) if have_c else None,
+        central_err=({k: stack(lambda s, k=k: s.central_err[k]) for k in ("pos", "vel", "rng")}
+                     if have_c else None),
+        central_held_final=(np.array([s.central_held_final for s in per_run])
+                            if have_c else None),
+        bound_pos=stack(lambda s: s.bound_pos), bound_vel=stack(lambda s: s.bound_vel),
+        held_final=stack(lambda s: s.held_final),
+        sent=np.array([s.sent for s in per_run], np.int64),
+        delivered=np.array([s.delivered for s in per_run], np.int64),
+        lost=np.array([s.lost for s in per_run], np.int64),
+        seconds=np.array([s.seconds for s in per_run]), wall=np.array(wall),
+        example=example, example_targets=example_targets,
+    )
+

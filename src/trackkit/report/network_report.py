@@ -1,0 +1,459 @@
+"""The report of a network Monte Carlo (seed 004, issue 14), written atomically into one
+directory with ``report.files.write_atomically``:
+
+* ``results.json``: per agent (numbered from 1) the fraction of runs ending with every target
+  held, the mean number of confirmed tracks and mean GOSPA, and per target the position RMSE
+  over the first and the last window, the velocity and range RMSE over the last window, the
+  centralised reference's and the PCRLB's values over the same windows and the ratios to
+  them, and the fraction of executions with the target held; the centralised reference's
+  own numbers; message counts; the series against time (``series``). SI units, listed under
+  ``units``; only numbers that depend on the scenario and the seed, so equal seeds give
+  byte-identical files; wall-clock times go to ``timings.json``.
+* ``paths.png``: run 0 in plan view: the agents' paths, the targets' paths and one agent's
+  confirmed tracks (the paper's Figs. 7-12).
+* ``errors.png``: position, velocity and range RMSE against time per agent (pooled over the
+  targets), beside the centralised reference and the PCRLB.
+* ``gospa.png``: mean GOSPA against time per agent and the centralised reference, and the
+  mean number of confirmed tracks against the number of targets.
+* ``report.html``: one self-contained page (inline CSS, PNGs as data URIs, no scripts).
+
+    mc = run_network_mc(scenario)                     # trackkit.eval.network_mc
+    paths = write_network_report(mc, scenario, "trackkit-out/net-baseline")
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from trackkit import __version__
+from trackkit.eval.network_mc import NetworkMonteCarlo
+from trackkit.report.files import (
+    REPORT_HTML,
+    RESULTS_JSON,
+    TIMINGS_JSON,
+    _write_json,
+    write_atomically,
+)
+from trackkit.report.html import _CSS, notes_and_figures
+from trackkit.report.plots import _distance_scale, _save
+
+__all__ = ["NETWORK_FILES", "network_results_document", "network_timings_document",
+           "paths_figure", "errors_figure", "gospa_figure", "render_network_html",
+           "write_network_report"]
+
+PATHS_PNG = "paths.png"
+ERRORS_PNG = "errors.png"
+GOSPA_PNG = "gospa.png"
+NETWORK_FILES = (PATHS_PNG, ERRORS_PNG, GOSPA_PNG, REPORT_HTML, TIMINGS_JSON, RESULTS_JSON)
+
+#: per-agent entries of results.json with their units
+AGENT_UNITS: dict[str, str] = {
+    "agent": "agent number (1 = the scenario's first agent)",
+    "all_held_final_fraction": "fraction 0 to 1 of runs ending with exactly one confirmed "
+                               "track per target, each within c_m of its target",
+    "confirmed_tracks_mean": "tracks (mean over runs and executions)",
+    "gospa_mean": "m (mean over runs and executions; p = 2, alpha = 2, cut-off c_m)",
+    "held_fraction": "per target: fraction 0 to 1 of (run, execution) with a track assigned",
+    "rmse_pos_first": "m, per target, over the first window (runs and executions where held)",
+    "rmse_pos_last": "m, per target, over the last window",
+    "rmse_vel_last": "m/s, per target, over the last window",
+    "rmse_range_last": "m, per target, over the last window (range from this agent)",
+    "rmse_pos_first_all": "m, pooled over targets, first window",
+    "rmse_pos_last_all": "m, pooled over targets, last window",
+    "central_rmse_pos_last": "m, per target: the centralised reference at this agent's "
+                             "executions, last window",
+    "central_rmse_vel_last": "m/s, per target, likewise",
+    "central_rmse_range_last": "m, per target, likewise (range from this agent)",
+    "pcrlb_pos_last": "m, per target: sqrt(mean over runs and the last window's executions of "
+                      "the centralised PCRLB^2)",
+    "pcrlb_vel_last": "m/s, per target, likewise",
+    "ratio_to_central_pos_last": "1, per target: rmse_pos_last / central_rmse_pos_last",
+    "ratio_to_pcrlb_pos_last": "1, per target: rmse_pos_last / pcrlb_pos_last",
+}
+CENTRAL_UNITS: dict[str, str] = {
+    "all_held_final_fraction": "fraction 0 to 1 of runs",
+    "gospa_mean": "m (mean over runs and its executions)",
+}
+TOP_UNITS: dict[str, Any] = {
+    "runs": "Monte Carlo runs", "agents": "agents", "targets": "targets",
+    "duration_s": "s", "period_s": "s", "jitter_s": "s (executions delayed U[0, jitter_s))",
+    "windows": "s ([from, to] of the first and the last window)",
+    "metrics": {"c_m": "m (GOSPA cut-off and target-track assignment distance)",
+                "gospa_p": "1", "gospa_alpha": "1"},
+    "messages": "messages (totals over all runs: sent, delivered, lost; per run: means)",
+    "series": "time_s: s (slot times e P + jitter / 2); per agent over executions: "
+              "confirmed_mean tracks, gospa_mean m, rmse_pos m, rmse_vel m/s, rmse_range m "
+              "(pooled over targets), central_* likewise, pcrlb_pos m, pcrlb_vel m/s",
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# numbers
+# ---------------------------------------------------------------------------------------------
+
+
+def _list(x: Any) -> Any:
+    """Nested lists of floats, None where a value is missing or not finite (JSON null;
+    ``_finite_or_none`` does not look inside lists)."""
+    if np.ndim(x) == 1:
+        return [float(v) if math.isfinite(v) else None for v in np.asarray(x, dtype=float)]
+    return [_list(v) for v in x]
+
+
+def _json_safe(obj: Any) -> Any:
+    """Non-finite floats as None (JSON null) anywhere in nested dicts and lists."""
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where((b > 0) & np.isfinite(b), a / np.where(b > 0, b, 1.0), np.nan)
+
+
+def _agent_entries(mc: NetworkMonteCarlo) -> list[dict[str, Any]]:
+    out = []
+    first_pos = mc.window_rmse("pos", "first")
+    last = {k: mc.window_rmse(k, "last") for k in ("pos", "vel", "rng")}
+    held = (~np.isnan(mc.err["pos"])).mean(axis=(0, 2))  # (A, Nt)
+    first_all = mc.window_rmse("pos", "first", pooled=True)
+    last_all = mc.window_rmse("pos", "last", pooled=True)
+    bound = {k: mc.window_bound(k, "last") for k in ("pos", "vel")}
+    nan = np.full(last["pos"].shape, np.nan)
+    central = ({k: mc.window_rmse(k, "last", central=True) for k in ("pos", "vel", "rng")}
+               if mc.has_central else {"pos": nan, "vel": nan, "rng": nan})
+    for a in range(mc.n_agents):
+        out.append({
+            "agent": a + 1,
+            "all_held_final_fraction": float(mc.held_final[:, a].mean()),
+            "confirmed_tracks_mean": float(mc.count[:, a].mean()),
+            "gospa_mean": float(mc.gospa[:, a].mean()),
+            "held_fraction": _list(held[a]),
+            "rmse_pos_first": _list(first_pos[a]),
+            "rmse_pos_last": _list(last["pos"][a]),
+            "rmse_vel_last": _list(last["vel"][a]),
+            "rmse_range_last": _list(last["rng"][a]),
+            "rmse_pos_first_all": float(first_all[a]),
+            "rmse_pos_last_all": float(last_all[a]),
+            "central_rmse_pos_last": _list(central["pos"][a]),
+            "central_rmse_vel_last": _list(central["vel"][a]),
+            "central_rmse_range_last": _list(central["rng"][a]),
+            "pcrlb_pos_last": _list(bound["pos"][a]),
+            "pcrlb_vel_last": _list(bound["vel"][a]),
+            "ratio_to_central_pos_last": _list(_ratio(last["pos"][a], central["pos"][a])),
+            "ratio_to_pcrlb_pos_last": _list(_ratio(last["pos"][a], bound["pos"][a])),
+        })
+    return out
+
+
+def _series(mc: NetworkMonteCarlo) -> dict[str, Any]:
+    pooled = {k: mc.rmse_over_time(k, pooled=True) for k in ("pos", "vel", "rng")}
+    per_agent = []
+    for a in range(mc.n_agents):
+        s: dict[str, Any] = {
+            "confirmed_mean": _list(mc.count[:, a].mean(0)),
+            "gospa_mean": _list(mc.gospa[:, a].mean(0)),
+            "rmse_pos": _list(pooled["pos"][a]),
+            "rmse_vel": _list(pooled["vel"][a]),
+            "rmse_range": _list(pooled["rng"][a]),
+            "pcrlb_pos": _list(mc.bound_over_time("pos", pooled=True)[a]),
+            "pcrlb_vel": _list(mc.bound_over_time("vel", pooled=True)[a]),
+        }
+        if mc.has_central:
+            s["central_confirmed_mean"] = _list(mc.central_count[:, a].mean(0))
+            s["central_gospa_mean"] = _list(mc.central_gospa[:, a].mean(0))
+            for k, name in (("pos", "pos"), ("vel", "vel"), ("rng", "range")):
+                s[f"central_rmse_{name}"] = _list(mc.rmse_over_time(k, central=True,
+                                                                    pooled=True)[a])
+        per_agent.append(s)
+    return {"time_s": _list(mc.time), "agents": per_agent}
+
+
+def network_results_document(mc: NetworkMonteCarlo, scenario) -> dict[str, Any]:
+    """The ``results.json`` document (module docstring); non-finite numbers as null."""
+    doc: dict[str, Any] = {
+        "scenario": scenario.name,
+        "kind": "network",
+        "runs": int(mc.runs),
+        "seed": int(mc.seed),
+        "steering": bool(mc.steering),
+        "central": bool(mc.has_central),
+        "agents": mc.n_agents,
+        "targets": mc.n_targets,
+        "duration_s": float(mc.duration),
+        "period_s": float(mc.period),
+        "jitter_s": float(mc.jitter),
+        "windows": {"first": list(mc.window_s("first")), "last": list(mc.window_s("last"))},
+        "metrics": {"c_m": float(mc.c), "gospa_p": 2.0, "gospa_alpha": 2.0},
+        "units": {**TOP_UNITS, "per_agent": dict(AGENT_UNITS),
+                  "central_reference": dict(CENTRAL_UNITS)},
+        "per_agent": _agent_entries(mc),
+        "central_reference": ({
+            "all_held_final_fraction": float(mc.central_held_final.mean()),
+            "gospa_mean": float(mc.central_gospa.mean()),
+        } if mc.has_central else None),
+        "messages": {
+            "sent": int(mc.sent.sum()), "delivered": int(mc.delivered.sum()),
+            "lost": int(mc.lost.sum()), "sent_per_run": float(mc.sent.mean()),
+            "lost_per_run": float(mc.lost.mean()),
+        },
+        "series": _series(mc),
+    }
+    return _json_safe(doc)
+
+
+def network_timings_document(mc: NetworkMonteCarlo, scenario) -> dict[str, Any]:
+    """The ``timings.json`` document: wall-clock seconds per run (they vary between
+    machines and runs, so they are kept out of results.json)."""
+    return _json_safe({
+        "scenario": scenario.name, "runs": int(mc.runs), "seed": int(mc.seed),
+        "units": {"network_s_per_run": "s (run_network: every agent's program and the "
+                                       "centralised reference)",
+                  "total_s_per_run": "s (run_network, scoring and the PCRLB)"},
+        "network_s_per_run": float(mc.seconds.mean()),
+        "total_s_per_run": float(mc.wall.mean()),
+    })
+
+
+# ---------------------------------------------------------------------------------------------
+# figures
+# ---------------------------------------------------------------------------------------------
+
+
+def paths_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
+    """Run 0 in plan view: agents' paths (coloured, triangle at the start, numbers at the
+    end), targets' paths (black, circle at the start, numbers) and the example agent's
+    confirmed track positions (small dots, one colour per track ID)."""
+    ex = mc.example
+    fig = Figure(figsize=(7.5, 7.0), layout="constrained")
+    ax = fig.add_subplot()
+    if ex is None:
+        ax.text(0.5, 0.5, "no example run", ha="center", va="center")
+        return fig
+    k = scenario.report.example_agent - 1
+    agent_xy = [tr.position for tr in ex.agents]
+    truth = ex.agents[k].truth  # (E, Nt, 4): the targets at that agent's executions
+    pts = np.concatenate([*agent_xy, truth[:, :, :2].reshape(-1, 2)])
+    lo, hi = pts.min(0), pts.max(0)
+    unit, s = _distance_scale(float((hi - lo).max()) or 1000.0)
+    for a, xy in enumerate(agent_xy):
+        ax.plot(xy[:, 0] * s, xy[:, 1] * s, color=f"C{a}", lw=1.8, label=f"agent {a + 1}")
+        ax.plot(xy[0, 0] * s, xy[0, 1] * s, "^", color=f"C{a}", ms=7)
+        ax.annotate(str(a + 1), xy[-1] * s, color=f"C{a}", xytext=(3, 3),
+                    textcoords="offset points")
+    for j in range(truth.shape[1]):
+        ax.plot(truth[:, j, 0] * s, truth[:, j, 1] * s, color="black", lw=1.2,
+                label="targets" if j == 0 else None)
+        ax.plot(truth[0, j, 0] * s, truth[0, j, 1] * s, "o", color="black", ms=4)
+        ax.annotate(f"T{j + 1}", truth[-1, j, :2] * s, xytext=(3, -10),
+                    textcoords="offset points")
+    tr = ex.agents[k]
+    if tr.ids.size:
+        ax.scatter(tr.mean[:, 0] * s, tr.mean[:, 1] * s, s=3, c=[f"C{i % 10}" for i in tr.ids],
+                   alpha=0.6, linewidths=0, label=f"agent {k + 1}'s confirmed tracks")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(f"east [{unit}]")
+    ax.set_ylabel(f"north [{unit}]")
+    mode = "steering" if mc.steering else "straight courses"
+    ax.set_title(f"{scenario.name}: run 0 ({mode})", fontsize="medium")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
+    return fig
+
+
+def errors_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
+    """One row per agent, columns position, velocity and range RMSE (pooled over targets)
+    against time, with the centralised reference (dashed) and the PCRLB (dotted)."""
+    A = mc.n_agents
+    fig = Figure(figsize=(11.0, 2.6 * A + 0.6), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(A, 3, sharex=True))
+    t = mc.time
+    cols = (("pos", "position RMSE [m]"), ("vel", "velocity RMSE [m/s]"),
+            ("rng", "range RMSE [m]"))
+    for a in range(A):
+        for i, (kind, label) in enumerate(cols):
+            ax = axes[a, i]
+            ax.plot(t, mc.rmse_over_time(kind, pooled=True)[a], color=f"C{a}", lw=1.3,
+                    label=f"agent {a + 1}")
+            if mc.has_central:
+                ax.plot(t, mc.rmse_over_time(kind, central=True, pooled=True)[a], color="0.3",
+                        ls="--", lw=1.1, label="centralised")
+            if kind != "rng":
+                ax.plot(t, mc.bound_over_time(kind, pooled=True)[a], color="black", ls=":",
+                        lw=1.1, label="PCRLB (centralised)")
+            ax.set_yscale("log")
+            ax.set_ylabel(label)
+            ax.grid(True, alpha=0.3, which="both")
+            if i == 0:
+                ax.legend(fontsize="x-small")
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle(f"{scenario.name}: RMSE over {mc.runs} runs (targets held, pooled over "
+                 "targets)", fontsize="medium")
+    return fig
+
+
+def gospa_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
+    """Mean GOSPA against time per agent (and the centralised reference), and the mean
+    number of confirmed tracks against the number of targets."""
+    fig = Figure(figsize=(8.0, 6.5), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    t = mc.time
+    for a in range(mc.n_agents):
+        top.plot(t, mc.gospa[:, a].mean(0), color=f"C{a}", lw=1.2, label=f"agent {a + 1}")
+        bottom.plot(t, mc.count[:, a].mean(0), color=f"C{a}", lw=1.2, label=f"agent {a + 1}")
+    if mc.has_central:
+        top.plot(t, mc.central_gospa.mean(axis=(0, 1)), color="0.3", ls="--", lw=1.1,
+                 label="centralised")
+    bottom.axhline(mc.n_targets, color="black", ls="--", lw=1.0, label="targets")
+    top.set_ylabel("GOSPA [m]")
+    top.set_ylim(bottom=0)
+    top.set_title(f"{scenario.name}: GOSPA (c = {mc.c:g} m, p = 2, alpha = 2), mean of "
+                  f"{mc.runs} runs", fontsize="medium")
+    bottom.set_ylabel("confirmed tracks")
+    bottom.set_xlabel("time [s]")
+    bottom.set_ylim(bottom=0)
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize="small")
+    return fig
+
+
+# ---------------------------------------------------------------------------------------------
+# page
+# ---------------------------------------------------------------------------------------------
+
+_CAPTIONS = {
+    "paths": "Monte Carlo run 0: the agents' paths (triangle at the start), the targets "
+             "(black, circle at the start) and the example agent's confirmed tracks (dots, "
+             "one colour per track ID), east-north frame.",
+    "errors": "RMSE against time per agent (over the runs where a target is held, pooled over "
+              "the targets), beside the centralised reference at the same times (dashed) and "
+              "the centralised PCRLB on the run's actual paths (dotted; RMS over runs).",
+    "gospa": "GOSPA against time, mean over the runs, per agent and for the centralised "
+             "reference (top); mean number of confirmed tracks against the number of "
+             "targets (bottom).",
+}
+
+
+def _num(v: Any, spec: str = ".0f") -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return format(v, spec)
+
+
+def _per_target(values: list, spec: str = ".0f") -> str:
+    return " / ".join(_num(v, spec) for v in values)
+
+
+def _summary_table(doc: Mapping[str, Any]) -> str:
+    esc = html.escape
+    rows = (("all_held_final_fraction", "runs ending with every target held [%]", None),
+            ("confirmed_tracks_mean", "confirmed tracks (mean)", ".2f"),
+            ("gospa_mean", "GOSPA mean [m]", ".0f"),
+            ("held_fraction", "held, per target [%]", "%"),
+            ("rmse_pos_first", "position RMSE, first window [m]", ".0f"),
+            ("rmse_pos_last", "position RMSE, last window [m]", ".0f"),
+            ("central_rmse_pos_last", "centralised, last window [m]", ".0f"),
+            ("pcrlb_pos_last", "PCRLB, last window [m]", ".0f"),
+            ("ratio_to_central_pos_last", "ratio to centralised", ".2f"),
+            ("ratio_to_pcrlb_pos_last", "ratio to PCRLB", ".2f"),
+            ("rmse_vel_last", "velocity RMSE, last window [m/s]", ".2f"),
+            ("rmse_range_last", "range RMSE, last window [m]", ".0f"))
+    agents = doc["per_agent"]
+    head = "".join(f"<th>agent {e['agent']}</th>" for e in agents)
+    body = []
+    for key, label, spec in rows:
+        cells = []
+        for e in agents:
+            v = e[key]
+            if isinstance(v, list):
+                vals = [None if x is None else (100 * x if spec == "%" else x) for x in v]
+                cells.append(_per_target(vals, ".0f" if spec == "%" else spec))
+            elif spec is None:
+                cells.append(_num(None if v is None else 100 * v, ".0f"))
+            else:
+                cells.append(_num(v, spec))
+        body.append(f"<tr><th>{esc(label)}</th>"
+                    + "".join(f"<td>{esc(c)}</td>" for c in cells) + "</tr>")
+    w = doc["windows"]
+    caption = (f"{doc['runs']} runs; per-target values separated by '/', targets 1 to "
+               f"{doc['targets']}; first window {w['first'][0]:g}-{w['first'][1]:g} s, last "
+               f"window {w['last'][0]:g}-{w['last'][1]:g} s; errors over the (run, execution) "
+               "pairs where the target is held.")
+    return (f'<table class="summary"><caption>{esc(caption)}</caption>'
+            f"<thead><tr><th></th>{head}</tr></thead>\n<tbody>\n" + "\n".join(body)
+            + "\n</tbody></table>")
+
+
+def render_network_html(doc: Mapping[str, Any], scenario,
+                        images: Mapping[str, str | Path | bytes]) -> str:
+    """The report page from the ``results.json`` document and the figures (name -> PNG
+    path or bytes): self-contained, no scripts, no links."""
+    esc = html.escape
+    m = doc["messages"]
+    mode = "steering" if doc["steering"] else "straight courses"
+    c = doc["central_reference"]
+    central = ("" if c is None else
+               f" The centralised reference ends with every target held in "
+               f"{100 * c['all_held_final_fraction']:.0f}% of the runs; its mean GOSPA is "
+               f"{_num(c['gospa_mean'])} m.")
+    meta = (f"{doc['runs']} Monte Carlo runs, seed {doc['seed']}; {doc['agents']} agents "
+            f"({mode}), {doc['targets']} targets, {doc['duration_s']:g} s, executions every "
+            f"{doc['period_s']:g} s delayed U[0, {doc['jitter_s']:g}) s. Messages: "
+            f"{m['sent']} sent, {m['lost']} lost.{central} Generated by trackkit "
+            f"{__version__}.")
+    parts = [
+        "<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<title>trackkit: {esc(scenario.name)}</title>", f"<style>{_CSS}</style></head>",
+        "<body>", f"<h1>{esc(scenario.name)}</h1>",
+    ]
+    if scenario.description:
+        parts.append(f"<p>{esc(scenario.description)}</p>")
+    parts += [f'<p class="meta">{esc(meta)}</p>', "<h2>Summary</h2>", _summary_table(doc)]
+    parts += notes_and_figures(scenario.notes, images, _CAPTIONS)
+    parts += ["</body>", "</html>", ""]
+    return "\n".join(parts)
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+# ---------------------------------------------------------------------------------------------
+
+
+def _write_all(mc: NetworkMonteCarlo, scenario, folder: Path) -> dict[str, Path]:
+    images: dict[str, Path] = {}
+    if mc.example is not None:
+        images["paths"] = _save(paths_figure(mc, scenario), folder / PATHS_PNG)
+    images["errors"] = _save(errors_figure(mc, scenario), folder / ERRORS_PNG)
+    images["gospa"] = _save(gospa_figure(mc, scenario), folder / GOSPA_PNG)
+    written: dict[str, Path] = dict(images)
+    doc = network_results_document(mc, scenario)
+    written["html"] = folder / REPORT_HTML
+    written["html"].write_text(render_network_html(doc, scenario, images), encoding="utf-8")
+    written["timings"] = _write_json(network_timings_document(mc, scenario),
+                                     folder / TIMINGS_JSON)
+    written["results"] = _write_json(doc, folder / RESULTS_JSON)
+    return written
+
+
+def write_network_report(mc: NetworkMonteCarlo, scenario, out: str | Path) -> dict[str, Path]:
+    """Write the report files into ``out`` atomically (``report.files.write_atomically``:
+    a temporary directory inside ``out``, ``results.json`` moved into place last, nothing
+    left behind on failure). Returns name -> path (``paths``, ``errors``, ``gospa``,
+    ``html``, ``timings``, ``results``)."""
+    return write_atomically(out, lambda folder: _write_all(mc, scenario, folder),
+                            NETWORK_FILES)
