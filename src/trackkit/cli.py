@@ -5,6 +5,7 @@ recorded data.
     trackkit show bo-cv [--format toml|json]
     trackkit run [NAME|FILE] [--runs N] [--seed S] [--out DIR] [--workers K] [--scheduler ADDR]
     trackkit network NAME|FILE [--runs N] [--seed S] [--out DIR] [--straight]
+                     [--agents inprocess|processes]
     trackkit track FILE [--format ais|opensky|detections] [--as-radar] [radar, tracker and
                    input options] [--on-bad skip|stop] [--out DIR]
 
@@ -579,6 +580,13 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
         console.print(Text(f"report: {html}", style="green"))
 
 
+class AgentsMode(StrEnum):
+    """Where a network scenario's agents run (``trackkit network --agents``)."""
+
+    inprocess = "inprocess"
+    processes = "processes"
+
+
 @app.command()
 def network(
     scenario: Annotated[str, typer.Argument(
@@ -597,6 +605,10 @@ def network(
     straight: Annotated[bool, typer.Option(
         "--straight", help="Straight courses: no steering, whatever the scenario says "
         "(for comparison with the steered agents).")] = False,
+    agents: Annotated[AgentsMode, typer.Option(
+        "--agents", help="inprocess: every agent in this process (fast); processes: every "
+        "agent its own operating-system process, talking over ZeroMQ on loopback (same "
+        "results without message loss, slower).")] = AgentsMode.inprocess,
 ) -> None:
     """Run a network scenario (seed 004: agents with bearing sensors that track targets
     together): Monte Carlo runs of the agents beside the centralised reference and the
@@ -626,7 +638,7 @@ def network(
             if where.note:
                 _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
             _run_network(sc, where.path, runs=runs, seed=seed,
-                         steering=False if straight else None)
+                         steering=False if straight else None, agents=str(agents.value))
             state.interrupted = "interrupted"
 
 

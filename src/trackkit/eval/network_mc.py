@@ -10,6 +10,8 @@ centralised reference and the centralised PCRLB of that run.
 for run r when random: ``NetworkScenario.target_states``), schedule and settings; it depends
 on (seed, r) alone, so a result is the same whatever else runs, and runs go through a plain
 Python loop (each run is one multi-target problem whose agents execute one at a time).
+With ``agents="processes"`` a run is ``network.processes.run_network_processes`` instead
+(every agent its own OS process over ZeroMQ; the same numbers when the scenario has no loss).
 
 **Time axis.** Every agent executes exactly once per period (``sim.network.schedule``), so
 execution e of every agent lies in slot e, ``[e P, (e + 1) P)``; series are indexed by e and
@@ -300,13 +302,27 @@ class NetworkMonteCarlo:
 def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                    steering: bool | None = None,
                    progress: Callable[[float, int], None] | None = None,
-                   keep_example: bool = True) -> NetworkMonteCarlo:
+                   keep_example: bool = True,
+                   agents: Literal["inprocess", "processes"] = "inprocess"
+                   ) -> NetworkMonteCarlo:
     """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
     ``runs``, ``seed`` and ``steering`` override the file's; ``progress(done, runs)`` after
-    every run; ``keep_example`` keeps run 0's ``NetworkResult`` for the pictures."""
+    every run; ``keep_example`` keeps run 0's ``NetworkResult`` for the pictures.
+    ``agents``: "inprocess" (``run_network``, the default) or "processes"
+    (``network.processes.run_network_processes``: every agent its own OS process, talking
+    over ZeroMQ; with the scenario's loss 0 the same results bit for bit, only slower)."""
     from dataclasses import replace
 
     from trackkit.network.agents import AgentSettings
+
+    if agents == "inprocess":
+        runner = run_network
+    elif agents == "processes":
+        from trackkit.network.processes import run_network_processes
+
+        runner = run_network_processes
+    else:
+        raise ValueError(f"agents = {agents!r}; expected 'inprocess' or 'processes'")
 
     runs = scenario.run.runs if runs is None else int(runs)
     seed = scenario.run.seed if seed is None else int(seed)
@@ -319,7 +335,7 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     settings = AgentSettings(combination=scenario.settings.combination)
     if scenario.settings.q is not None:
         settings = replace(settings, q=scenario.settings.q)
-    agents = scenario.agent_states()
+    states = scenario.agent_states()
     sigma, mr, cr = scenario.sigma_rad(), scenario.meas_range(), scenario.comm_range()
     prior = np.diag([rep.prior_pos_std_m**2] * 2 + [rep.prior_vel_std_mps**2] * 2)
     per_run: list[RunScores] = []
@@ -328,10 +344,10 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     for r in range(runs):
         t0 = _time.perf_counter()
         targets = scenario.target_states(seed, r)
-        res = run_network(seed, r, targets, agents, duration=net.duration_s,
-                          period=net.period_s, sigma=sigma, mr=mr, cr=cr,
-                          max_delay=net.max_delay_s, q=net.q, settings=settings,
-                          steering=steer, central=scenario.run.central, loss=net.loss)
+        res = runner(seed, r, targets, states, duration=net.duration_s,
+                     period=net.period_s, sigma=sigma, mr=mr, cr=cr,
+                     max_delay=net.max_delay_s, q=net.q, settings=settings,
+                     steering=steer, central=scenario.run.central, loss=net.loss)
         per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m))
         wall.append(_time.perf_counter() - t0)
         if r == 0 and keep_example:

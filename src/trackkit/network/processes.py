@@ -1,0 +1,676 @@
+"""Seed 004's agents as separate operating-system processes talking over ZeroMQ.
+
+:func:`run_network_processes` runs the same network as :func:`trackkit.network.run.run_network`
+(same arguments, same :class:`~trackkit.network.run.NetworkResult`), but every agent lives in
+its own process (``python -m trackkit.network.processes agent ...``, a fresh interpreter, so
+nothing depends on the caller's ``__main__``) holding its own
+:class:`~trackkit.network.agents.Agent`; the calling process is the **environment**: it owns
+the truth and the schedule, runs the agents' executions one at a time in simulated time order
+(ties: lower agent index first, as ``run_network``), hands each agent its bearings and the
+messages delivered to it, and routes each agent's broadcast through the **channel** to the
+agents within communication range.
+
+**Transport.** The environment binds one ZeroMQ ROUTER socket (``tcp://HOST:PORT``, loopback
+and an OS-chosen port by default, so parallel runs never collide); each agent connects one
+DEALER socket with the identity ``agent-<index>-<incarnation>`` (a restarted agent is a new
+incarnation, so the ROUTER never confuses it with the killed one). Every message is one frame
+of UTF-8 JSON (Python's ``json``: floats are written with ``repr`` and read back exactly,
+``NaN`` and ``Infinity`` included), so the process run reproduces the in-process run bit for
+bit. Every receive has a timeout (``timeout_s``) and a clear error; nothing busy-waits.
+
+**Envelope** (protocol version :data:`PROTOCOL_VERSION`; every message): ``protocol`` (int),
+``type`` (str), ``agent`` (int), ``time`` (float, simulated seconds; never wall-clock).
+
+Agent -> environment:
+
+* ``hello``: the agent is up (``time`` = -inf, i.e. ``-Infinity`` in JSON).
+* ``result``: the outcome of a ``step``: ``payload`` (``Payload.to_dict()``, schema
+  :data:`~trackkit.network.agents.PAYLOAD_VERSION`), ``report`` (the 7 ``StepReport``
+  counts), ``confirmed`` (``ids``, ``mean``, ``cov`` of the confirmed tracks after the
+  step), ``course`` (the commanded course, rad, or null without steering).
+* ``error``: ``error`` (str): the agent could not carry out the request (a payload of a
+  wrong schema version, a malformed message, an exception in ``Agent.step``); the
+  environment raises :class:`AgentError` with it.
+* ``delivered``: answer to ``deliver``.
+* ``bye``: answer to ``stop``; the agent exits.
+
+Environment -> agent:
+
+* ``step``: execute at ``time``: ``inbox`` (the payload dicts delivered since the last step,
+  in delivery order, each checked by ``Payload.from_dict`` on receipt), ``bearings`` (the own
+  bearings as a ``BearingSet``: ``z``, ``t``, ``sensor``, ``sigma``, ``source``),
+  ``position``, ``velocity`` (m, m/s), ``course``, ``speed``, ``dt_next`` (for steering).
+* ``deliver``: ``inbox`` only (no execution): the messages that arrived after the agent's
+  last execution, handed over when the run ends (so that, as in ``run_network``, every
+  message sent is received).
+* ``stop``: exit cleanly.
+
+**Channel** (options): each delivery is lost with probability ``loss`` (the same stream as
+``run_network``: ``SeedSequence(seed, spawn_key=(run, 4))``) and arrives ``delay`` simulated
+seconds after it was sent; an agent gets the messages that arrived by its execution time.
+Counts: ``sent`` (one per sender-receiver link at the broadcast), ``delivered``, ``lost``
+(dropped by the channel, addressed to a dead agent, or still in flight ``delay`` after the
+last execution when the run ends), so
+``sent = delivered + lost``; ``late``: delivered messages that missed at least one of the
+receiver's executions they would have reached without the delay.
+
+**Kill and restart** (``outages``: ``(agent, kill_at, restart_at or None)``): at the first
+execution at or after ``kill_at`` the environment kills the agent's process (SIGKILL); while
+it is dead it neither measures nor broadcasts, its executions are recorded with no tracks,
+and messages to it are lost. At ``restart_at`` a new process starts with an empty agent (its
+initiation stream ``SeedSequence(seed, spawn_key=(run, 3, a, k))`` for its k-th restart) and
+rebuilds its tracks from its own bearings and its neighbours' messages.
+
+**Shutdown.** On success, on error and on KeyboardInterrupt: ``stop`` to every live agent,
+then ``join`` with a timeout, ``terminate``, ``kill``; sockets closed with linger 0 and the
+context terminated. Agents ignore SIGINT (the environment decides when they end) and exit by
+themselves when they hear nothing for ``idle_timeout_s``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time as _time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import zmq
+from numpy.typing import ArrayLike, NDArray
+
+from trackkit.network.agents import (
+    Agent,
+    AgentSettings,
+    BearingSet,
+    Payload,
+    StepReport,
+    empty_bearings,
+    empty_tracks,
+    own_bearings,
+)
+from trackkit.network.central import CentralSettings, central_fusion
+from trackkit.network.run import NetworkResult, Trace, _fusion_trace, _Recorder
+from trackkit.network.steering import TURN_RATE, Steering, move
+from trackkit.network.tracks import Message
+from trackkit.sim.network import bearings_at, disk_graph, schedule, simulate_network
+
+__all__ = ["PROTOCOL_VERSION", "AgentError", "ProcessNetworkResult", "decode",
+           "decode_payload", "encode", "run_network_processes", "settings_from_dict",
+           "settings_to_dict"]
+
+Array = NDArray[np.float64]
+
+#: version of the envelope and message types above (``decode`` refuses any other)
+PROTOCOL_VERSION = 1
+
+
+class AgentError(RuntimeError):
+    """An agent process failed, answered with an error, or did not answer in time."""
+
+
+class ProcessNetworkResult(NetworkResult):
+    """A :class:`NetworkResult` (same fields) with the process run's extras as attributes:
+    ``late`` (delivered late, module docstring), ``endpoint`` (the ROUTER's address, now
+    closed), ``restarts`` (processes started after a kill), ``recovered`` (per outage:
+    the simulated time after the restart when the agent first held as many confirmed
+    tracks as before the kill, nan if never)."""
+
+    late: int
+    endpoint: str
+    restarts: int
+    recovered: list[float]
+
+
+# --------------------------------------------------------------------------------------------
+# the wire
+
+
+def encode(kind: str, agent: int, t: float, **fields: Any) -> bytes:
+    """One message (module docstring): the envelope plus ``fields``, as UTF-8 JSON."""
+    return json.dumps({"protocol": PROTOCOL_VERSION, "type": kind, "agent": int(agent),
+                       "time": float(t), **fields}).encode()
+
+
+def decode(frame: bytes, expect: Sequence[str] | None = None) -> dict[str, Any]:
+    """A received frame as a dict, its envelope checked: ``protocol`` equal to
+    :data:`PROTOCOL_VERSION`, ``type`` among ``expect`` (when given), ``agent`` an int and
+    ``time`` a number."""
+    try:
+        d = json.loads(frame.decode())
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"message is not UTF-8 JSON ({err}); expected one JSON object") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"message is a JSON {type(d).__name__}; expected an object")
+    v = d.get("protocol")
+    if v != PROTOCOL_VERSION:
+        raise ValueError(f"message protocol = {v!r}; expected {PROTOCOL_VERSION}")
+    kind = d.get("type")
+    if expect is not None and kind not in expect:
+        raise ValueError(f"message type = {kind!r}; expected one of {list(expect)}")
+    if not isinstance(d.get("agent"), int) or not isinstance(d.get("time"), int | float):
+        raise ValueError(f"message agent = {d.get('agent')!r}, time = {d.get('time')!r}; "
+                         "expected an int and a number (simulated seconds)")
+    return d
+
+
+def decode_payload(d: Any) -> Payload:
+    """``Payload.from_dict`` of a received payload dict: refuses any schema version other
+    than ``PAYLOAD_VERSION`` with an error naming the version."""
+    if not isinstance(d, dict):
+        raise ValueError(f"payload is a {type(d).__name__}; expected a JSON object")
+    return Payload.from_dict(d)
+
+
+def _bearings_dict(b: BearingSet) -> dict[str, list]:
+    return {"z": b.z.tolist(), "t": b.t.tolist(), "sensor": b.sensor.tolist(),
+            "sigma": b.sigma.tolist(), "source": b.source.tolist()}
+
+
+def _bearings_from(d: dict[str, list]) -> BearingSet:
+    M = len(d["z"])
+    return BearingSet(np.asarray(d["z"], float).reshape(M), np.asarray(d["t"], float).reshape(M),
+                      np.asarray(d["sensor"], float).reshape(M, 2),
+                      np.asarray(d["sigma"], float).reshape(M),
+                      np.asarray(d["source"], np.int64).reshape(M))
+
+
+# --------------------------------------------------------------------------------------------
+# the agent process
+
+
+def settings_to_dict(s: AgentSettings) -> dict[str, Any]:
+    """``AgentSettings`` as plain JSON values (``steering`` a dict or None)."""
+    return dataclasses.asdict(s)
+
+
+def settings_from_dict(d: dict[str, Any]) -> AgentSettings:
+    """The inverse of :func:`settings_to_dict` (the dataclasses validate the values)."""
+    st = d.get("steering")
+    return AgentSettings(**{**d, "steering": None if st is None else Steering(**st)})
+
+
+def _agent_main(endpoint: str, index: int, incarnation: int, settings: AgentSettings,
+                entropy: int, spawn_key: tuple[int, ...], idle_timeout_s: float) -> None:
+    """An agent process: connect, say hello, answer ``step`` and ``stop`` (module
+    docstring). Exits on ``stop``, when its parent process is gone, or when nothing arrives
+    for ``idle_timeout_s``."""
+    # the environment owns our lifetime (a Ctrl-C is its to handle, and it stops us)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+    agent = Agent(index, settings,
+                  np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=spawn_key)))
+    ctx = zmq.Context()
+    sock = ctx.socket(zmq.DEALER)
+    sock.setsockopt(zmq.LINGER, 0)
+    sock.setsockopt(zmq.IDENTITY, f"agent-{index}-{incarnation}".encode())
+    try:
+        sock.connect(endpoint)
+        sock.send(encode("hello", index, -math.inf))
+        t_last = -math.inf
+        idle = 0.0
+        while True:
+            # wait in 1 s slices (a blocking poll) to notice an orphaned agent
+            if not sock.poll(1000):
+                idle += 1.0
+                if idle >= idle_timeout_s or os.getppid() != parent:
+                    return  # the environment is gone: do not linger
+                continue
+            idle = 0.0
+            frame = sock.recv()
+            try:
+                d = decode(frame, ("step", "deliver", "stop"))
+                if d["type"] == "stop":
+                    sock.send(encode("bye", index, d["time"]))
+                    return
+                if d["type"] == "deliver":
+                    _agent_receive(agent, d["inbox"])
+                    sock.send(encode("delivered", index, d["time"]))
+                    continue
+                t_last = float(d["time"])
+                sock.send(_agent_step(agent, d))
+            except Exception as err:  # answered, so that the environment can name it
+                sock.send(encode("error", index, t_last, error=f"{type(err).__name__}: {err}"))
+    finally:
+        sock.close(0)
+        ctx.term()
+
+
+def _agent_receive(agent: Agent, inbox: list[Any]) -> None:
+    """Hand the agent the delivered payloads in order, each checked on receipt."""
+    for p in inbox:
+        payload = decode_payload(p)
+        agent.receive(Message(payload.sender, payload.time, payload))
+
+
+def _agent_step(agent: Agent, d: dict[str, Any]) -> bytes:
+    """Receive the inbox, run ``Agent.step`` at ``d["time"]``, steer; the ``result``."""
+    t = float(d["time"])
+    _agent_receive(agent, d["inbox"])
+    own = _bearings_from(d["bearings"])
+    here = np.asarray(d["position"], float).reshape(2)
+    vel = np.asarray(d["velocity"], float).reshape(2)
+    msg, rep = agent.step(t, own, here, vel)
+    course = None
+    if agent.settings.steering is not None:
+        course = agent.steer(here, float(d["course"]), float(d["speed"]), float(d["dt_next"]))
+    c = agent.confirmed()
+    return encode("result", agent.index, t, payload=msg.payload.to_dict(), report=list(rep),
+                  confirmed={"ids": c.ids.tolist(), "mean": c.mean.tolist(),
+                             "cov": c.cov.tolist()},
+                  course=course)
+
+
+# --------------------------------------------------------------------------------------------
+# the environment
+
+
+@dataclass
+class _Link:
+    """One live agent process and its ROUTER identity."""
+
+    index: int
+    identity: bytes
+    proc: subprocess.Popen
+    stderr: Any  # a temporary file with the process's stderr (for error messages)
+
+
+class _Confirmed:
+    """What ``_Recorder.add`` reads from an agent, rebuilt from a ``result`` message."""
+
+    def __init__(self, t: float, conf: dict[str, list] | None) -> None:
+        self.time = t
+        if conf is None:
+            self._c = empty_tracks()
+        else:
+            T = len(conf["ids"])
+            self._c = empty_tracks()._replace(ids=np.asarray(conf["ids"], np.int64).reshape(T),
+                                              mean=np.asarray(conf["mean"], float).reshape(T, 4),
+                                              cov=np.asarray(conf["cov"], float).reshape(T, 4, 4))
+
+    def confirmed(self):  # noqa: ANN201 (duck-typed Agent for _Recorder.add)
+        return self._c
+
+
+class _Environment:
+    """The ROUTER socket, the agent processes and their shutdown."""
+
+    def __init__(self, host: str, port: int, timeout_s: float, start_timeout_s: float,
+                 idle_timeout_s: float) -> None:
+        self.ctx = zmq.Context()
+        self.sock = self.ctx.socket(zmq.ROUTER)
+        self.sock.setsockopt(zmq.LINGER, 0)
+        # a message to an identity that is not connected is an error, not a silent drop
+        self.sock.setsockopt(zmq.ROUTER_MANDATORY, 1)
+        try:
+            if port == 0:
+                port = self.sock.bind_to_random_port(f"tcp://{host}")
+            else:
+                self.sock.bind(f"tcp://{host}:{port}")
+        except zmq.ZMQError as err:
+            self.sock.close(0)
+            self.ctx.destroy(0)
+            raise ValueError(f"host = {host!r}, port = {port!r}: cannot listen there "
+                             f"({err}); expected a local address and a free port") from None
+        self.endpoint = f"tcp://{host}:{port}"
+        self.timeout_s, self.start_timeout_s = timeout_s, start_timeout_s
+        self.idle_timeout_s = idle_timeout_s
+        self.links: dict[int, _Link] = {}
+        self.incarnations: dict[int, int] = {}
+
+    def start(self, indices: Sequence[int], settings: Sequence[AgentSettings], seed: int,
+              keys: Sequence[tuple[int, ...]]) -> None:
+        """Start the agents' processes and wait for every ``hello``."""
+        waiting = {}
+        for a, s, key in zip(indices, settings, keys, strict=True):
+            k = self.incarnations.get(a, -1) + 1
+            self.incarnations[a] = k
+            ident = f"agent-{a}-{k}".encode()
+            cmd = [sys.executable, "-m", "trackkit.network.processes", "agent",
+                   "--endpoint", self.endpoint, "--index", str(a), "--incarnation", str(k),
+                   "--seed", str(seed), "--key", ",".join(str(int(v)) for v in key),
+                   "--idle-timeout", repr(float(self.idle_timeout_s)),
+                   "--settings", json.dumps(settings_to_dict(s))]
+            err = tempfile.TemporaryFile()
+            # its own session: a Ctrl-C in the terminal reaches the environment only
+            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                    stderr=err, start_new_session=True)
+            self.links[a] = _Link(a, ident, proc, err)
+            waiting[ident] = a
+        deadline = _time.monotonic() + self.start_timeout_s
+        while waiting:
+            ident, d = self._recv(deadline, "hello", set(waiting))
+            del waiting[ident]
+
+    def _recv(self, deadline: float, kind: str, idents: set[bytes]
+              ) -> tuple[bytes, dict[str, Any]]:
+        """The next message from one of ``idents`` before ``deadline`` (monotonic s);
+        checks the agents' processes are alive while it waits."""
+        while True:
+            left = deadline - _time.monotonic()
+            if left <= 0:
+                names = sorted(i.decode() for i in idents)
+                raise AgentError(f"no {kind!r} from {names} within the timeout; expected an "
+                                 "answer (raise timeout_s for slow machines)")
+            # wake at least every 0.5 s to notice a dead process (a blocking poll, not a spin)
+            if self.sock.poll(int(1000 * min(left, 0.5))):
+                ident, frame = self.sock.recv_multipart()
+                if ident not in idents:
+                    continue  # a killed incarnation's late words: not ours to read
+                d = decode(frame)
+                if d["type"] == "error":
+                    raise AgentError(f"agent {d['agent']} failed at t = {d['time']!r} s: "
+                                     f"{d.get('error')}")
+                if d["type"] != kind:
+                    raise AgentError(f"agent {d['agent']} sent type = {d['type']!r}; "
+                                     f"expected {kind!r}")
+                return ident, d
+            for link in self.links.values():
+                if link.identity in idents and link.proc.poll() is not None:
+                    link.stderr.seek(0)
+                    tail = link.stderr.read()[-2000:].decode(errors="replace").strip()
+                    raise AgentError(f"agent {link.index}'s process exited with code "
+                                     f"{link.proc.returncode} before its {kind!r}"
+                                     + (f"; its stderr ends:\n{tail}" if tail else ""))
+
+    def request(self, a: int, frame: bytes, kind: str = "result") -> dict[str, Any]:
+        """Send ``frame`` to agent a and wait for its answer of type ``kind``."""
+        link = self.links[a]
+        self.sock.send_multipart([link.identity, frame])
+        return self._recv(_time.monotonic() + self.timeout_s, kind, {link.identity})[1]
+
+    def kill(self, a: int) -> None:
+        """Kill agent a's process at once (SIGKILL): the failure the option simulates."""
+        link = self.links.pop(a)
+        link.proc.kill()
+        link.proc.wait(self.timeout_s)
+        link.stderr.close()
+
+    def close(self, grace_s: float = 5.0) -> None:
+        """``stop`` every live agent, then join, terminate, kill; close the socket and the
+        context (linger 0). Safe to call on any path."""
+        try:
+            for link in self.links.values():
+                try:
+                    self.sock.send_multipart([link.identity, encode("stop", link.index, 0.0)],
+                                             zmq.NOBLOCK)
+                except zmq.ZMQError:
+                    pass  # not connected (or already gone): terminate below
+            deadline = _time.monotonic() + grace_s
+            for link in self.links.values():
+                try:
+                    link.proc.wait(max(0.01, deadline - _time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    link.proc.terminate()
+                    try:
+                        link.proc.wait(grace_s)
+                    except subprocess.TimeoutExpired:
+                        link.proc.kill()
+                        link.proc.wait(grace_s)
+                link.stderr.close()
+            self.links.clear()
+        finally:
+            self.sock.close(0)
+            self.ctx.destroy(0)
+
+
+def run_network_processes(
+    seed: int,
+    run: int,
+    targets: ArrayLike,
+    agents: ArrayLike,
+    *,
+    duration: float,
+    period: float,
+    sigma: ArrayLike,
+    mr: ArrayLike = math.inf,
+    cr: ArrayLike = math.inf,
+    max_delay: float | None = None,
+    q: float = 0.0,
+    settings: AgentSettings | None = None,
+    steering: bool = False,
+    central: bool | str = False,
+    loss: float = 0.0,
+    central_settings: CentralSettings | None = None,
+    delay: float = 0.0,
+    outages: Sequence[tuple[int, float, float | None]] = (),
+    host: str = "127.0.0.1",
+    port: int = 0,
+    timeout_s: float = 60.0,
+    start_timeout_s: float = 120.0,
+    idle_timeout_s: float = 300.0,
+    on_event: Callable[[float], None] | None = None,
+) -> ProcessNetworkResult:
+    """Run ``run`` of a network with every agent in its own process (module docstring).
+
+    Args:
+        seed, run, targets, agents, duration, period, sigma, mr, cr, max_delay, q, settings,
+            steering, central, loss, central_settings: as ``run_network``; with ``loss`` 0,
+            ``delay`` 0 and no outages the tracks equal ``run_network``'s bit for bit.
+        delay: the channel's delivery delay (simulated s, >= 0).
+        outages: ``(agent, kill_at, restart_at)`` (0-based agent index, simulated s;
+            ``restart_at`` None: never restarted, else > ``kill_at``).
+        host, port: the environment's ROUTER address (port 0: chosen by the OS).
+        timeout_s: the longest wait for one agent's answer (wall-clock s);
+            ``start_timeout_s`` for the processes to start; ``idle_timeout_s``: an agent
+            that hears nothing that long exits by itself.
+        on_event: called with the simulated time after every execution (progress; an
+            exception it raises ends the run, cleanly).
+    """
+    if not 0.0 <= loss < 1.0:
+        raise ValueError(f"loss = {loss!r}; expected a probability in [0, 1)")
+    if not (math.isfinite(delay) and delay >= 0):
+        raise ValueError(f"delay = {delay!r}; expected simulated seconds >= 0")
+    for name, v in (("timeout_s", timeout_s), ("start_timeout_s", start_timeout_s),
+                    ("idle_timeout_s", idle_timeout_s)):
+        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} = {v!r}; expected seconds > 0")
+    if not (isinstance(port, int) and 0 <= port < 65536):
+        raise ValueError(f"port = {port!r}; expected 0 (OS-chosen) or a TCP port")
+    if central is True:
+        central = "filter"
+    if central not in (False, "filter", "agent"):
+        raise ValueError(f"central = {central!r}; expected False, True, 'filter' or 'agent'")
+    base = AgentSettings() if settings is None else settings
+    if steering and base.steering is None:
+        base = replace(base, steering=Steering())
+    if not steering and base.steering is not None:
+        base = replace(base, steering=None)
+    ag0 = np.asarray(agents, dtype=float)
+    if ag0.ndim != 2 or ag0.shape[1] != 4:
+        raise ValueError(f"agents has shape {ag0.shape}; expected (A, 4) states [x, y, vx, vy]")
+    A = ag0.shape[0]
+    kills: dict[int, tuple[float, float]] = {}
+    for k, o in enumerate(outages):
+        a, t_kill, t_back = int(o[0]), float(o[1]), math.inf if o[2] is None else float(o[2])
+        if not 0 <= a < A:
+            raise ValueError(f"outages[{k}] agent = {a}; expected an index in 0..{A - 1}")
+        if a in kills:
+            raise ValueError(f"outages[{k}] agent = {a}; expected one outage per agent")
+        if not (math.isfinite(t_kill) and t_kill < t_back):
+            raise ValueError(f"outages[{k}] = {tuple(o)!r}; expected a finite kill time "
+                             "before the restart time")
+        kills[a] = (t_kill, t_back)
+
+    sim = simulate_network(seed, 1, targets, ag0, duration=duration, period=period,
+                           sigma=sigma, mr=mr, max_delay=max_delay, q=q, first_run=run)
+    Nt = sim.target_at_bearing.shape[-2]
+    sch = schedule(seed, 1, A, Nt, duration, period, max_delay, first_run=run)
+    times, noise = sch.time[0], sch.noise[0]
+    E = times.shape[1]
+    sig = np.broadcast_to(np.asarray(sigma, dtype=float), (A,))
+    MR = np.broadcast_to(np.asarray(mr, dtype=float), (A,))
+    CR = np.broadcast_to(np.asarray(cr, dtype=float), (A,))
+    agent_settings = [replace(base, comm_range=float(CR[a]), meas_range=float(MR[a]),
+                              r_max=min(base.r_max, float(MR[a]))) for a in range(A)]
+    hub = None
+    if central == "agent":
+        s = replace(base, combine_neighbours=False, steering=None,
+                    r_max=min(base.r_max, float(MR.max())))
+        hub = Agent(A, s, np.random.default_rng(np.random.SeedSequence(seed,
+                                                                       spawn_key=(run, 3, A))))
+    lose = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 4)))
+
+    pos = ag0[:, :2].copy()
+    speed = np.hypot(ag0[:, 2], ag0[:, 3])
+    course = np.arctan2(ag0[:, 2], ag0[:, 3])
+    cmd = course.copy()
+    last_t = np.zeros(A)
+
+    def where_at(t: float) -> Array:
+        if not steering:
+            return ag0[:, :2] + t * ag0[:, 2:]
+        return move(pos, course, speed, cmd, t - last_t, TURN_RATE)[0]
+
+    rec = [_Recorder() for _ in range(A)]
+    rec_c = _Recorder() if central == "agent" else None
+    Zc = np.full((A, E, Nt), np.nan)
+    Sc = np.zeros((A, E, 2))
+    order = np.lexsort((np.repeat(np.arange(A), E), times.ravel()))
+    # in flight: per receiver, (arrival time, send time, payload dict), in sending order
+    flight: list[list[tuple[float, float, dict[str, Any]]]] = [[] for _ in range(A)]
+    last_exec = np.full(A, -math.inf)  # each agent's last execution (for "late")
+    alive = np.ones(A, bool)
+    sent = delivered = lost = late = restarts = 0
+    held_before = dict.fromkeys(kills, 0)
+    recovered = {a: math.nan for a in kills}
+    t0 = _time.perf_counter()
+    env = _Environment(host, port, timeout_s, start_timeout_s, idle_timeout_s)
+    try:
+        env.start(range(A), agent_settings, seed, [(run, 3, a) for a in range(A)])
+        for flat in order.tolist():
+            a, e = divmod(flat, E)
+            t = float(times[a, e])
+            if a in kills:
+                t_kill, t_back = kills[a]
+                if alive[a] and t_kill <= t < t_back:
+                    env.kill(a)
+                    alive[a] = False
+                    lost += len(flight[a])  # what it had not yet read dies with it
+                    flight[a].clear()
+                    held_before[a] = rec[a].sizes[-1] if rec[a].sizes else 0
+                elif not alive[a] and t >= t_back:
+                    restarts += 1
+                    env.start([a], [agent_settings[a]], seed, [(run, 3, a, restarts)])
+                    alive[a] = True
+            if steering:
+                p, c = move(pos[a], course[a], speed[a], cmd[a], t - last_t[a], TURN_RATE)
+                pos[a], course[a], last_t[a] = p, float(c), t
+                here = pos[a].copy()
+            else:
+                here = ag0[a, :2] + t * ag0[a, 2:]
+            vel = speed[a] * np.array([math.sin(course[a]), math.cos(course[a])])
+            truth = sim.target_at_bearing[0, a, e]
+            if not alive[a]:
+                rec[a].add(_Confirmed(t, None), truth, here,  # type: ignore[arg-type]
+                           StepReport(0, 0, 0, 0, 0, 0, 0))
+                if on_event is not None:
+                    on_event(t)
+                continue
+            z, _ = bearings_at(here, truth, noise[a, e], sig[a], MR[a])
+            Zc[a, e], Sc[a, e] = z, here
+            own = own_bearings(z, t, here, float(sig[a]), a)
+            inbox = [m for m in flight[a] if m[0] <= t]
+            flight[a] = [m for m in flight[a] if m[0] > t]
+            for _, t_sent, _ in inbox:
+                delivered += 1
+                # it would have arrived at the receiver's first execution after t_sent
+                late += int(last_exec[a] >= t_sent and delay > 0)
+            dt_next = float(times[a, e + 1] - t) if e + 1 < E else period
+            res = env.request(a, encode(
+                "step", a, t, inbox=[m[2] for m in inbox], bearings=_bearings_dict(own),
+                position=here.tolist(), velocity=vel.tolist(), course=float(course[a]),
+                speed=float(speed[a]), dt_next=dt_next))
+            last_exec[a] = t
+            if float(res["time"]) != t:
+                raise AgentError(f"agent {a} answered for time = {res['time']!r}; expected "
+                                 f"{t!r}")
+            conf = _Confirmed(t, res["confirmed"])
+            rec[a].add(conf, truth, here,  # type: ignore[arg-type]
+                       StepReport(*(int(v) for v in res["report"])))
+            if a in kills and math.isnan(recovered[a]) and t >= kills[a][1] and (
+                    conf.confirmed().size >= max(held_before[a], 1)):
+                recovered[a] = t - kills[a][1]
+            if steering and res["course"] is not None:
+                cmd[a] = float(res["course"])
+            pd = res["payload"]
+            payload = decode_payload(pd)  # checks the schema on receipt
+
+            links = disk_graph(where_at(t), CR)[a]
+            for b in np.flatnonzero(links).tolist():
+                sent += 1
+                if loss > 0 and lose.random() < loss:
+                    lost += 1
+                    continue
+                if not alive[b]:
+                    lost += 1
+                    continue
+                flight[b].append((t + delay, t, pd))
+            if hub is not None and rec_c is not None:
+                bare = replace(payload, ids=payload.ids[:0], mean=payload.mean[:0],
+                               cov=payload.cov[:0], status=payload.status[:0],
+                               lost=payload.lost[:0])
+                hub.receive(Message(payload.sender, payload.time, bare))
+                _, rep_c = hub.step(t, empty_bearings())
+                rec_c.add(hub, truth, np.full(2, np.nan), rep_c)
+            if on_event is not None:
+                on_event(t)
+        # the run ends at the last execution: what has arrived by then is handed over (as
+        # run_network's receive at once); what is still in flight is never delivered
+        t_end = float(times.max())
+        for b in range(A):
+            due = [m for m in flight[b] if m[0] <= t_end]
+            lost += len(flight[b]) - len(due)
+            if due and alive[b]:
+                env.request(b, encode("deliver", b, t_end, inbox=[m[2] for m in due]),
+                            "delivered")
+                delivered += len(due)
+    finally:
+        env.close()
+    fusion = None
+    trace_c: Trace | None = rec_c.trace() if rec_c else None
+    if central == "filter":
+        fusion = central_fusion(Zc[None], times[None], Sc[None], sig, q=q,
+                                settings=central_settings)
+        trace_c = _fusion_trace(fusion, sim.target_at_bearing[0], Zc)
+    seconds = _time.perf_counter() - t0
+    out = ProcessNetworkResult([r.trace() for r in rec], trace_c, sim, sent, delivered, lost,
+                               seconds, fusion)
+    out.late, out.endpoint, out.restarts = late, env.endpoint, restarts
+    out.recovered = [recovered[a] for a in sorted(kills)]
+    return out
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
+    """``python -m trackkit.network.processes agent --endpoint ... --index ...``: one agent
+    process (started by the environment). Without arguments: print the protocol."""
+    ap = argparse.ArgumentParser(prog="python -m trackkit.network.processes")
+    sub = ap.add_subparsers(dest="command")
+    ag = sub.add_parser("agent", help="run one agent (the environment starts these)")
+    ag.add_argument("--endpoint", required=True)
+    ag.add_argument("--index", type=int, required=True)
+    ag.add_argument("--incarnation", type=int, default=0)
+    ag.add_argument("--seed", type=int, required=True)
+    ag.add_argument("--key", required=True, help="the SeedSequence spawn key, e.g. 0,3,1")
+    ag.add_argument("--idle-timeout", type=float, default=300.0)
+    ag.add_argument("--settings", default="{}", help="AgentSettings as JSON")
+    ns = ap.parse_args(argv)
+    if ns.command != "agent":
+        print(__doc__)
+        return 0
+    key = tuple(int(v) for v in ns.key.split(","))
+    _agent_main(ns.endpoint, ns.index, ns.incarnation,
+                settings_from_dict(json.loads(ns.settings)), ns.seed, key, ns.idle_timeout)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main())
