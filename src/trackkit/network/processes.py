@@ -80,7 +80,7 @@ import sys
 import tempfile
 import time as _time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -93,15 +93,21 @@ from trackkit.network.agents import (
     BearingSet,
     Payload,
     StepReport,
-    empty_bearings,
     empty_tracks,
     own_bearings,
 )
-from trackkit.network.central import CentralSettings, central_fusion
-from trackkit.network.run import NetworkResult, Trace, _fusion_trace, _Recorder
-from trackkit.network.steering import TURN_RATE, Steering, move
+from trackkit.network.central import CentralSettings
+from trackkit.network.run import (
+    NetworkResult,
+    _central_trace,
+    _Motion,
+    _Recorder,
+    _relay_to_hub,
+    _world,
+)
+from trackkit.network.steering import Steering
 from trackkit.network.tracks import Message
-from trackkit.sim.network import bearings_at, disk_graph, schedule, simulate_network
+from trackkit.sim.network import bearings_at, disk_graph
 
 __all__ = ["PROTOCOL_VERSION", "AgentError", "ProcessNetworkResult", "decode",
            "decode_payload", "encode", "run_network_processes", "settings_from_dict",
@@ -475,19 +481,10 @@ def run_network_processes(
             raise ValueError(f"{name} = {v!r}; expected seconds > 0")
     if not (isinstance(port, int) and 0 <= port < 65536):
         raise ValueError(f"port = {port!r}; expected 0 (OS-chosen) or a TCP port")
-    if central is True:
-        central = "filter"
-    if central not in (False, "filter", "agent"):
-        raise ValueError(f"central = {central!r}; expected False, True, 'filter' or 'agent'")
-    base = AgentSettings() if settings is None else settings
-    if steering and base.steering is None:
-        base = replace(base, steering=Steering())
-    if not steering and base.steering is not None:
-        base = replace(base, steering=None)
-    ag0 = np.asarray(agents, dtype=float)
-    if ag0.ndim != 2 or ag0.shape[1] != 4:
-        raise ValueError(f"agents has shape {ag0.shape}; expected (A, 4) states [x, y, vx, vy]")
-    A = ag0.shape[0]
+    w = _world(seed, run, targets, agents, duration=duration, period=period, sigma=sigma,
+               mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings, steering=steering,
+               central=central)
+    A, E = w.times.shape
     kills: dict[int, tuple[float, float]] = {}
     for k, o in enumerate(outages):
         a, t_kill, t_back = int(o[0]), float(o[1]), math.inf if o[2] is None else float(o[2])
@@ -500,41 +497,11 @@ def run_network_processes(
                              "before the restart time")
         kills[a] = (t_kill, t_back)
 
-    sim = simulate_network(seed, 1, targets, ag0, duration=duration, period=period,
-                           sigma=sigma, mr=mr, max_delay=max_delay, q=q, first_run=run)
-    Nt = sim.target_at_bearing.shape[-2]
-    sch = schedule(seed, 1, A, Nt, duration, period, max_delay, first_run=run)
-    times, noise = sch.time[0], sch.noise[0]
-    E = times.shape[1]
-    sig = np.broadcast_to(np.asarray(sigma, dtype=float), (A,))
-    MR = np.broadcast_to(np.asarray(mr, dtype=float), (A,))
-    CR = np.broadcast_to(np.asarray(cr, dtype=float), (A,))
-    agent_settings = [replace(base, comm_range=float(CR[a]), meas_range=float(MR[a]),
-                              r_max=min(base.r_max, float(MR[a]))) for a in range(A)]
-    hub = None
-    if central == "agent":
-        s = replace(base, combine_neighbours=False, steering=None,
-                    r_max=min(base.r_max, float(MR.max())))
-        hub = Agent(A, s, np.random.default_rng(np.random.SeedSequence(seed,
-                                                                       spawn_key=(run, 3, A))))
-    lose = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 4)))
-
-    pos = ag0[:, :2].copy()
-    speed = np.hypot(ag0[:, 2], ag0[:, 3])
-    course = np.arctan2(ag0[:, 2], ag0[:, 3])
-    cmd = course.copy()
-    last_t = np.zeros(A)
-
-    def where_at(t: float) -> Array:
-        if not steering:
-            return ag0[:, :2] + t * ag0[:, 2:]
-        return move(pos, course, speed, cmd, t - last_t, TURN_RATE)[0]
-
+    motion = _Motion(w.ag0, steering)
     rec = [_Recorder() for _ in range(A)]
-    rec_c = _Recorder() if central == "agent" else None
-    Zc = np.full((A, E, Nt), np.nan)
+    rec_c = _Recorder() if w.hub is not None else None
+    Zc = np.full((A, E, w.Nt), np.nan)
     Sc = np.zeros((A, E, 2))
-    order = np.lexsort((np.repeat(np.arange(A), E), times.ravel()))
     # in flight: per receiver, (arrival time, send time, payload dict), in sending order
     flight: list[list[tuple[float, float, dict[str, Any]]]] = [[] for _ in range(A)]
     last_exec = np.full(A, -math.inf)  # each agent's last execution (for "late")
@@ -545,10 +512,9 @@ def run_network_processes(
     t0 = _time.perf_counter()
     env = _Environment(host, port, timeout_s, start_timeout_s, idle_timeout_s)
     try:
-        env.start(range(A), agent_settings, seed, [(run, 3, a) for a in range(A)])
-        for flat in order.tolist():
-            a, e = divmod(flat, E)
-            t = float(times[a, e])
+        env.start(range(A), w.settings, seed, [(run, 3, a) for a in range(A)])
+        for a, e in w.order:
+            t = float(w.times[a, e])
             if a in kills:
                 t_kill, t_back = kills[a]
                 if alive[a] and t_kill <= t < t_back:
@@ -559,36 +525,30 @@ def run_network_processes(
                     held_before[a] = rec[a].sizes[-1] if rec[a].sizes else 0
                 elif not alive[a] and t >= t_back:
                     restarts += 1
-                    env.start([a], [agent_settings[a]], seed, [(run, 3, a, restarts)])
+                    env.start([a], [w.settings[a]], seed, [(run, 3, a, restarts)])
                     alive[a] = True
-            if steering:
-                p, c = move(pos[a], course[a], speed[a], cmd[a], t - last_t[a], TURN_RATE)
-                pos[a], course[a], last_t[a] = p, float(c), t
-                here = pos[a].copy()
-            else:
-                here = ag0[a, :2] + t * ag0[a, 2:]
-            vel = speed[a] * np.array([math.sin(course[a]), math.cos(course[a])])
-            truth = sim.target_at_bearing[0, a, e]
+            here, vel = motion.at(a, t)
+            truth = w.sim.target_at_bearing[0, a, e]
             if not alive[a]:
                 rec[a].add(_Confirmed(t, None), truth, here,  # type: ignore[arg-type]
                            StepReport(0, 0, 0, 0, 0, 0, 0))
                 if on_event is not None:
                     on_event(t)
                 continue
-            z, _ = bearings_at(here, truth, noise[a, e], sig[a], MR[a])
+            z, _ = bearings_at(here, truth, w.noise[a, e], w.sig[a], w.MR[a])
             Zc[a, e], Sc[a, e] = z, here
-            own = own_bearings(z, t, here, float(sig[a]), a)
+            own = own_bearings(z, t, here, float(w.sig[a]), a)
             inbox = [m for m in flight[a] if m[0] <= t]
             flight[a] = [m for m in flight[a] if m[0] > t]
             for _, t_sent, _ in inbox:
                 delivered += 1
                 # it would have arrived at the receiver's first execution after t_sent
                 late += int(last_exec[a] >= t_sent and delay > 0)
-            dt_next = float(times[a, e + 1] - t) if e + 1 < E else period
+            dt_next = float(w.times[a, e + 1] - t) if e + 1 < E else period
             res = env.request(a, encode(
                 "step", a, t, inbox=[m[2] for m in inbox], bearings=_bearings_dict(own),
-                position=here.tolist(), velocity=vel.tolist(), course=float(course[a]),
-                speed=float(speed[a]), dt_next=dt_next))
+                position=here.tolist(), velocity=vel.tolist(), course=float(motion.course[a]),
+                speed=float(motion.speed[a]), dt_next=dt_next))
             last_exec[a] = t
             if float(res["time"]) != t:
                 raise AgentError(f"agent {a} answered for time = {res['time']!r}; expected "
@@ -600,32 +560,27 @@ def run_network_processes(
                     conf.confirmed().size >= max(held_before[a], 1)):
                 recovered[a] = t - kills[a][1]
             if steering and res["course"] is not None:
-                cmd[a] = float(res["course"])
+                motion.cmd[a] = float(res["course"])
             pd = res["payload"]
             payload = decode_payload(pd)  # checks the schema on receipt
 
-            links = disk_graph(where_at(t), CR)[a]
+            links = disk_graph(motion.where(t), w.CR)[a]
             for b in np.flatnonzero(links).tolist():
                 sent += 1
-                if loss > 0 and lose.random() < loss:
+                if loss > 0 and w.lose.random() < loss:
                     lost += 1
                     continue
                 if not alive[b]:
                     lost += 1
                     continue
                 flight[b].append((t + delay, t, pd))
-            if hub is not None and rec_c is not None:
-                bare = replace(payload, ids=payload.ids[:0], mean=payload.mean[:0],
-                               cov=payload.cov[:0], status=payload.status[:0],
-                               lost=payload.lost[:0])
-                hub.receive(Message(payload.sender, payload.time, bare))
-                _, rep_c = hub.step(t, empty_bearings())
-                rec_c.add(hub, truth, np.full(2, np.nan), rep_c)
+            if rec_c is not None:
+                _relay_to_hub(w.hub, rec_c, payload, t, truth)
             if on_event is not None:
                 on_event(t)
         # the run ends at the last execution: what has arrived by then is handed over (as
         # run_network's receive at once); what is still in flight is never delivered
-        t_end = float(times.max())
+        t_end = float(w.times.max())
         for b in range(A):
             due = [m for m in flight[b] if m[0] <= t_end]
             lost += len(flight[b]) - len(due)
@@ -635,15 +590,10 @@ def run_network_processes(
                 delivered += len(due)
     finally:
         env.close()
-    fusion = None
-    trace_c: Trace | None = rec_c.trace() if rec_c else None
-    if central == "filter":
-        fusion = central_fusion(Zc[None], times[None], Sc[None], sig, q=q,
-                                settings=central_settings)
-        trace_c = _fusion_trace(fusion, sim.target_at_bearing[0], Zc)
+    trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
     seconds = _time.perf_counter() - t0
-    out = ProcessNetworkResult([r.trace() for r in rec], trace_c, sim, sent, delivered, lost,
-                               seconds, fusion)
+    out = ProcessNetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered,
+                               lost, seconds, fusion)
     out.late, out.endpoint, out.restarts = late, env.endpoint, restarts
     out.recovered = [recovered[a] for a in sorted(kills)]
     return out

@@ -181,6 +181,84 @@ def run_network(
     """
     if not 0.0 <= loss < 1.0:
         raise ValueError(f"loss = {loss!r}; expected a probability in [0, 1)")
+    w = _world(seed, run, targets, agents, duration=duration, period=period, sigma=sigma,
+               mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings, steering=steering,
+               central=central)
+    A, E = w.times.shape
+    nodes = [Agent(a, w.settings[a], np.random.default_rng(np.random.SeedSequence(
+        seed, spawn_key=(run, 3, a)))) for a in range(A)]
+    motion = _Motion(w.ag0, steering)
+    rec = [_Recorder() for _ in range(A)]
+    rec_c = _Recorder() if w.hub is not None else None
+    # the bearings as taken, labelled by target, for the centralised filter
+    Zc = np.full((A, E, w.Nt), np.nan)
+    Sc = np.zeros((A, E, 2))
+    sent = delivered = lost = 0
+    t0 = _time.perf_counter()
+    for a, e in w.order:
+        t = float(w.times[a, e])
+        here, vel = motion.at(a, t)
+        truth = w.sim.target_at_bearing[0, a, e]
+        z, _ = bearings_at(here, truth, w.noise[a, e], w.sig[a], w.MR[a])
+        Zc[a, e], Sc[a, e] = z, here
+        own = own_bearings(z, t, here, float(w.sig[a]), a)
+        msg, rep = nodes[a].step(t, own, here, vel)
+        rec[a].add(nodes[a], truth, here, rep)
+        if steering:
+            dt_next = float(w.times[a, e + 1] - t) if e + 1 < E else period
+            motion.cmd[a] = nodes[a].steer(here, float(motion.course[a]),
+                                           float(motion.speed[a]), dt_next)
+
+        # delivery over the disk graph at time t
+        links = disk_graph(motion.where(t), w.CR)[a]
+        for b in np.flatnonzero(links).tolist():
+            sent += 1
+            if loss > 0 and w.lose.random() < loss:
+                lost += 1
+                continue
+            nodes[b].receive(msg)
+            delivered += 1
+        if rec_c is not None:
+            _relay_to_hub(w.hub, rec_c, msg.payload, t, truth)
+    trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
+    seconds = _time.perf_counter() - t0
+    return NetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered, lost,
+                         seconds, fusion)
+
+
+# --------------------------------------------------------------------------------------------
+# What the in-process run and the process run (trackkit.network.processes) share
+
+
+class _World(NamedTuple):
+    """A network run's fixed parts, built from its arguments by :func:`_world`: the
+    simulation, the execution times ``(A, E)`` and bearing noise ``(A, E, Nt)``, each
+    agent's bearing std, ranges and settings, the "agent" reference's hub (or None), the
+    message-loss stream, and the executions ``(a, e)`` in time order."""
+
+    central: bool | str
+    ag0: Array
+    sim: NetworkRun
+    times: Array
+    noise: Array
+    sig: Array
+    MR: Array
+    CR: Array
+    settings: list[AgentSettings]
+    hub: Agent | None
+    lose: np.random.Generator
+    order: list[tuple[int, int]]
+
+    @property
+    def Nt(self) -> int:
+        return self.sim.target_at_bearing.shape[-2]
+
+
+def _world(seed: int, run: int, targets: ArrayLike, agents: ArrayLike, *, duration: float,
+           period: float, sigma: ArrayLike, mr: ArrayLike, cr: ArrayLike,
+           max_delay: float | None, q: float, settings: AgentSettings | None,
+           steering: bool, central: bool | str) -> _World:
+    """Check the shared arguments of a network run and build its :class:`_World`."""
     if central is True:
         central = "filter"
     if central not in (False, "filter", "agent"):
@@ -203,13 +281,8 @@ def run_network(
     sig = np.broadcast_to(np.asarray(sigma, dtype=float), (A,))
     MR = np.broadcast_to(np.asarray(mr, dtype=float), (A,))
     CR = np.broadcast_to(np.asarray(cr, dtype=float), (A,))
-
-    nodes = []
-    for a in range(A):
-        s = replace(base, comm_range=float(CR[a]), meas_range=float(MR[a]),
-                    r_max=min(base.r_max, float(MR[a])))
-        g = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 3, a)))
-        nodes.append(Agent(a, s, g))
+    per_agent = [replace(base, comm_range=float(CR[a]), meas_range=float(MR[a]),
+                         r_max=min(base.r_max, float(MR[a]))) for a in range(A)]
     hub = None
     if central == "agent":
         s = replace(base, combine_neighbours=False, steering=None,
@@ -217,72 +290,65 @@ def run_network(
         hub = Agent(A, s, np.random.default_rng(np.random.SeedSequence(seed,
                                                                        spawn_key=(run, 3, A))))
     lose = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 4)))
-
-    # agent kinematics: position at last_t, course, speed, commanded course
-    pos = ag0[:, :2].copy()
-    speed = np.hypot(ag0[:, 2], ag0[:, 3])
-    course = np.arctan2(ag0[:, 2], ag0[:, 3])
-    cmd = course.copy()
-    last_t = np.zeros(A)
-
-    def where_at(t: float) -> Array:
-        if not steering:
-            return ag0[:, :2] + t * ag0[:, 2:]
-        return move(pos, course, speed, cmd, t - last_t, TURN_RATE)[0]
-
-    rec = [_Recorder() for _ in range(A)]
-    rec_c = _Recorder() if central == "agent" else None
-    # the bearings as taken, labelled by target, for the centralised filter
-    Zc = np.full((A, E, Nt), np.nan)
-    Sc = np.zeros((A, E, 2))
+    # time order, ties: lower agent index first
     order = np.lexsort((np.repeat(np.arange(A), E), times.ravel()))
-    sent = delivered = lost = 0
-    t0 = _time.perf_counter()
-    for flat in order.tolist():
-        a, e = divmod(flat, E)
-        t = float(times[a, e])
-        if steering:
-            p, c = move(pos[a], course[a], speed[a], cmd[a], t - last_t[a], TURN_RATE)
-            pos[a], course[a], last_t[a] = p, float(c), t
-            here = pos[a].copy()
-        else:
-            here = ag0[a, :2] + t * ag0[a, 2:]
-        vel = speed[a] * np.array([math.sin(course[a]), math.cos(course[a])])
-        truth = sim.target_at_bearing[0, a, e]
-        z, _ = bearings_at(here, truth, noise[a, e], sig[a], MR[a])
-        Zc[a, e], Sc[a, e] = z, here
-        own = own_bearings(z, t, here, float(sig[a]), a)
-        msg, rep = nodes[a].step(t, own, here, vel)
-        rec[a].add(nodes[a], truth, here, rep)
-        if steering:
-            dt_next = float(times[a, e + 1] - t) if e + 1 < E else period
-            cmd[a] = nodes[a].steer(here, float(course[a]), float(speed[a]), dt_next)
+    return _World(central, ag0, sim, times, noise, sig, MR, CR, per_agent, hub, lose,
+                  [divmod(int(f), E) for f in order])
 
-        # delivery over the disk graph at time t
-        links = disk_graph(where_at(t), CR)[a]
-        for b in np.flatnonzero(links).tolist():
-            sent += 1
-            if loss > 0 and lose.random() < loss:
-                lost += 1
-                continue
-            nodes[b].receive(msg)
-            delivered += 1
-        if hub is not None and rec_c is not None:
-            p: Payload = msg.payload
-            bare = replace(p, ids=p.ids[:0], mean=p.mean[:0], cov=p.cov[:0],
-                           status=p.status[:0], lost=p.lost[:0])
-            hub.receive(Message(msg.sender, msg.time, bare))
-            _, rep_c = hub.step(t, empty_bearings())
-            rec_c.add(hub, truth, np.full(2, np.nan), rep_c)
-    fusion = None
-    trace_c = rec_c.trace() if rec_c else None
-    if central == "filter":
-        fusion = central_fusion(Zc[None], times[None], Sc[None], sig, q=q,
+
+class _Motion:
+    """The agents' kinematics between executions: with steering, each agent is moved from its
+    previous execution on its last commanded course (``steering.move``); without, the
+    straight line ``p0 + t v`` exactly (so the bearings equal ``simulate_network``'s)."""
+
+    def __init__(self, ag0: Array, steering: bool) -> None:
+        self.ag0, self.steering = ag0, steering
+        self.pos = ag0[:, :2].copy()
+        self.speed = np.hypot(ag0[:, 2], ag0[:, 3])
+        self.course = np.arctan2(ag0[:, 2], ag0[:, 3])
+        self.cmd = self.course.copy()
+        self.last_t = np.zeros(len(ag0))
+
+    def at(self, a: int, t: float) -> tuple[Array, Array]:
+        """Agent a's position and velocity at its execution time t (moving it there)."""
+        if self.steering:
+            p, c = move(self.pos[a], self.course[a], self.speed[a], self.cmd[a],
+                        t - self.last_t[a], TURN_RATE)
+            self.pos[a], self.course[a], self.last_t[a] = p, float(c), t
+            here = self.pos[a].copy()
+        else:
+            here = self.ag0[a, :2] + t * self.ag0[a, 2:]
+        course = self.course[a]
+        return here, self.speed[a] * np.array([math.sin(course), math.cos(course)])
+
+    def where(self, t: float) -> Array:
+        """Every agent's position at t, the others extrapolated on their current commands."""
+        if not self.steering:
+            return self.ag0[:, :2] + t * self.ag0[:, 2:]
+        return move(self.pos, self.course, self.speed, self.cmd, t - self.last_t,
+                    TURN_RATE)[0]
+
+
+def _relay_to_hub(hub: Agent, rec: _Recorder, payload: Payload, t: float,
+                  truth: Array) -> None:
+    """The "agent" reference: the sender's bearings (not its tracks) to the hub, which then
+    executes."""
+    bare = replace(payload, ids=payload.ids[:0], mean=payload.mean[:0],
+                   cov=payload.cov[:0], status=payload.status[:0], lost=payload.lost[:0])
+    hub.receive(Message(payload.sender, payload.time, bare))
+    _, rep = hub.step(t, empty_bearings())
+    rec.add(hub, truth, np.full(2, np.nan), rep)
+
+
+def _central_trace(w: _World, rec_c: _Recorder | None, Zc: Array, Sc: Array, q: float,
+                   central_settings: CentralSettings | None
+                   ) -> tuple[Trace | None, CentralFusion | None]:
+    """The centralised reference's trace (and the filter's output), after the run."""
+    if w.central == "filter":
+        fusion = central_fusion(Zc[None], w.times[None], Sc[None], w.sig, q=q,
                                 settings=central_settings)
-        trace_c = _fusion_trace(fusion, sim.target_at_bearing[0], Zc)
-    seconds = _time.perf_counter() - t0
-    return NetworkResult([r.trace() for r in rec], trace_c, sim, sent, delivered, lost,
-                         seconds, fusion)
+        return _fusion_trace(fusion, w.sim.target_at_bearing[0], Zc), fusion
+    return (rec_c.trace() if rec_c else None), None
 
 
 def _fusion_trace(c: CentralFusion, truth: Array, z: Array) -> Trace:
