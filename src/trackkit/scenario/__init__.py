@@ -111,21 +111,48 @@ def _read(p: Path) -> str:
             "is a TOML file, which must be saved as UTF-8") from None
 
 
-def load(name_or_path: str | Path) -> Scenario:
-    """Load a bundled scenario by name or a TOML file by path."""
+def bundled_file(folder, name: str):
+    """The bundled scenario file ``folder/name.toml``, or None (also for a name that is not
+    a plain file name)."""
+    f = folder / f"{name}.toml"
+    return f if PLAIN_NAME.fullmatch(name) and f.is_file() else None
+
+
+def read_scenario(name_or_path: str | Path, folder, kind: str = "") -> tuple[dict, str]:
+    """``(data, source)`` of a scenario file by path, or bundled in ``folder`` by name;
+    ``kind`` names the kind of scenario in the error for an unknown name ("multi-target ",
+    "network ")."""
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
         text, source = _read(p), str(p)
     else:
-        f = _bundled_dir() / f"{name_or_path}.toml"
-        if not (PLAIN_NAME.fullmatch(str(name_or_path)) and f.is_file()):
+        f = bundled_file(folder, str(name_or_path))
+        if f is None:
             raise ScenarioError(
-                f"no bundled scenario named {str(name_or_path)!r}; expected one of "
-                f"{sorted(bundled())} or a path to a .toml file"
+                f"no bundled {kind}scenario named {str(name_or_path)!r}; expected one of "
+                f"{sorted(descriptions(folder))} or a path to a .toml file"
             )
         text, source = f.read_text(encoding="utf-8"), f"{name_or_path} (bundled)"
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text), source
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{source}: not valid TOML: {err}") from None
-    return parse(data, source)
+
+
+def holds_table(name_or_path: str | Path, folder, table: str, kind: type) -> bool:
+    """Whether ``name_or_path`` names a scenario bundled in ``folder``, or a TOML file whose
+    ``table`` is a ``kind`` (dict for ``[table]``, list for ``[[table]]``). A file that cannot
+    be read or parsed is not claimed: another loader then reports its problem."""
+    p = Path(name_or_path)
+    if not (p.suffix == ".toml" or p.exists()):
+        return bundled_file(folder, str(name_or_path)) is not None
+    try:
+        data = tomllib.loads(_read(p))
+    except (ScenarioError, tomllib.TOMLDecodeError):
+        return False
+    return isinstance(data.get(table), kind)
+
+
+def load(name_or_path: str | Path) -> Scenario:
+    """Load a bundled scenario by name or a TOML file by path."""
+    return parse(*read_scenario(name_or_path, _bundled_dir()))

@@ -51,7 +51,6 @@ radar_dense) is an error, not silently ignored. Messages name the field and the 
 from __future__ import annotations
 
 import math
-import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -63,11 +62,11 @@ from trackkit.scenario import (
     _format,
     _Missing,
     _pydantic_problems,
-    _read,
     descriptions,
+    holds_table,
+    read_scenario,
 )
 from trackkit.scenario.schema import (
-    PLAIN_NAME,
     NonNegFloat,
     PositiveFloat,
     _Strict,
@@ -315,47 +314,16 @@ def parse_multitarget(data: dict, source: str = "<scenario>") -> MultiTargetScen
         raise ScenarioError(_format(_pydantic_problems(err), source)) from None
 
 
-def _bundled_file(name: str):
-    f = _bundled_dir() / f"{name}.toml"
-    return f if PLAIN_NAME.fullmatch(name) and f.is_file() else None
-
-
 def is_multitarget(name_or_path: str | Path) -> bool:
     """Whether ``name_or_path`` is a bundled multi-target scenario's name, or a TOML file with
     a ``[scene]`` table (a single-target scenario has none). A file that cannot be read or
     parsed is not claimed (the single-target loader then reports its problem)."""
-    p = Path(name_or_path)
-    if not (p.suffix == ".toml" or p.exists()):
-        return _bundled_file(str(name_or_path)) is not None
-    try:
-        data = tomllib.loads(_read(p))
-    except (ScenarioError, tomllib.TOMLDecodeError):
-        return False
-    return isinstance(data.get("scene"), dict)
+    return holds_table(name_or_path, _bundled_dir(), "scene", dict)
 
 
 def load_multitarget(name_or_path: str | Path) -> MultiTargetScenario:
     """Load a bundled multi-target scenario by name or a TOML file by path."""
-    p = Path(name_or_path)
-    if p.suffix == ".toml" or p.exists():
-        text, source = _read(p), str(p)
-    else:
-        f = _bundled_file(str(name_or_path))
-        if f is None:
-            raise ScenarioError(
-                f"no bundled multi-target scenario named {str(name_or_path)!r}; expected one "
-                f"of {sorted(bundled_multitarget())} or a path to a .toml file")
-        text, source = f.read_text(encoding="utf-8"), f"{name_or_path} (bundled)"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"{source}: not valid TOML: {err}") from None
-    return parse_multitarget(data, source)
-
-
-# ---------------------------------------------------------------------------------------------
-# building
-# ---------------------------------------------------------------------------------------------
+    return parse_multitarget(*read_scenario(name_or_path, _bundled_dir(), "multi-target "))
 
 
 def build_scene(scenario: MultiTargetScenario):

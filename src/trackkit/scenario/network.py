@@ -74,7 +74,6 @@ be started, so it is refused. Messages name the field, the value and what is all
 from __future__ import annotations
 
 import math
-import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Literal
@@ -88,11 +87,11 @@ from trackkit.scenario import (
     _format,
     _Missing,
     _pydantic_problems,
-    _read,
     descriptions,
+    holds_table,
+    read_scenario,
 )
 from trackkit.scenario.schema import (
-    PLAIN_NAME,
     Finite,
     NonNegFloat,
     PositiveFloat,
@@ -385,39 +384,13 @@ def parse_network(data: dict, source: str = "<scenario>") -> NetworkScenario:
         raise ScenarioError(_format(_pydantic_problems(err), source)) from None
 
 
-def _bundled_file(name: str):
-    f = _bundled_dir() / f"{name}.toml"
-    return f if PLAIN_NAME.fullmatch(name) and f.is_file() else None
-
-
 def is_network(name_or_path: str | Path) -> bool:
     """Whether ``name_or_path`` is a bundled network scenario's name, or a TOML file with
     ``[[agents]]`` tables (no other kind of scenario has them). A file that cannot be read
     or parsed is not claimed (another loader then reports its problem)."""
-    p = Path(name_or_path)
-    if not (p.suffix == ".toml" or p.exists()):
-        return _bundled_file(str(name_or_path)) is not None
-    try:
-        data = tomllib.loads(_read(p))
-    except (ScenarioError, tomllib.TOMLDecodeError):
-        return False
-    return isinstance(data.get("agents"), list)
+    return holds_table(name_or_path, _bundled_dir(), "agents", list)
 
 
 def load_network(name_or_path: str | Path) -> NetworkScenario:
     """Load a bundled network scenario by name or a TOML file by path."""
-    p = Path(name_or_path)
-    if p.suffix == ".toml" or p.exists():
-        text, source = _read(p), str(p)
-    else:
-        f = _bundled_file(str(name_or_path))
-        if f is None:
-            raise ScenarioError(
-                f"no bundled network scenario named {str(name_or_path)!r}; expected one of "
-                f"{sorted(bundled_network())} or a path to a .toml file")
-        text, source = f.read_text(encoding="utf-8"), f"{name_or_path} (bundled)"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"{source}: not valid TOML: {err}") from None
-    return parse_network(data, source)
+    return parse_network(*read_scenario(name_or_path, _bundled_dir(), "network "))
