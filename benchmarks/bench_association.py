@@ -124,6 +124,22 @@ def row_sizes(T, repeat):
           f"{1e3 * total:.2f} | {1e3 * tj:.2f} |")
 
 
+def table_dense(repeat):
+    print("\n### GNN: dense against per cluster (spread-out tracks, ~20 clutter plots)\n")
+    print("| tracks | dets | cells T(D+T) | dense ms | clusters ms | dense / clusters |")
+    print("|---:|---:|---:|---:|---:|---:|")
+    for T in (1, 3, 10, 30, 100, 150, 200, 300, 500):
+        sc = make(T)
+        mp = predict_measurement(tk.filters.KF().predict(sc.prior, sc.motion, 1.0), sc.sensor)
+        g = gate(mp.zhat, mp.S, sc.z, P_G)
+        c = loglik_costs(g, sc.p_d, sc.clutter_density, P_G)
+        assert np.array_equal(gnn(g, c, "dense").det, gnn(g, c, "clusters").det)
+        d = best_of(lambda g=g, c=c: gnn(g, c, "dense"), repeat)
+        k = best_of(lambda g=g, c=c: gnn(g, c, "clusters"), repeat)
+        D = sc.z.shape[0]
+        print(f"| {T} | {D} | {T * (D + T)} | {1e3 * d:.3f} | {1e3 * k:.3f} | {d / k:.2f} |")
+
+
 def table_crossover(repeat):
     print("\n### gate: brute force against the KD-tree pre-gate (T = D)\n")
     print("| tracks x dets | brute ms | KD-tree ms | KD-tree / brute |")
@@ -214,6 +230,7 @@ def main() -> None:
           f"{platform.python_version()}, {platform.machine()}, {os.cpu_count()} CPUs")
     table_sizes(args.sizes, args.repeat)
     table_crossover(args.repeat)
+    table_dense(args.repeat)
     if args.ss_sizes:
         table_stonesoup(args.ss_sizes, args.repeat)
 

@@ -6,11 +6,13 @@ from __future__ import annotations
 import json
 import math
 import tomllib
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from tests.cli_helpers import assert_user_error, trackkit
+from trackkit.eval.network_compare import compare_networks, run_mse
 from trackkit.eval.network_mc import run_network_mc
 from trackkit.report.network_report import AGENT_UNITS, write_network_report
 from trackkit.scenario import ScenarioError
@@ -257,7 +259,69 @@ def test_report_keys_and_byte_identical_results(tiny_mc, tmp_path):
     assert {"paths", "errors", "gospa", "html", "timings", "results"} == set(p1)
 
 
+def test_paired_comparison_of_the_same_runs(tiny_mc):
+    """A Monte Carlo against itself: ratio 1, no difference; against a copy with one
+    agent's errors doubled: that agent's error is "higher" (t > 0, p tiny), the other's
+    unchanged; runs of another seed are refused."""
+    sc, mc = tiny_mc
+    same = compare_networks(mc, mc, label_a="a", label_b="b")
+    np.testing.assert_array_equal(same.ratio, 1.0)
+    assert same.verdict == ["no difference"] * 2 and same.verdict_all == "no difference"
+    err = {k: v.copy() for k, v in mc.err.items()}
+    err["pos"][:, 0] *= 2.0
+    worse = replace(mc, err=err)
+    c = compare_networks(worse, mc, label_a="worse", label_b="mc", confidence=0.9)
+    np.testing.assert_allclose(c.ratio, [2.0, 1.0], rtol=1e-12)
+    assert c.verdict[1] == "no difference"
+    mse = run_mse(mc)
+    assert mse.shape == (2, 2)
+    d = 3.0 * mse[:, 0]  # (2e)^2 - e^2 per run
+    t = d.mean() / (d.std(ddof=1) / np.sqrt(2))
+    assert c.t[0] == pytest.approx(t, rel=1e-12)
+    assert c.lower_share[0] == 0.0
+    with pytest.raises(ValueError, match="seed differs"):
+        compare_networks(mc, replace(mc, seed=mc.seed + 1), label_a="a", label_b="b")
+
+
+def test_report_with_straight_courses(tiny_mc, tmp_path):
+    """The steering comparison in results.json, the page and courses.png; a report without
+    it drops an earlier courses.png; a straight Monte Carlo as the steered one is refused."""
+    sc, _ = tiny_mc
+    steered = run_network_mc(sc, steering=True)
+    flat = run_network_mc(sc, steering=False, keep_example=False)
+    p = write_network_report(steered, sc, tmp_path / "r", straight=flat)
+    doc = json.loads(p["results"].read_text())
+    c = doc["courses"]
+    assert c["steering_pays"] in {"yes", "no", "not measurably"}
+    assert {"yes": "lower", "no": "higher"}.get(c["steering_pays"], "no difference") == \
+        c["verdict"]
+    assert len(c["per_agent"]) == 2 and c["per_agent"][0]["paired_runs"] == 2
+    assert c["rmse_steered_m"] == pytest.approx(np.sqrt(np.nanmean(
+        np.square(steered.err["pos"][:, :, steered.window("last")]))), rel=1e-12)
+    assert "Steering against straight courses" in p["html"].read_text()
+    assert p["courses"].is_file()
+    q = write_network_report(steered, sc, tmp_path / "r")
+    assert "courses" not in q and not (tmp_path / "r" / "courses.png").exists()
+    with pytest.raises(ValueError, match="steered Monte Carlo"):
+        write_network_report(flat, sc, tmp_path / "x", straight=steered)
+
+
 # --- the command ------------------------------------------------------------------------------
+
+
+def test_cli_network_compare_straight(tmp_path):
+    f = tmp_path / "tiny.toml"
+    f.write_text(TINY.replace("steering = false", "steering = true"), encoding="utf-8")
+    ran = trackkit("network", str(f), "--runs", "2", "--compare-straight", "--out",
+                   str(tmp_path / "out"))
+    assert ran.code == 0, ran.text
+    doc = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert doc["steering"] is True and "courses" in doc
+    assert "steering pays:" in ran.out
+    assert (tmp_path / "out" / "courses.png").is_file()
+    assert_user_error(trackkit("network", str(f), "--straight", "--compare-straight"), 2,
+                      "--compare-straight", "steering")
+
 
 
 def test_cli_network_writes_its_files(tmp_path):

@@ -609,6 +609,9 @@ def network(
         "--agents", help="inprocess: every agent in this process (fast); processes: every "
         "agent its own operating-system process, talking over ZeroMQ on loopback (same "
         "results without message loss, slower).")] = AgentsMode.inprocess,
+    compare_straight: Annotated[bool, typer.Option(
+        "--compare-straight", help="Also run the same runs on straight courses and report "
+        "whether steering pays (twice the time).")] = False,
 ) -> None:
     """Run a network scenario (seed 004: agents with bearing sensors that track targets
     together): Monte Carlo runs of the agents beside the centralised reference and the
@@ -631,6 +634,10 @@ def network(
                                  f"`trackkit run {scenario}` (network scenarios: see "
                                  "trackkit list)")
         sc = load_network(scenario)
+        if compare_straight and (straight or not sc.settings.steering):
+            raise ValueError("--compare-straight compares steered agents with straight "
+                             "courses; expected a scenario with settings.steering = true "
+                             "and no --straight")
         name = f"{sc.name}-straight" if straight else str(sc.name)
         target, label = _output_dir(out, name)
         with OutputDir(target, label) as where:
@@ -638,7 +645,8 @@ def network(
             if where.note:
                 _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
             _run_network(sc, where.path, runs=runs, seed=seed,
-                         steering=False if straight else None, agents=str(agents.value))
+                         steering=False if straight else None, agents=str(agents.value),
+                         compare_straight=compare_straight)
             state.interrupted = "interrupted"
 
 
@@ -654,18 +662,26 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
     from trackkit.eval.network_mc import run_network_mc
     from trackkit.report.network_report import write_network_report
 
+    compare = kwargs.pop("compare_straight", False)
     total = kwargs.get("runs") or sc.run.runs
     with _progress_bar(_stderr()) as bar:
-        task = bar.add_task(str(sc.name), total=total, unit="runs")
 
-        def progress(done: float, of: int) -> None:
+        def monte_carlo(label: str, **more: Any):
+            task = bar.add_task(label, total=total, unit="runs")
+
+            def progress(done: float, of: int) -> None:
+                _deliver_interrupt()
+                bar.update(task, completed=done, total=of)
+
+            result = run_network_mc(sc, progress=progress, **{**kwargs, **more})
             _deliver_interrupt()
-            bar.update(task, completed=done, total=of)
+            return result
 
-        mc = run_network_mc(sc, progress=progress, **kwargs)
-        _deliver_interrupt()
+        mc = monte_carlo(str(sc.name))
+        straight = (monte_carlo(f"{sc.name} (straight)", steering=False, keep_example=False)
+                    if compare else None)
     with _stderr().status("writing the report"):
-        paths = write_network_report(mc, sc, out)
+        paths = write_network_report(mc, sc, out, straight=straight)
     _print_network_summary(paths)
 
 
@@ -698,6 +714,13 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
     m = doc["messages"]
     console.print(Text(f"messages: {m['sent']} sent, {m['delivered']} delivered, "
                        f"{m['lost']} lost"))
+    c = doc.get("courses")
+    if c is not None:
+        console.print(Text(
+            f"steering pays: {c['steering_pays']} (position RMSE {w[0]:g}-{w[1]:g} s "
+            f"{c['rmse_steered_m']:.0f} m steered, {c['rmse_straight_m']:.0f} m straight, "
+            f"ratio {c['ratio']:.2f}; steered lower in {100 * c['steered_lower_share']:.0f}% "
+            f"of runs, paired t = {c['t']:.2f}, p = {c['p']:.2g})"), soft_wrap=True)
     html = paths.get("html")
     where = html.parent if html is not None else paths["results"].parent
     console.print(Text(f"wrote {len(paths)} files to {where}", style="green"), soft_wrap=True)

@@ -112,14 +112,14 @@ def test_gnn_global_beats_greedy():
     # greedy would give t0 -> d0 (cost 1) and leave t1 with d1 (10): 11; global: 2 + 2 = 4
     g = make_gate([(0, 0), (0, 1), (1, 0), (1, 1)], T=2, D=3)
     costs = Costs(np.array([1.0, 2.0, 2.0, 10.0]), np.array([20.0, 20.0]))
-    for method in ("sparse", "clusters"):
+    for method in ("sparse", "clusters", "dense", "auto"):
         a = gnn(g, costs, method=method)
         np.testing.assert_array_equal(a.det, [1, 0])
         np.testing.assert_array_equal(a.unassigned, [2])
         assert a.cost == 4.0
     # a cheap miss for track 1: t0 -> d0, t1 misses (1 + 2.5 < 4)
     costs = Costs(np.array([1.0, 2.0, 2.0, 10.0]), np.array([20.0, 2.5]))
-    for method in ("sparse", "clusters"):
+    for method in ("sparse", "clusters", "dense", "auto"):
         a = gnn(g, costs, method=method)
         np.testing.assert_array_equal(a.det, [0, -1])
         np.testing.assert_array_equal(a.unassigned, [1, 2])
@@ -159,9 +159,11 @@ def test_gnn_is_optimal(g, miss):
     costs = Costs(g.d2 - 3.0, np.full(g.n_tracks, miss) + rng.uniform(0, 1, g.n_tracks))
     a = gnn(g, costs, method="sparse")
     b = gnn(g, costs, method="clusters")
+    c = gnn(g, costs, method="dense")
     best = _brute_gnn(g, costs)
     assert a.cost == pytest.approx(best, abs=1e-9)
     assert b.cost == pytest.approx(best, abs=1e-9)
+    assert c.cost == pytest.approx(best, abs=1e-9)
     # feasible: every detection at most once, only gated pairs
     assigned = a.det[a.det >= 0]
     assert len(set(assigned.tolist())) == assigned.size
@@ -169,6 +171,33 @@ def test_gnn_is_optimal(g, miss):
     assert all((i, int(j)) in gated for i, j in enumerate(a.det) if j >= 0)
     np.testing.assert_array_equal(np.sort(np.concatenate([assigned, a.unassigned])),
                                   np.arange(g.n_dets))
+
+
+@pytest.mark.parametrize("T", [3, 60, 400])
+def test_gnn_auto_takes_dense_below_the_threshold_and_clusters_above(T, monkeypatch):
+    """Both sides of GNN_DENSE_MAX_CELLS give the same assignment as the other two methods,
+    and "auto" takes the side the threshold says (spread-out tracks: many clusters)."""
+    from trackkit.tracking import association
+
+    rng = np.random.default_rng(T)
+    pos = rng.uniform(0, 50.0 * T, (T, 2))
+    z = np.concatenate([pos + rng.normal(0, 1.0, (T, 2)), rng.uniform(0, 50.0 * T, (T, 2))])
+    g = gate(pos, np.broadcast_to(np.eye(2) * 4.0, (T, 2, 2)), z, 0.99)
+    costs = Costs(g.d2 - 3.0, np.full(T, 2.0))
+    ref = gnn(g, costs, method="sparse")
+    for method in ("clusters", "dense"):
+        a = gnn(g, costs, method=method)
+        np.testing.assert_array_equal(a.det, ref.det)
+        assert a.cost == pytest.approx(ref.cost, rel=1e-12)
+    taken = []
+    for name in ("_gnn_dense", "_gnn_clusters"):
+        real = getattr(association, name)
+        monkeypatch.setattr(association, name,
+                            lambda *a, _r=real, _n=name: taken.append(_n) or _r(*a))
+    np.testing.assert_array_equal(gnn(g, costs).det, ref.det)
+    dense = T * (g.n_dets + T) <= association.GNN_DENSE_MAX_CELLS
+    assert taken == ["_gnn_dense" if dense else "_gnn_clusters"]
+    assert (T == 400) != dense
 
 
 @settings(max_examples=60, deadline=None)

@@ -15,10 +15,16 @@ directory with ``report.files.write_atomically``:
   targets), beside the centralised reference and the PCRLB.
 * ``gospa.png``: mean GOSPA against time per agent and the centralised reference, and the
   mean number of confirmed tracks against the number of targets.
+* ``courses.png`` and a ``courses`` entry in ``results.json``, when the same runs on
+  straight courses are given (``straight=``): position RMSE against time, steered and
+  straight, and the paired comparison over the last window (``eval.network_compare``) with
+  the verdict whether steering pays.
 * ``report.html``: one self-contained page (inline CSS, PNGs as data URIs, no scripts).
 
     mc = run_network_mc(scenario)                     # trackkit.eval.network_mc
     paths = write_network_report(mc, scenario, "trackkit-out/net-baseline")
+    flat = run_network_mc(scenario, steering=False)   # the same runs on straight courses
+    paths = write_network_report(mc, scenario, "trackkit-out/net-baseline", straight=flat)
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from trackkit import __version__
+from trackkit.eval.network_compare import PairedComparison, compare_networks
 from trackkit.eval.network_mc import NetworkMonteCarlo
 from trackkit.report.files import (
     REPORT_HTML,
@@ -45,13 +52,15 @@ from trackkit.report.html import _CSS, notes_and_figures
 from trackkit.report.plots import _distance_scale, _save
 
 __all__ = ["NETWORK_FILES", "network_results_document", "network_timings_document",
-           "paths_figure", "errors_figure", "gospa_figure", "render_network_html",
-           "write_network_report"]
+           "paths_figure", "errors_figure", "gospa_figure", "courses_figure",
+           "render_network_html", "write_network_report"]
 
 PATHS_PNG = "paths.png"
 ERRORS_PNG = "errors.png"
 GOSPA_PNG = "gospa.png"
-NETWORK_FILES = (PATHS_PNG, ERRORS_PNG, GOSPA_PNG, REPORT_HTML, TIMINGS_JSON, RESULTS_JSON)
+COURSES_PNG = "courses.png"
+NETWORK_FILES = (PATHS_PNG, ERRORS_PNG, GOSPA_PNG, COURSES_PNG, REPORT_HTML, TIMINGS_JSON,
+                 RESULTS_JSON)
 
 #: per-agent entries of results.json with their units
 AGENT_UNITS: dict[str, str] = {
@@ -88,6 +97,10 @@ TOP_UNITS: dict[str, Any] = {
     "metrics": {"c_m": "m (GOSPA cut-off and target-track assignment distance)",
                 "gospa_p": "1", "gospa_alpha": "1"},
     "messages": "messages (totals over all runs: sent, delivered, lost; per run: means)",
+    "courses": "steered against straight courses over the last window, per agent (numbered "
+               "from 1): rmse_steered_m, rmse_straight_m (pooled position RMSE), ratio "
+               "(steered / straight), steered_lower_share (fraction of runs), t and p (paired "
+               "t test on the per-run MSE, two-sided), verdict; the same pooled over agents",
     "series": "time_s: s (slot times e P + jitter / 2); per agent over executions: "
               "confirmed_mean tracks, gospa_mean m, rmse_pos m, rmse_vel m/s, rmse_range m "
               "(pooled over targets), central_* likewise, pcrlb_pos m, pcrlb_vel m/s",
@@ -181,7 +194,28 @@ def _series(mc: NetworkMonteCarlo) -> dict[str, Any]:
     return {"time_s": _list(mc.time), "agents": per_agent}
 
 
-def network_results_document(mc: NetworkMonteCarlo, scenario) -> dict[str, Any]:
+def _courses_entry(c: PairedComparison) -> dict[str, Any]:
+    per_agent = [{
+        "agent": i + 1, "rmse_steered_m": float(c.rmse_a[i]),
+        "rmse_straight_m": float(c.rmse_b[i]), "ratio": float(c.ratio[i]),
+        "steered_lower_share": float(c.lower_share[i]), "t": float(c.t[i]),
+        "p": float(c.p[i]), "paired_runs": int(c.runs[i]), "verdict": c.verdict[i],
+        "all_held_final_steered": float(c.held_a[i]),
+        "all_held_final_straight": float(c.held_b[i]),
+    } for i in range(c.rmse_a.size)]
+    return {"window_s": list(c.window), "confidence": c.confidence, "per_agent": per_agent,
+            "rmse_steered_m": c.rmse_a_all, "rmse_straight_m": c.rmse_b_all,
+            "ratio": c.ratio_all, "steered_lower_share": c.lower_share_all, "t": c.t_all,
+            "p": c.p_all, "verdict": c.verdict_all, "steering_pays": steering_pays(c)}
+
+
+def steering_pays(c: PairedComparison) -> str:
+    """The report's one-line answer: "yes", "no" (it costs accuracy) or "not measurably"."""
+    return {"lower": "yes", "higher": "no"}.get(c.verdict_all, "not measurably")
+
+
+def network_results_document(mc: NetworkMonteCarlo, scenario,
+                             courses: PairedComparison | None = None) -> dict[str, Any]:
     """The ``results.json`` document (module docstring); non-finite numbers as null."""
     doc: dict[str, Any] = {
         "scenario": scenario.name,
@@ -211,6 +245,8 @@ def network_results_document(mc: NetworkMonteCarlo, scenario) -> dict[str, Any]:
         },
         "series": _series(mc),
     }
+    if courses is not None:
+        doc["courses"] = _courses_entry(courses)
     return _json_safe(doc)
 
 
@@ -331,6 +367,32 @@ def gospa_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
     return fig
 
 
+def courses_figure(mc: NetworkMonteCarlo, straight: NetworkMonteCarlo, scenario) -> Figure:
+    """Position RMSE against time per agent (pooled over targets), steered (solid) and on
+    straight courses (dashed), the same runs, beside the centralised PCRLB of each."""
+    A = mc.n_agents
+    fig = Figure(figsize=(8.0, 2.4 * A + 0.6), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(A, 1, sharex=True))
+    t = mc.time
+    for a, ax in enumerate(axes):
+        ax.plot(t, mc.rmse_over_time("pos", pooled=True)[a], color=f"C{a}", lw=1.3,
+                label=f"agent {a + 1}, steered")
+        ax.plot(t, straight.rmse_over_time("pos", pooled=True)[a], color=f"C{a}", ls="--",
+                lw=1.1, label="straight courses")
+        ax.plot(t, mc.bound_over_time("pos", pooled=True)[a], color="black", ls=":", lw=1.0,
+                label="PCRLB, steered")
+        ax.plot(t, straight.bound_over_time("pos", pooled=True)[a], color="0.5", ls=":",
+                lw=1.0, label="PCRLB, straight")
+        ax.set_yscale("log")
+        ax.set_ylabel("position RMSE [m]")
+        ax.grid(True, alpha=0.3, which="both")
+        ax.legend(fontsize="x-small")
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{scenario.name}: steered against straight courses, the same {mc.runs} "
+                 "runs", fontsize="medium")
+    return fig
+
+
 # ---------------------------------------------------------------------------------------------
 # page
 # ---------------------------------------------------------------------------------------------
@@ -342,6 +404,9 @@ _CAPTIONS = {
     "errors": "RMSE against time per agent (over the runs where a target is held, pooled over "
               "the targets), beside the centralised reference at the same times (dashed) and "
               "the centralised PCRLB on the run's actual paths (dotted; RMS over runs).",
+    "courses": "Position RMSE against time per agent, steered (solid) and on straight "
+               "courses (dashed), the same runs (targets and bearing noise), with each one's "
+               "centralised PCRLB (dotted).",
     "gospa": "GOSPA against time, mean over the runs, per agent and for the centralised "
              "reference (top); mean number of confirmed tracks against the number of "
              "targets (bottom).",
@@ -398,6 +463,35 @@ def _summary_table(doc: Mapping[str, Any]) -> str:
             + "\n</tbody></table>")
 
 
+def _courses_section(c: Mapping[str, Any]) -> list[str]:
+    esc = html.escape
+    w = c["window_s"]
+    conf = 100 * c["confidence"]
+    answer = {"yes": "Steering pays", "no": "Steering costs accuracy",
+              "not measurably": "Steering makes no difference measurable"}[c["steering_pays"]]
+    text = (f"{answer} here: over {w[0]:g}-{w[1]:g} s the agents' position RMSE is "
+            f"{_num(c['rmse_steered_m'])} m steered against {_num(c['rmse_straight_m'])} m on "
+            f"straight courses (ratio {_num(c['ratio'], '.2f')}); the steered error is lower "
+            f"in {_num(100 * c['steered_lower_share'])}% of the runs (paired t = "
+            f"{_num(c['t'], '.2f')}, p = {_num(c['p'], '.2g')}, at {conf:g}% confidence; "
+            "the same runs, targets and bearing noise).")
+    rows = []
+    for e in c["per_agent"]:
+        rows.append("<tr>" + "".join(f"<td>{esc(x)}</td>" for x in (
+            str(e["agent"]), _num(e["rmse_steered_m"]), _num(e["rmse_straight_m"]),
+            _num(e["ratio"], ".2f"), _num(100 * e["steered_lower_share"]),
+            _num(e["t"], ".2f"), _num(e["p"], ".2g"), e["verdict"],
+            _num(100 * e["all_held_final_steered"]),
+            _num(100 * e["all_held_final_straight"]))) + "</tr>")
+    head = ("<tr><th>agent</th><th>steered RMSE [m]</th><th>straight RMSE [m]</th>"
+            "<th>ratio</th><th>steered lower [% of runs]</th><th>t</th><th>p</th>"
+            "<th>steered error</th><th>all held at end, steered [%]</th>"
+            "<th>straight [%]</th></tr>")
+    return ["<h2>Steering against straight courses</h2>", f"<p>{esc(text)}</p>",
+            f'<table class="summary"><thead>{head}</thead><tbody>\n' + "\n".join(rows)
+            + "\n</tbody></table>"]
+
+
 def render_network_html(doc: Mapping[str, Any], scenario,
                         images: Mapping[str, str | Path | bytes]) -> str:
     """The report page from the ``results.json`` document and the figures (name -> PNG
@@ -424,6 +518,8 @@ def render_network_html(doc: Mapping[str, Any], scenario,
     if scenario.description:
         parts.append(f"<p>{esc(scenario.description)}</p>")
     parts += [f'<p class="meta">{esc(meta)}</p>', "<h2>Summary</h2>", _summary_table(doc)]
+    if "courses" in doc:
+        parts += _courses_section(doc["courses"])
     parts += notes_and_figures(scenario.notes, images, _CAPTIONS)
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)
@@ -434,14 +530,19 @@ def render_network_html(doc: Mapping[str, Any], scenario,
 # ---------------------------------------------------------------------------------------------
 
 
-def _write_all(mc: NetworkMonteCarlo, scenario, folder: Path) -> dict[str, Path]:
+def _write_all(mc: NetworkMonteCarlo, scenario, folder: Path,
+               straight: NetworkMonteCarlo | None) -> dict[str, Path]:
     images: dict[str, Path] = {}
     if mc.example is not None:
         images["paths"] = _save(paths_figure(mc, scenario), folder / PATHS_PNG)
     images["errors"] = _save(errors_figure(mc, scenario), folder / ERRORS_PNG)
     images["gospa"] = _save(gospa_figure(mc, scenario), folder / GOSPA_PNG)
+    courses = None
+    if straight is not None:
+        images["courses"] = _save(courses_figure(mc, straight, scenario), folder / COURSES_PNG)
+        courses = compare_networks(mc, straight, label_a="steered", label_b="straight")
     written: dict[str, Path] = dict(images)
-    doc = network_results_document(mc, scenario)
+    doc = network_results_document(mc, scenario, courses)
     written["html"] = folder / REPORT_HTML
     written["html"].write_text(render_network_html(doc, scenario, images), encoding="utf-8")
     written["timings"] = _write_json(network_timings_document(mc, scenario),
@@ -450,10 +551,17 @@ def _write_all(mc: NetworkMonteCarlo, scenario, folder: Path) -> dict[str, Path]
     return written
 
 
-def write_network_report(mc: NetworkMonteCarlo, scenario, out: str | Path) -> dict[str, Path]:
+def write_network_report(mc: NetworkMonteCarlo, scenario, out: str | Path,
+                         straight: NetworkMonteCarlo | None = None) -> dict[str, Path]:
     """Write the report files into ``out`` atomically (``report.files.write_atomically``:
     a temporary directory inside ``out``, ``results.json`` moved into place last, nothing
-    left behind on failure). Returns name -> path (``paths``, ``errors``, ``gospa``,
-    ``html``, ``timings``, ``results``)."""
-    return write_atomically(out, lambda folder: _write_all(mc, scenario, folder),
+    left behind on failure). ``straight``: the same runs on straight courses, for the
+    steering comparison (``mc`` must then be steered). Returns name -> path (``paths``,
+    ``errors``, ``gospa``, ``courses`` with ``straight``, ``html``, ``timings``,
+    ``results``)."""
+    if straight is not None and not (mc.steering and not straight.steering):
+        raise ValueError(f"write_network_report: steering = {mc.steering} and straight's "
+                         f"steering = {straight.steering}; expected a steered Monte Carlo "
+                         "and the same runs on straight courses")
+    return write_atomically(out, lambda folder: _write_all(mc, scenario, folder, straight),
                             NETWORK_FILES)

@@ -14,6 +14,7 @@
 """
 
 from trackkit.tracking.association import (
+    GNN_DENSE_MAX_CELLS,
     JPDA_MAX_EVENTS,
     Assignment,
     Clusters,
@@ -119,7 +120,8 @@ __all__ = [
     "QInflation", "ScaledNoise", "VariableOrderRun", "WindowDetector", "WindowState",
     "chi2_threshold", "fading_memory", "fading_threshold", "inflate_p", "inflate_q",
     "run_variable_order", "run_with_detector", "weighted_chi2_sf",
-    "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult", "clusters",
+    "GNN_DENSE_MAX_CELLS", "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult",
+    "clusters",
     "distance_costs", "gnn", "jpda", "jpda_update", "loglik_costs", "pda_costs",
     "seed004_costs",
     "GATE_PROBABILITY", "KDTREE_MIN_PAIRS", "Gate", "MeasurementPrediction", "gate",

@@ -57,6 +57,14 @@ __all__ = [
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
 
+#: a scan whose whole problem has at most this many cells, tracks x (detections + tracks), is
+#: solved by ``gnn`` as one dense ``linear_sum_assignment`` instead of cluster by cluster: the
+#: cluster search (a sparse graph and its components) costs about 0.27 ms a scan even for one
+#: track, the dense solve 26 us for 3 tracks and 0.18 ms for 150 (43 800 cells); at 300
+#: tracks (178 500 cells) the clusters win, 0.46 against 0.62 ms (spread-out tracks, ~20
+#: clutter plots; benchmarks/bench_association.py, "GNN: dense against per cluster")
+GNN_DENSE_MAX_CELLS = 50_000
+
 #: largest number of joint events enumerated exactly in one JPDA cluster; a cluster with
 #: more falls back to loopy belief propagation (Williams and Lau 2014). 2e4 events of a
 #: 10-track cluster take about 5 ms to enumerate
@@ -245,18 +253,19 @@ class Assignment(NamedTuple):
     cost: float
 
 
-def gnn(g: Gate, costs: Costs, method: Literal["clusters", "sparse"] = "clusters"
-        ) -> Assignment:
+def gnn(g: Gate, costs: Costs,
+        method: Literal["auto", "clusters", "sparse", "dense"] = "auto") -> Assignment:
     """Least-cost assignment of gated pairs, each track taking one detection or its miss.
 
     With rows = tracks and columns = detections plus one miss column per track (the miss
     block diagonal), minimise ``sum_i c_i,col(i)``. ``method="clusters"`` solves each
     cluster of two or more tracks with a dense ``linear_sum_assignment`` and the tracks alone
     in their cluster by one vectorised argmin; ``"sparse"`` solves the whole scan as one
-    sparse problem (scipy's LAPJVsp, ``min_weight_full_bipartite_matching``). Both give the
-    optimum. Per cluster is the default: its cost grows linearly with the clusters, while
-XX
-    slower at 10 000; benchmarks/bench_association.py).
+    sparse problem (scipy's LAPJVsp, ``min_weight_full_bipartite_matching``); ``"dense"``
+    solves the whole scan as one dense problem. All give the optimum. ``"auto"``, the
+    default, takes "dense" up to ``GNN_DENSE_MAX_CELLS`` cells, where the cluster search's
+    fixed cost dominates, and "clusters" above, where the per-cluster cost grows linearly with
+    the clusters (benchmarks/bench_association.py).
     """
     T, D = g.n_tracks, g.n_dets
     pair, miss = np.asarray(costs.pair, dtype=float), np.asarray(costs.miss, dtype=float)
@@ -268,14 +277,19 @@ XX
                          "miss cost for every track (inf pair costs forbid a pair)")
     ok = np.isfinite(pair)
     t, d, c = g.track[ok], g.det[ok], pair[ok]
+    if method == "auto":
+        method = "dense" if T * (D + T) <= GNN_DENSE_MAX_CELLS else "clusters"
     if method == "sparse":
         det = _gnn_sparse(t, d, c, miss, T, D)
+    elif method == "dense":
+        det = _gnn_dense(t, d, c, miss, T, D)
     elif method == "clusters":
         sub = g._replace(track=t, det=d, d2=g.d2[ok], loglik=g.loglik[ok],
                          residual=g.residual[ok])
         det = _gnn_clusters(sub, c, miss)
     else:
-        raise ValueError(f"method = {method!r}; expected 'sparse' or 'clusters'")
+        raise ValueError(f"method = {method!r}; expected 'auto', 'dense', 'sparse' or "
+                         "'clusters'")
     taken = np.zeros(D, dtype=bool)
     taken[det[det >= 0]] = True
     # total cost: the chosen pair costs, looked up by (track, det) key in the sorted pairs
@@ -308,6 +322,21 @@ def _gnn_sparse(t: Index, d: Index, c: Array, miss: Array, T: int, D: int) -> In
     r, col = min_weight_full_bipartite_matching(A)
     hit = col < D
     det[rows[r[hit]]] = col[hit]
+    return det
+
+
+def _gnn_dense(t: Index, d: Index, c: Array, miss: Array, T: int, D: int) -> Index:
+    """One ``linear_sum_assignment`` on the T x (D + T) matrix [pairs | diag(miss)] (inf
+    where a pair is not gated; the miss diagonal keeps every row feasible)."""
+    det = np.full(T, -1, dtype=np.intp)
+    if t.size == 0:
+        return det
+    M = np.full((T, D + T), np.inf)
+    M[t, d] = c
+    M[np.arange(T), D + np.arange(T)] = miss
+    r, col = linear_sum_assignment(M)
+    hit = col < D
+    det[r[hit]] = col[hit]
     return det
 
 
