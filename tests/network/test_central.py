@@ -222,25 +222,15 @@ def _ratios(mc):
 
 
 @pytest.mark.slow
-def test_agents_against_centralised_fusion_what_holds():
-    """Issue 14's comparison (the numbers are printed): every agent holds the three
-    targets at the end in at least 95% of the (agent, run) cases; per target, the median
-    over the agents of the ratio of their RMSE (RMS over runs) to the centralised filter's is
-    below 1.5 (measured 1.31 / 1.24 / 1.23); every agent is within 4x (measured worst 3.59 /
-    2.08: agent 0 in one run of twenty follows targets 0 and 1 poorly while they pass
-    within about 700 m of each other near 900 s)."""
+def test_every_agent_within_1_5x_of_centralised_fusion():
+    """Issue 14's comparison on this geometry (the numbers are printed): every agent holds
+    the three targets at the end in at least 95% of the (agent, run) cases, and each agent's
+    RMSE per target (RMS over runs) is within 1.5x of the centralised filter's (measured
+    1.31 / 1.23 / 1.23, 60 of 60 held). Before the agents deleted uncorroborated tracks
+    (``AgentSettings.corroborate_s``), agent 0 was at 3.59x on target 0: in one run of twenty
+    it held a ghost, a track at the wrong range on the true line of sight, which its own
+    bearings kept alive (docs/network-comparison.md)."""
     mc = _monte_carlo()
-    ratio = _ratios(mc)
     assert mc["held"] >= 0.95 * 3 * 20
     assert not np.isnan(mc["ra"]).any()
-    assert np.all(np.median(ratio, 0) < 1.5)
-    assert np.all(ratio < 4.0)
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 14's 'each agent within 1.5x of centralised "
-                   "fusion' does not hold for every agent: one run in twenty (seed 31) puts "
-                   "agent 0 at 3.6x on target 0 (crossing targets near 900 s); see "
-                   "test_agents_against_centralised_fusion_what_holds")
-def test_every_agent_within_1_5x_of_centralised_fusion():
-    assert np.all(_ratios(_monte_carlo()) < 1.5)
+    assert np.all(_ratios(mc) < 1.5)

@@ -74,7 +74,10 @@ class RunScores:
     ``central_*`` the same for the centralised reference beside each agent (None without
     it); ``bound_pos``, ``bound_vel`` ``(A, E, Nt)`` the centralised PCRLB;
     ``held_final (A,)`` whether the agent ends with exactly one confirmed track per target,
-    each assigned; ``sent``, ``delivered``, ``lost`` messages; ``seconds`` the network run's
+    each assigned; ``final_range (A, Nt)`` the true agent-target distance at the agent's
+    last execution; ``spacing (2,)`` the run's least and greatest agent-pair distance as a
+    fraction of the communication range (``NetworkResult.spacing``); ``sent``,
+    ``delivered``, ``lost`` messages; ``seconds`` the network run's
     wall-clock time (``NetworkResult.seconds``).
     """
 
@@ -88,6 +91,8 @@ class RunScores:
     bound_pos: Array
     bound_vel: Array
     held_final: NDArray[np.bool_]
+    final_range: Array
+    spacing: Array
     sent: int
     delivered: int
     lost: int
@@ -182,9 +187,11 @@ def score_run(result: NetworkResult, sigma: Array, meas_range: Array, prior_cov:
     back[b.order] = np.arange(A * E)  # sorted position of every input event
     bound_pos = b.position_rmse[back].reshape(A, E, Nt)
     bound_vel = b.velocity_rmse[back].reshape(A, E, Nt)
+    final_range = np.hypot(truth[:, -1, :, 0] - pos[:, -1, None, 0],
+                           truth[:, -1, :, 1] - pos[:, -1, None, 1])
     return RunScores(count, gospa, err, c_count, c_gospa, c_err, c_held, bound_pos, bound_vel,
-                     held, int(result.sent), int(result.delivered), int(result.lost),
-                     float(result.seconds))
+                     held, final_range, np.asarray(result.spacing, float), int(result.sent),
+                     int(result.delivered), int(result.lost), float(result.seconds))
 
 
 def _rms(x: Array, axis) -> Array:
@@ -204,6 +211,8 @@ class NetworkMonteCarlo:
     with a leading runs axis: ``count``, ``gospa`` ``(R, A, E)``; ``err[kind]``
     ``(R, A, E, Nt)``; ``central_*`` likewise (None without the reference);
     ``bound_pos``, ``bound_vel``; ``held_final (R, A)``, ``central_held_final (R,)``;
+    ``final_range (R, A, Nt)`` the true agent-target distance at the end; ``spacing (R, 2)``
+    each run's least and greatest agent-pair distance over the communication range;
     ``sent``, ``delivered``, ``lost`` ``(R,)``; ``seconds (R,)`` (network run) and
     ``wall (R,)`` (run, scores and bound).
     """
@@ -229,6 +238,8 @@ class NetworkMonteCarlo:
     bound_pos: Array
     bound_vel: Array
     held_final: NDArray[np.bool_]
+    final_range: Array
+    spacing: Array
     sent: NDArray[np.int64]
     delivered: NDArray[np.int64]
     lost: NDArray[np.int64]
@@ -376,6 +387,7 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                             if have_c else None),
         bound_pos=stack(lambda s: s.bound_pos), bound_vel=stack(lambda s: s.bound_vel),
         held_final=stack(lambda s: s.held_final),
+        final_range=stack(lambda s: s.final_range), spacing=stack(lambda s: s.spacing),
         sent=np.array([s.sent for s in per_run], np.int64),
         delivered=np.array([s.delivered for s in per_run], np.int64),
         lost=np.array([s.lost for s in per_run], np.int64),

@@ -50,7 +50,9 @@ Per execution at time t (the order of Fig. 2, with the reconstruction's choices)
    The track starts at that composite (x_ML, J^-1), and its bearings leave the pool.
 8. **Pruning, timers, deletion.** ``duplicates`` deletes the more uncertain of two tracks
    within the similarity gate; ``TimerLogic`` steps with hit = "a bearing was associated at
-   this execution"; DELETED tracks are dropped. A Lost track coasts: the seed feeds it its
+   this execution"; DELETED tracks are dropped, and so are *ghosts*, confirmed tracks no
+   neighbour able to see them has matched for ``corroborate_s`` (ours; ``AgentSettings``).
+   A Lost track coasts: the seed feeds it its
    own predicted measurement, z = h(x-), whose innovation is zero, so the update returns the
    prediction (with the covariance shrunk by a fictitious measurement, which we refuse:
    coasting keeps P- honest).
@@ -160,6 +162,15 @@ class AgentSettings:
     chi2.ppf(0.99, 4) (track-to-track matching and duplicate pruning); ``combination``
     "information" (or "paper", "convex", "ci"); ``combine_neighbours`` False turns the
     combination step off (a centralised node has no neighbours anyway).
+    Corroboration (ours; the seed has none): ``corroborate_s`` = 60 s (inf turns it off)
+    deletes a confirmed track of ours that no neighbour able to see it has matched for that
+    long: a *ghost*, a track at the wrong range on a true line of sight (the initiation's
+    ambiguity, docs/network-comparison.md), gathers our own bearings and keeps its timers
+    alive while every neighbour's bearings and tracks miss it. A neighbour is able to see it
+    when it holds confirmed tracks and the track lies within our ``meas_range`` of its
+    position (the message does not carry the neighbour's range: the sensors are taken as
+    alike). Adopting a neighbour's unmatched confirmed tracks instead was tried and spreads
+    one agent's ghost to every agent (net-baseline run 20: five and six tracks each).
     Steering: ``steering`` None (straight courses) or a ``Steering``; ``comm_range``,
     ``meas_range`` (m, inf for unlimited) used by the constraints and the candidates.
     """
@@ -189,13 +200,14 @@ class AgentSettings:
     prune_gate: float = DEFAULT_GATE
     combination: str = "information"
     combine_neighbours: bool = True
+    corroborate_s: float = 60.0
     steering: Steering | None = None
     comm_range: float = math.inf
     meas_range: float = math.inf
 
     def __post_init__(self) -> None:
         positive = ("k1", "k2", "batch_age_s", "lost_after", "delete_after", "r_max", "v_max",
-                    "speed_gate",
+                    "speed_gate", "corroborate_s",
                     "init_window_s", "memory_s", "match_gate", "prune_gate", "comm_range",
                     "meas_range")
         for name in positive:
@@ -269,7 +281,9 @@ class Tracks(NamedTuple):
     ``ids (T,)`` int64; ``mean (T, 4)``, ``cov (T, 4, 4)``: [x, y, vx, vy] at the agent's
     last execution; ``logic``: the ``TimerState`` (status, born, last_hit, lost); the
     pending batch of associated bearings, nan-padded ``(T, B)``: ``bz``, ``bt``,
-    ``bsigma`` and ``bsensor (T, B, 2)`` (B grows and shrinks with the longest batch).
+    ``bsigma`` and ``bsensor (T, B, 2)`` (B grows and shrinks with the longest batch);
+    ``seen (T,)``: the last time a neighbour able to see the track matched it, or none could
+    (``AgentSettings.corroborate_s``).
     """
 
     ids: NDArray[np.int64]
@@ -280,6 +294,7 @@ class Tracks(NamedTuple):
     bt: Array
     bsensor: Array
     bsigma: Array
+    seen: Array
 
     @property
     def size(self) -> int:
@@ -288,13 +303,22 @@ class Tracks(NamedTuple):
     def take(self, idx: ArrayLike) -> Tracks:
         lg = TimerState(*(np.asarray(a)[idx] for a in self.logic))
         return Tracks(self.ids[idx], self.mean[idx], self.cov[idx], lg, self.bz[idx],
-                      self.bt[idx], self.bsensor[idx], self.bsigma[idx])
+                      self.bt[idx], self.bsensor[idx], self.bsigma[idx], self.seen[idx])
 
 
 def empty_tracks() -> Tracks:
     lg = TimerState(np.zeros(0), np.zeros(0), np.zeros(0, np.int8), np.zeros(0, bool))
     return Tracks(np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros((0, 4, 4)), lg,
-                  np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0, 2)), np.zeros((0, 0)))
+                  np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0, 2)), np.zeros((0, 0)),
+                  np.zeros(0))
+
+
+def new_tracks(ids: NDArray[np.int64], mean: Array, cov: Array, logic: TimerState,
+               t: float) -> Tracks:
+    """Tracks started at t with empty batches."""
+    n = ids.shape[0]
+    return Tracks(ids, mean, cov, logic, np.zeros((n, 0)), np.zeros((n, 0)),
+                  np.zeros((n, 0, 2)), np.zeros((n, 0)), np.full(n, float(t)))
 
 
 def _concat_tracks(a: Tracks, b: Tracks) -> Tracks:
@@ -312,7 +336,8 @@ def _concat_tracks(a: Tracks, b: Tracks) -> Tracks:
                   np.concatenate([a.cov, b.cov]), lg,
                   *(np.concatenate([pad(u, B), pad(v, B)])
                     for u, v in ((a.bz, b.bz), (a.bt, b.bt), (a.bsensor, b.bsensor),
-                                 (a.bsigma, b.bsigma))))
+                                 (a.bsigma, b.bsigma))),
+                  np.concatenate([a.seen, b.seen]))
 
 
 @dataclass(frozen=True)
@@ -691,6 +716,9 @@ class Agent:
         logic = s.logic
         if tr.size:
             tr = tr._replace(logic=logic.step(tr.logic, t, hits))
+        ghosts = 0
+        if nb and tr.size and math.isfinite(s.corroborate_s):
+            tr, ghosts = self._corroborate(tr, nb, t)
 
         # initiation from the unclaimed pool
         n_new = sum(b.size for b in unclaimed)
@@ -713,8 +741,27 @@ class Agent:
 
         msg = Message(self.index, t, self.payload(own, position, velocity))
         rep = StepReport(n_assoc, int(cs.made.sum()), int(cs.dropped.sum()), started,
-                         int(pruned.sum()), int(dead.sum() - pruned.sum()), len(nb))
+                         int(pruned.sum()), int(dead.sum() - pruned.sum()) + ghosts, len(nb))
         return msg, rep
+
+    def _corroborate(self, tr: Tracks, nb: list[tuple[Array, Array]], t: float
+                     ) -> tuple[Tracks, int]:
+        """``AgentSettings.corroborate_s`` against the neighbours' confirmed tracks ``nb``
+        (``neighbour_tracks(t)``, in memory order): refresh ``seen`` and delete the ghosts.
+        Returns the tracks and the number of ghosts deleted."""
+        s = self.settings
+        assert self.memory is not None
+        matched = np.zeros(tr.size, bool)
+        watched = np.zeros(tr.size, bool)  # some neighbour holding tracks could see it
+        for (xn, Pn), m in zip(nb, self.memory, strict=True):
+            if xn.shape[0] == 0:
+                continue
+            matched[match_tracks(tr.mean, tr.cov, xn, Pn, s.match_gate).a] = True
+            where = m.payload.position + (t - m.time) * m.payload.velocity
+            watched |= np.hypot(*(tr.mean[:, :2] - where).T) <= s.meas_range
+        seen = np.where(matched | ~watched, t, tr.seen)
+        ghost = (tr.logic.status == _CONF) & (t - seen > s.corroborate_s)
+        return tr._replace(seen=seen).take(~ghost), int(ghost.sum())
 
     def _initiate(self, tr: Tracks, pool: BearingSet, fresh: NDArray[np.intp], t: float
                   ) -> tuple[Tracks, BearingSet, int]:
@@ -747,9 +794,7 @@ class Agent:
                 continue
             ids, self.counter = self.counter.issue(1)
             lg = s.logic.init(t, 1)
-            new = Tracks(ids, c.mean[None], c.cov[None], lg, np.zeros((1, 0)),
-                         np.zeros((1, 0)), np.zeros((1, 0, 2)), np.zeros((1, 0)))
-            tr = _concat_tracks(tr, new)
+            tr = _concat_tracks(tr, new_tracks(ids, c.mean[None], c.cov[None], lg, t))
             used[sub[sup]] = True
             started += 1
         return tr, pool.take(~used), started

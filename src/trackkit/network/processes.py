@@ -103,6 +103,7 @@ from trackkit.network.run import (
     _Motion,
     _Recorder,
     _relay_to_hub,
+    _Spacing,
     _world,
 )
 from trackkit.network.steering import Steering
@@ -507,6 +508,7 @@ def run_network_processes(
     last_exec = np.full(A, -math.inf)  # each agent's last execution (for "late")
     alive = np.ones(A, bool)
     sent = delivered = lost = late = restarts = 0
+    spacing = _Spacing(w.CR)
     held_before = dict.fromkeys(kills, 0)
     recovered = {a: math.nan for a in kills}
     t0 = _time.perf_counter()
@@ -564,7 +566,9 @@ def run_network_processes(
             pd = res["payload"]
             payload = decode_payload(pd)  # checks the schema on receipt
 
-            links = disk_graph(motion.where(t), w.CR)[a]
+            where = motion.where(t)
+            spacing.add(where)
+            links = disk_graph(where, w.CR)[a]
             for b in np.flatnonzero(links).tolist():
                 sent += 1
                 if loss > 0 and w.lose.random() < loss:
@@ -593,7 +597,7 @@ def run_network_processes(
     trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
     seconds = _time.perf_counter() - t0
     out = ProcessNetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered,
-                               lost, seconds, fusion)
+                               lost, seconds, fusion, spacing.span)
     out.late, out.endpoint, out.restarts = late, env.endpoint, restarts
     out.recovered = [recovered[a] for a in sorted(kills)]
     return out

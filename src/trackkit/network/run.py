@@ -99,7 +99,9 @@ class NetworkResult(NamedTuple):
     ``lost``: message counts; ``seconds``: wall-clock time of the run (agents and
     reference); ``fusion``: the centralised filter's full output (a one-run
     :class:`~trackkit.network.central.CentralFusion`, for its NEES) when ``central`` is the
-    filter, else None."""
+    filter, else None; ``spacing``: the least and the greatest distance between two agents
+    over all execution instants, each as a fraction of the pair's communication range
+    (the smaller of the two; nan where every range is unlimited)."""
 
     agents: list[Trace]
     central: Trace | None
@@ -109,6 +111,29 @@ class NetworkResult(NamedTuple):
     lost: int
     seconds: float
     fusion: CentralFusion | None = None
+    spacing: tuple[float, float] = (math.nan, math.nan)
+
+
+class _Spacing:
+    """The least and greatest agent-pair distance over the execution instants, as a
+    fraction of the pair's communication range (``NetworkResult.spacing``)."""
+
+    def __init__(self, cr: Array) -> None:
+        i, j = np.triu_indices(cr.shape[0], 1)
+        self.i, self.j = i, j
+        self.range = np.minimum(cr[i], cr[j])
+        self.finite = np.isfinite(self.range)
+        self.low, self.high = math.inf, -math.inf
+
+    def add(self, where: Array) -> None:
+        if not self.finite.any():
+            return
+        d = np.hypot(*(where[self.i] - where[self.j]).T)[self.finite] / self.range[self.finite]
+        self.low, self.high = min(self.low, float(d.min())), max(self.high, float(d.max()))
+
+    @property
+    def span(self) -> tuple[float, float]:
+        return (self.low, self.high) if self.finite.any() else (math.nan, math.nan)
 
 
 class _Recorder:
@@ -194,6 +219,7 @@ def run_network(
     Zc = np.full((A, E, w.Nt), np.nan)
     Sc = np.zeros((A, E, 2))
     sent = delivered = lost = 0
+    spacing = _Spacing(w.CR)
     t0 = _time.perf_counter()
     for a, e in w.order:
         t = float(w.times[a, e])
@@ -210,7 +236,9 @@ def run_network(
                                            float(motion.speed[a]), dt_next)
 
         # delivery over the disk graph at time t
-        links = disk_graph(motion.where(t), w.CR)[a]
+        where = motion.where(t)
+        spacing.add(where)
+        links = disk_graph(where, w.CR)[a]
         for b in np.flatnonzero(links).tolist():
             sent += 1
             if loss > 0 and w.lose.random() < loss:
@@ -223,7 +251,7 @@ def run_network(
     trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
     seconds = _time.perf_counter() - t0
     return NetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered, lost,
-                         seconds, fusion)
+                         seconds, fusion, spacing.span)
 
 
 # --------------------------------------------------------------------------------------------

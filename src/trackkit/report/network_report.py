@@ -100,7 +100,8 @@ TOP_UNITS: dict[str, Any] = {
     "courses": "steered against straight courses over the last window, per agent (numbered "
                "from 1): rmse_steered_m, rmse_straight_m (pooled position RMSE), ratio "
                "(steered / straight), steered_lower_share (fraction of runs), t and p (paired "
-               "t test on the per-run MSE, two-sided), verdict; the same pooled over agents",
+               "t test on the per-run MSE, two-sided), verdict; the same pooled over agents; "
+               "whole_run: the pooled comparison over the whole run",
     "series": "time_s: s (slot times e P + jitter / 2); per agent over executions: "
               "confirmed_mean tracks, gospa_mean m, rmse_pos m, rmse_vel m/s, rmse_range m "
               "(pooled over targets), central_* likewise, pcrlb_pos m, pcrlb_vel m/s",
@@ -194,7 +195,7 @@ def _series(mc: NetworkMonteCarlo) -> dict[str, Any]:
     return {"time_s": _list(mc.time), "agents": per_agent}
 
 
-def _courses_entry(c: PairedComparison) -> dict[str, Any]:
+def _courses_entry(c: PairedComparison, whole: PairedComparison) -> dict[str, Any]:
     per_agent = [{
         "agent": i + 1, "rmse_steered_m": float(c.rmse_a[i]),
         "rmse_straight_m": float(c.rmse_b[i]), "ratio": float(c.ratio[i]),
@@ -206,7 +207,12 @@ def _courses_entry(c: PairedComparison) -> dict[str, Any]:
     return {"window_s": list(c.window), "confidence": c.confidence, "per_agent": per_agent,
             "rmse_steered_m": c.rmse_a_all, "rmse_straight_m": c.rmse_b_all,
             "ratio": c.ratio_all, "steered_lower_share": c.lower_share_all, "t": c.t_all,
-            "p": c.p_all, "verdict": c.verdict_all, "steering_pays": steering_pays(c)}
+            "p": c.p_all, "verdict": c.verdict_all, "steering_pays": steering_pays(c),
+            "whole_run": {"rmse_steered_m": whole.rmse_a_all,
+                          "rmse_straight_m": whole.rmse_b_all, "ratio": whole.ratio_all,
+                          "steered_lower_share": whole.lower_share_all, "t": whole.t_all,
+                          "p": whole.p_all, "verdict": whole.verdict_all,
+                          "steering_pays": steering_pays(whole)}}
 
 
 def steering_pays(c: PairedComparison) -> str:
@@ -215,7 +221,8 @@ def steering_pays(c: PairedComparison) -> str:
 
 
 def network_results_document(mc: NetworkMonteCarlo, scenario,
-                             courses: PairedComparison | None = None) -> dict[str, Any]:
+                             courses: tuple[PairedComparison, PairedComparison] | None = None
+                             ) -> dict[str, Any]:
     """The ``results.json`` document (module docstring); non-finite numbers as null."""
     doc: dict[str, Any] = {
         "scenario": scenario.name,
@@ -246,7 +253,7 @@ def network_results_document(mc: NetworkMonteCarlo, scenario,
         "series": _series(mc),
     }
     if courses is not None:
-        doc["courses"] = _courses_entry(courses)
+        doc["courses"] = _courses_entry(*courses)
     return _json_safe(doc)
 
 
@@ -475,6 +482,11 @@ def _courses_section(c: Mapping[str, Any]) -> list[str]:
             f"in {_num(100 * c['steered_lower_share'])}% of the runs (paired t = "
             f"{_num(c['t'], '.2f')}, p = {_num(c['p'], '.2g')}, at {conf:g}% confidence; "
             "the same runs, targets and bearing noise).")
+    w2 = c["whole_run"]
+    text += (f" Over the whole run: {_num(w2['rmse_steered_m'])} m against "
+             f"{_num(w2['rmse_straight_m'])} m (ratio {_num(w2['ratio'], '.3f')}, steered lower "
+             f"in {_num(100 * w2['steered_lower_share'])}% of runs, t = {_num(w2['t'], '.2f')}, "
+             f"p = {_num(w2['p'], '.2g')}: steering pays {w2['steering_pays']}).")
     rows = []
     for e in c["per_agent"]:
         rows.append("<tr>" + "".join(f"<td>{esc(x)}</td>" for x in (
@@ -540,7 +552,8 @@ def _write_all(mc: NetworkMonteCarlo, scenario, folder: Path,
     courses = None
     if straight is not None:
         images["courses"] = _save(courses_figure(mc, straight, scenario), folder / COURSES_PNG)
-        courses = compare_networks(mc, straight, label_a="steered", label_b="straight")
+        courses = tuple(compare_networks(mc, straight, label_a="steered", label_b="straight",
+                                         which=w) for w in ("last", "all"))
     written: dict[str, Path] = dict(images)
     doc = network_results_document(mc, scenario, courses)
     written["html"] = folder / REPORT_HTML
