@@ -309,6 +309,33 @@ def test_report_with_straight_courses(tiny_mc, tmp_path):
 # --- the command ------------------------------------------------------------------------------
 
 
+def test_cli_network_processes_with_loss_delay_and_a_kill(tmp_path):
+    """--loss, --delay and --kill reach the agent processes; the report counts lost and
+    late messages and the outage's recovery; the options are refused in process and with a
+    bad agent or time, naming them."""
+    f = tmp_path / "tiny.toml"
+    f.write_text(TINY, encoding="utf-8")
+    ran = trackkit("network", str(f), "--runs", "1", "--agents", "processes", "--loss",
+                   "0.2", "--delay", "7", "--kill", "2@20:30", "--out", str(tmp_path / "o"))
+    assert ran.code == 0, ran.text
+    doc = json.loads((tmp_path / "o" / "results.json").read_text())
+    m, ch = doc["messages"], doc["channel"]
+    assert m["sent"] == m["delivered"] + m["lost"] and m["lost"] > 0 and m["late"] > 0
+    assert ch["loss"] == 0.2 and ch["delay_s"] == 7.0
+    assert ch["outages"][0]["agent"] == 2 and ch["outages"][0]["restart_at_s"] == 30.0
+    assert len(ch["outages"][0]["recovered_after_s"]) == 1
+    assert "agent 2 killed at 20 s" in ran.out
+    for args, names in ((["--delay", "1"], ["--delay", "--agents processes"]),
+                        (["--agents", "processes", "--kill", "3@10"], ["--kill", "3@10",
+                                                                        "1 to 2"]),
+                        (["--agents", "processes", "--kill", "1@30:20"], ["1@30:20",
+                                                                           "RESTART > T"]),
+                        (["--agents", "processes", "--kill", "x"], ["--kill", "'x'",
+                                                                     "AGENT@T"]),
+                        (["--loss", "1.5"], ["--loss", "1.5", "[0, 1)"])):
+        assert_user_error(trackkit("network", str(f), *args), 2, *names)
+
+
 def test_cli_network_compare_straight(tmp_path):
     f = tmp_path / "tiny.toml"
     f.write_text(TINY.replace("steering = false", "steering = true"), encoding="utf-8")

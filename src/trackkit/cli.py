@@ -612,6 +612,20 @@ def network(
     compare_straight: Annotated[bool, typer.Option(
         "--compare-straight", help="Also run the same runs on straight courses and report "
         "whether steering pays (twice the time).")] = False,
+    loss: Annotated[float | None, typer.Option(
+        "--loss", help="Probability that one message delivery is lost, in [0, 1).",
+        show_default="the scenario's network.loss")] = None,
+    delay: Annotated[float, typer.Option(
+        "--delay", help="Delivery delay of every message, simulated seconds (with --agents "
+        "processes).")] = 0.0,
+    kill: Annotated[list[str] | None, typer.Option(
+        "--kill", help="AGENT@T or AGENT@T:RESTART: kill agent AGENT (numbered from 1) at "
+        "simulated time T s and restart it at RESTART s (with --agents processes; may be "
+        "repeated).")] = None,
+    host: Annotated[str, typer.Option(
+        "--host", help="Address the environment binds for the agents' ZeroMQ connections "
+        "(with --agents processes; 0.0.0.0 to accept agents from other machines).")]
+        = "127.0.0.1",
 ) -> None:
     """Run a network scenario (seed 004: agents with bearing sensors that track targets
     together): Monte Carlo runs of the agents beside the centralised reference and the
@@ -638,6 +652,14 @@ def network(
             raise ValueError("--compare-straight compares steered agents with straight "
                              "courses; expected a scenario with settings.steering = true "
                              "and no --straight")
+        outages = _outages(kill or [], len(sc.agents), sc.network.duration_s)
+        if agents != AgentsMode.processes and (delay != 0.0 or outages or host != "127.0.0.1"):
+            raise ValueError("--delay, --kill and --host act on agents in their own "
+                             "processes; expected --agents processes with them")
+        if loss is not None and not 0.0 <= loss < 1.0:
+            raise ValueError(f"--loss {loss!r}; expected a probability in [0, 1)")
+        if not (math.isfinite(delay) and delay >= 0.0):
+            raise ValueError(f"--delay {delay!r}; expected simulated seconds >= 0")
         name = f"{sc.name}-straight" if straight else str(sc.name)
         target, label = _output_dir(out, name)
         with OutputDir(target, label) as where:
@@ -646,8 +668,32 @@ def network(
                 _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
             _run_network(sc, where.path, runs=runs, seed=seed,
                          steering=False if straight else None, agents=str(agents.value),
-                         compare_straight=compare_straight)
+                         compare_straight=compare_straight, loss=loss, delay=delay,
+                         outages=outages, host=host)
             state.interrupted = "interrupted"
+
+
+def _outages(specs: list[str], n_agents: int, duration: float
+             ) -> list[tuple[int, float, float | None]]:
+    """``--kill AGENT@T[:RESTART]`` (agent from 1, simulated s) as ``run_network_processes``
+    outages (agent from 0)."""
+    out: list[tuple[int, float, float | None]] = []
+    for spec in specs:
+        agent, _, when = spec.partition("@")
+        at, _, rest = when.partition(":")
+        try:
+            a, k = int(agent), float(at)
+            r = float(rest) if rest else None
+        except ValueError:
+            raise ValueError(f"--kill {spec!r}; expected AGENT@T or AGENT@T:RESTART, e.g. "
+                             "2@400:500") from None
+        if not 1 <= a <= n_agents:
+            raise ValueError(f"--kill {spec!r}: agent {a}; expected 1 to {n_agents}")
+        if not 0.0 <= k < duration or (r is not None and not k < r):
+            raise ValueError(f"--kill {spec!r}: kill at {k:g} s, restart at {r}; expected "
+                             f"0 <= T < {duration:g} s and RESTART > T")
+        out.append((a - 1, k, r))
+    return out
 
 
 def _bundled_multitarget() -> dict[str, str]:
@@ -713,7 +759,14 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
     console.print(table)
     m = doc["messages"]
     console.print(Text(f"messages: {m['sent']} sent, {m['delivered']} delivered, "
-                       f"{m['lost']} lost"))
+                       f"{m['lost']} lost, {m['late']} late"))
+    for o in doc["channel"]["outages"]:
+        back = [x for x in o["recovered_after_s"] if x is not None]
+        console.print(Text(
+            f"agent {o['agent']} killed at {o['kill_at_s']:g} s, restarted at "
+            f"{o['restart_at_s']} s: held its tracks again after "
+            + (f"{min(back):.0f}-{max(back):.0f} s" if back else "never")
+            + f" ({len(back)} of {len(o['recovered_after_s'])} runs)"), soft_wrap=True)
     c = doc.get("courses")
     if c is not None:
         console.print(Text(

@@ -48,7 +48,7 @@ of the run, pooled over runs (and over targets for the per-agent numbers).
 from __future__ import annotations
 
 import time as _time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -77,7 +77,7 @@ class RunScores:
     each assigned; ``final_range (A, Nt)`` the true agent-target distance at the agent's
     last execution; ``spacing (2,)`` the run's least and greatest agent-pair distance as a
     fraction of the communication range (``NetworkResult.spacing``); ``sent``,
-    ``delivered``, ``lost`` messages; ``seconds`` the network run's
+    ``delivered``, ``lost``, ``late`` messages; ``seconds`` the network run's
     wall-clock time (``NetworkResult.seconds``).
     """
 
@@ -96,6 +96,7 @@ class RunScores:
     sent: int
     delivered: int
     lost: int
+    late: int
     seconds: float
 
 
@@ -191,7 +192,8 @@ def score_run(result: NetworkResult, sigma: Array, meas_range: Array, prior_cov:
                            truth[:, -1, :, 1] - pos[:, -1, None, 1])
     return RunScores(count, gospa, err, c_count, c_gospa, c_err, c_held, bound_pos, bound_vel,
                      held, final_range, np.asarray(result.spacing, float), int(result.sent),
-                     int(result.delivered), int(result.lost), float(result.seconds))
+                     int(result.delivered), int(result.lost), int(result.late),
+                     float(result.seconds))
 
 
 def _rms(x: Array, axis) -> Array:
@@ -213,8 +215,11 @@ class NetworkMonteCarlo:
     ``bound_pos``, ``bound_vel``; ``held_final (R, A)``, ``central_held_final (R,)``;
     ``final_range (R, A, Nt)`` the true agent-target distance at the end; ``spacing (R, 2)``
     each run's least and greatest agent-pair distance over the communication range;
-    ``sent``, ``delivered``, ``lost`` ``(R,)``; ``seconds (R,)`` (network run) and
-    ``wall (R,)`` (run, scores and bound).
+    ``sent``, ``delivered``, ``lost``, ``late`` ``(R,)``; ``recovered (R, K)`` per outage
+    the time from the restart until the agent held its tracks again (``--agents
+    processes`` with outages; nan if never; K = 0 otherwise); ``seconds (R,)`` (network run) and
+    ``wall (R,)`` (run, scores and bound); the channel: ``loss`` (probability), ``delay``
+    (s) and ``outages``.
     """
 
     name: str
@@ -243,8 +248,13 @@ class NetworkMonteCarlo:
     sent: NDArray[np.int64]
     delivered: NDArray[np.int64]
     lost: NDArray[np.int64]
+    late: NDArray[np.int64]
+    recovered: Array
     seconds: Array
     wall: Array
+    loss: float = 0.0
+    delay: float = 0.0
+    outages: tuple[tuple[int, float, float | None], ...] = ()
     example: NetworkResult | None = field(default=None, repr=False)
     example_targets: Array | None = field(default=None, repr=False)
 
@@ -314,24 +324,37 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                    steering: bool | None = None,
                    progress: Callable[[float, int], None] | None = None,
                    keep_example: bool = True,
-                   agents: Literal["inprocess", "processes"] = "inprocess"
+                   agents: Literal["inprocess", "processes"] = "inprocess",
+                   loss: float | None = None,
+                   delay: float = 0.0,
+                   outages: Sequence[tuple[int, float, float | None]] = (),
+                   host: str = "127.0.0.1",
                    ) -> NetworkMonteCarlo:
     """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
-    ``runs``, ``seed`` and ``steering`` override the file's; ``progress(done, runs)`` after
-    every run; ``keep_example`` keeps run 0's ``NetworkResult`` for the pictures.
-    ``agents``: "inprocess" (``run_network``, the default) or "processes"
+    ``runs``, ``seed``, ``steering`` and ``loss`` override the file's; ``progress(done,
+    runs)`` after every run; ``keep_example`` keeps run 0's ``NetworkResult`` for the
+    pictures. ``agents``: "inprocess" (``run_network``, the default) or "processes"
     (``network.processes.run_network_processes``: every agent its own OS process, talking
-    over ZeroMQ; with the scenario's loss 0 the same results bit for bit, only slower)."""
+    over ZeroMQ; without loss, delay and outages the same results bit for bit, only slower),
+    which also takes ``delay`` (the channel's delivery delay, simulated s), ``outages``
+    (``(agent, kill_at, restart_at or None)``, 0-based agent) and ``host`` (the address the
+    environment binds)."""
     from dataclasses import replace
 
     from trackkit.network.agents import AgentSettings
 
+    extra: dict = {}
     if agents == "inprocess":
         runner = run_network
+        if delay != 0.0 or outages or host != "127.0.0.1":
+            raise ValueError(f"delay = {delay!r}, outages = {list(outages)!r}, host = "
+                             f"{host!r}: a channel delay, killing agents and the address "
+                             "need agents='processes'")
     elif agents == "processes":
         from trackkit.network.processes import run_network_processes
 
         runner = run_network_processes
+        extra = {"delay": delay, "outages": tuple(outages), "host": host}
     else:
         raise ValueError(f"agents = {agents!r}; expected 'inprocess' or 'processes'")
 
@@ -349,8 +372,10 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     states = scenario.agent_states()
     sigma, mr, cr = scenario.sigma_rad(), scenario.meas_range(), scenario.comm_range()
     prior = np.diag([rep.prior_pos_std_m**2] * 2 + [rep.prior_vel_std_mps**2] * 2)
+    p_loss = net.loss if loss is None else float(loss)
     per_run: list[RunScores] = []
     wall: list[float] = []
+    recovered: list[list[float]] = []
     example = example_targets = None
     for r in range(runs):
         t0 = _time.perf_counter()
@@ -358,8 +383,9 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
         res = runner(seed, r, targets, states, duration=net.duration_s,
                      period=net.period_s, sigma=sigma, mr=mr, cr=cr,
                      max_delay=net.max_delay_s, q=net.q, settings=settings,
-                     steering=steer, central=scenario.run.central, loss=net.loss)
+                     steering=steer, central=scenario.run.central, loss=p_loss, **extra)
         per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m))
+        recovered.append(list(getattr(res, "recovered", [])))
         wall.append(_time.perf_counter() - t0)
         if r == 0 and keep_example:
             example, example_targets = res, targets
@@ -391,7 +417,10 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
         sent=np.array([s.sent for s in per_run], np.int64),
         delivered=np.array([s.delivered for s in per_run], np.int64),
         lost=np.array([s.lost for s in per_run], np.int64),
+        late=np.array([s.late for s in per_run], np.int64),
+        recovered=np.array(recovered, float).reshape(runs, len(outages)),
         seconds=np.array([s.seconds for s in per_run]), wall=np.array(wall),
+        loss=p_loss, delay=float(delay), outages=tuple(outages),
         example=example, example_targets=example_targets,
     )
 

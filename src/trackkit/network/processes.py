@@ -125,13 +125,12 @@ class AgentError(RuntimeError):
 
 
 class ProcessNetworkResult(NetworkResult):
-    """A :class:`NetworkResult` (same fields) with the process run's extras as attributes:
-    ``late`` (delivered late, module docstring), ``endpoint`` (the ROUTER's address, now
-    closed), ``restarts`` (processes started after a kill), ``recovered`` (per outage:
-    the simulated time after the restart when the agent first held as many confirmed
-    tracks as before the kill, nan if never)."""
+    """A :class:`NetworkResult` (same fields, ``late`` counted) with the process run's extras
+    as attributes: ``endpoint`` (the ROUTER's address, now closed), ``restarts`` (processes
+    started after a kill), ``recovered`` (per outage: the simulated time after the restart
+    when the agent first held as many confirmed tracks as before the kill, nan if
+    never)."""
 
-    late: int
     endpoint: str
     restarts: int
     recovered: list[float]
@@ -597,8 +596,8 @@ def run_network_processes(
     trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
     seconds = _time.perf_counter() - t0
     out = ProcessNetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered,
-                               lost, seconds, fusion, spacing.span)
-    out.late, out.endpoint, out.restarts = late, env.endpoint, restarts
+                               lost, seconds, fusion, spacing.span, late)
+    out.endpoint, out.restarts = env.endpoint, restarts
     out.recovered = [recovered[a] for a in sorted(kills)]
     return out
 

@@ -101,7 +101,9 @@ class NetworkResult(NamedTuple):
     :class:`~trackkit.network.central.CentralFusion`, for its NEES) when ``central`` is the
     filter, else None; ``spacing``: the least and the greatest distance between two agents
     over all execution instants, each as a fraction of the pair's communication range
-    (the smaller of the two; nan where every range is unlimited)."""
+    (the smaller of the two; nan where every range is unlimited); ``late``: delivered
+    messages that missed at least one of the receiver's executions they would have reached
+    without the channel's delay (0 in process, where delivery is immediate)."""
 
     agents: list[Trace]
     central: Trace | None
@@ -112,6 +114,7 @@ class NetworkResult(NamedTuple):
     seconds: float
     fusion: CentralFusion | None = None
     spacing: tuple[float, float] = (math.nan, math.nan)
+    late: int = 0
 
 
 class _Spacing:
