@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from trackkit.angles import wrap
+from trackkit.network.bearings import BearingSet
 from trackkit.network.composite import CONVERGED, composite_measurement
-from trackkit.network.initiate import Bearings, candidates, congruity, initiate
+from trackkit.network.initiate import candidates, congruity, initiate
 
 SIGMA = math.radians(2.0)
 X0 = np.array([8000.0, 15000.0, -10.0, -5.0])  # the target at t = 0
@@ -24,7 +25,8 @@ def _two_sensors(rng, noise=SIGMA):
                                                          -1)])
     pos = X0[:2] + t[:, None] * X0[2:]
     z = np.arctan2(pos[:, 0] - origin[:, 0], pos[:, 1] - origin[:, 1])
-    return Bearings(wrap(z + noise * rng.standard_normal(24)), t, origin, np.full(24, SIGMA))
+    return BearingSet(wrap(z + noise * rng.standard_normal(24)), t, origin, np.full(24, SIGMA),
+                      np.full(24, -1))
 
 
 def test_candidates_spread_as_drawn():
@@ -51,7 +53,7 @@ def test_congruity_is_zero_at_the_truth_and_bounded_by_k1_per_bearing():
     assert 0 < congruity(far, 0.0, b, k1=2.0) <= 2.0 * 24
     # the formula, term by term, for a state off the truth
     x = X0 + [300.0, -200.0, 1.0, 0.5]
-    p = x[:2] + (b.t - 0.0)[:, None] * x[2:] - b.origin
+    p = x[:2] + (b.t - 0.0)[:, None] * x[2:] - b.sensor
     zeta = wrap(np.arctan2(p[:, 0], p[:, 1]) - b.z) / b.sigma
     assert congruity(x, 0.0, b, 1.5, 0.3) == pytest.approx(
         np.sum(1.5 * (1 - np.exp(-0.3 * zeta**2))), rel=1e-12)
@@ -71,7 +73,7 @@ def test_initiation_seeds_the_composite_measurement():
         truth = X0[:2] + b.t[k] * X0[2:]
         errors.append(np.hypot(*(ini.mean[:2] - truth)))
         assert ini.support >= 12
-        c = composite_measurement(b.z, b.t, b.origin, b.sigma, b.t[k], ini.mean)
+        c = composite_measurement(b.z, b.t, b.sensor, b.sigma, b.t[k], ini.mean)
         assert c.status == CONVERGED
         assert np.hypot(*(c.mean[:2] - truth)) < 2000.0
     assert max(errors) < 1500.0 and np.median(errors) < 700.0
@@ -88,9 +90,10 @@ def test_initiation_is_not_drawn_to_another_targets_bearings():
     a = _two_sensors(rng)
     other = np.array([30000.0, 15000.0, -5.0, 0.0])
     pos = other[:2] + a.t[:, None] * other[2:]
-    zb = np.arctan2(pos[:, 0] - a.origin[:, 0], pos[:, 1] - a.origin[:, 1])
-    both = Bearings(np.concatenate([a.z, zb]), np.concatenate([a.t, a.t]),
-                    np.concatenate([a.origin, a.origin]), np.concatenate([a.sigma, a.sigma]))
+    zb = np.arctan2(pos[:, 0] - a.sensor[:, 0], pos[:, 1] - a.sensor[:, 1])
+    both = BearingSet(np.concatenate([a.z, zb]), np.concatenate([a.t, a.t]),
+                      np.concatenate([a.sensor, a.sensor]), np.concatenate([a.sigma, a.sigma]),
+                      np.concatenate([a.source, a.source]))
     ini = initiate(11, both, 100.0, 30000.0, 30.0, rng)
     truth = X0[:2] + a.t[11] * X0[2:]
     assert np.hypot(*(ini.mean[:2] - truth)) < 1500.0
@@ -102,11 +105,11 @@ def test_initiation_is_not_drawn_to_another_targets_bearings():
     (lambda r: candidates(0.0, 0.0, [0, 0], 1.0, 5.0, 30.0, 10, r), "sigma = 0.0"),
     (lambda r: candidates(0.0, SIGMA, [0, 0], 1.0, 5.0, -1.0, 10, r), "v_max = -1.0"),
     (lambda r: candidates(0.0, SIGMA, [0, 0], 1.0, 5.0, 1.0, 0, r), "n = 0"),
-    (lambda r: congruity(np.zeros(3), 0.0, Bearings([0.0], [0.0], [[0, 0]], [SIGMA])),
+    (lambda r: congruity(np.zeros(3), 0.0, BearingSet([0.0], [0.0], [[0, 0]], [SIGMA], [-1])),
      r"states have shape \(3,\)"),
-    (lambda r: congruity(np.zeros(4), 0.0, Bearings([0.0], [0.0], [[0, 0]], [0.0])),
+    (lambda r: congruity(np.zeros(4), 0.0, BearingSet([0.0], [0.0], [[0, 0]], [0.0], [-1])),
      "bearings.sigma has entries <= 0"),
-    (lambda r: initiate(3, Bearings([0.0], [0.0], [[0, 0]], [SIGMA]), 1.0, 5.0, 1.0, r),
+    (lambda r: initiate(3, BearingSet([0.0], [0.0], [[0, 0]], [SIGMA], [-1]), 1.0, 5.0, 1.0, r),
      "bearing = 3; expected an index into the 1 bearings"),
 ])
 def test_bad_input_is_named(call, message):

@@ -35,7 +35,7 @@ from trackkit.network.diffusion import (
     neighbourhood,
     uniform_weights,
 )
-from trackkit.network.initiate import Bearings, Initiation, initiate
+from trackkit.network.initiate import Initiation, initiate
 from trackkit.network.run import NetworkResult, Trace, run_network
 from trackkit.network.steering import (
     TURN_RATE,
@@ -78,7 +78,6 @@ __all__ = [
     "move",
     "steer",
     "swarm_neighbours",
-    "Bearings",
     "Initiation",
     "initiate",
     "Matches",

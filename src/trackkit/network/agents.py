@@ -82,9 +82,9 @@ from scipy.stats import chi2
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
 from trackkit.models.sensors import Bearing
+from trackkit.network.bearings import BearingSet, concat_bearings, empty_bearings
 from trackkit.network.composite import CONVERGED, composite_measurement
 from trackkit.network.diffusion import COMBINATIONS, adapt, combine
-from trackkit.network.initiate import Bearings as InitBearings
 from trackkit.network.initiate import initiate
 from trackkit.network.steering import Steering, steer
 from trackkit.network.tracks import (
@@ -245,34 +245,6 @@ class AgentSettings:
 
 # --------------------------------------------------------------------------------------------
 # data
-
-
-class BearingSet(NamedTuple):
-    """Timestamped bearings: ``z (M,)`` (rad, nautical), ``t (M,)`` (s), ``sensor (M, 2)``
-    (the sensor's position, m), ``sigma (M,)`` (rad), ``source (M,)`` int64 (the measuring
-    agent's index; -1 unknown)."""
-
-    z: Array
-    t: Array
-    sensor: Array
-    sigma: Array
-    source: NDArray[np.int64]
-
-    def take(self, idx: ArrayLike) -> BearingSet:
-        return BearingSet(*(np.asarray(a)[idx] for a in self))
-
-    @property
-    def size(self) -> int:
-        return int(self.z.shape[0])
-
-
-def empty_bearings() -> BearingSet:
-    return BearingSet(np.zeros(0), np.zeros(0), np.zeros((0, 2)), np.zeros(0),
-                      np.zeros(0, np.int64))
-
-
-def _cat(*sets: BearingSet) -> BearingSet:
-    return BearingSet(*(np.concatenate(parts, axis=0) for parts in zip(*sets, strict=True)))
 
 
 class Tracks(NamedTuple):
@@ -722,7 +694,7 @@ class Agent:
 
         # initiation from the unclaimed pool
         n_new = sum(b.size for b in unclaimed)
-        pool = _cat(self.pool, *unclaimed) if unclaimed else self.pool
+        pool = concat_bearings(self.pool, *unclaimed) if unclaimed else self.pool
         fresh = np.arange(pool.size) >= pool.size - n_new
         recent = pool.t >= t - s.init_window_s
         pool, fresh = pool.take(recent), fresh[recent]
@@ -774,7 +746,6 @@ class Agent:
             return tr, pool, 0
         seeds = self.rng.permutation(fresh)
         r_max = min(s.r_max, s.meas_range)
-        ib = InitBearings(pool.z, pool.t, pool.sensor, pool.sigma)
         used = np.zeros(pool.size, bool)
         for k in seeds[: s.init_attempts].tolist():
             if used[k] or started >= s.max_initiations:
@@ -782,7 +753,7 @@ class Agent:
             sub = np.flatnonzero(~used)
             kk = int(np.searchsorted(sub, k))
             part = pool.take(sub)
-            ini = initiate(kk, InitBearings(*(np.asarray(a)[sub] for a in ib)), s.r_min, r_max,
+            ini = initiate(kk, part, s.r_min, r_max,
                            s.v_max, self.rng, s.n_candidates, s.k1, s.k2)
             sup = _support(ini.mean, float(part.t[kk]), part)
             if sup.sum() < s.min_support or np.unique(part.source[sup]).size < s.min_sources:

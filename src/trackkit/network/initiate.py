@@ -37,35 +37,27 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
+from trackkit.network.bearings import BearingSet
 
-__all__ = ["Bearings", "candidates", "congruity", "Initiation", "initiate"]
+__all__ = ["candidates", "congruity", "Initiation", "initiate"]
 
 Array = NDArray[np.float64]
 
 
-class Bearings(NamedTuple):
-    """M timestamped bearings: ``z (M,)`` nautical (rad), ``t (M,)`` (s), the sensor
-    positions ``origin (M, 2)`` (m) and noise ``sigma (M,)`` (rad)."""
-
-    z: Array
-    t: Array
-    origin: Array
-    sigma: Array
-
-
-def _bearings(b: Bearings, where: str) -> Bearings:
+def _bearings(b: BearingSet, where: str) -> BearingSet:
     z = np.asarray(b.z, dtype=float).reshape(-1)
     M = z.size
     t = np.broadcast_to(np.asarray(b.t, dtype=float), (M,))
-    o = np.broadcast_to(np.asarray(b.origin, dtype=float), (M, 2))
+    o = np.broadcast_to(np.asarray(b.sensor, dtype=float), (M, 2))
     s = np.broadcast_to(np.asarray(b.sigma, dtype=float), (M,))
-    for name, v in (("z", z), ("t", t), ("origin", o), ("sigma", s)):
+    for name, v in (("z", z), ("t", t), ("sensor", o), ("sigma", s)):
         if not np.isfinite(v).all():
             raise ValueError(f"{where}: bearings.{name} has non-finite entries; expected "
                              "finite values")
     if not (s > 0).all():
         raise ValueError(f"{where}: bearings.sigma has entries <= 0; expected rad > 0")
-    return Bearings(z, t, o, s)
+    src = np.broadcast_to(np.asarray(b.source, dtype=np.int64), (M,))
+    return BearingSet(z, t, o, s, src)
 
 
 def candidates(z: float, sigma: float, origin: ArrayLike, r_min: float, r_max: float,
@@ -91,7 +83,7 @@ def candidates(z: float, sigma: float, origin: ArrayLike, r_min: float, r_max: f
                      speed * np.sin(course), speed * np.cos(course)], -1)
 
 
-def congruity(states: ArrayLike, t0: float, bearings: Bearings, k1: float = 1.0,
+def congruity(states: ArrayLike, t0: float, bearings: BearingSet, k1: float = 1.0,
               k2: float = 0.5) -> Array:
     """``C_c = sum_m K1 (1 - exp(-K2 zeta_cm^2))`` of candidates ``states (..., 4)`` at time
     ``t0`` against ``bearings``: ``(...)`` (lower is better)."""
@@ -100,8 +92,8 @@ def congruity(states: ArrayLike, t0: float, bearings: Bearings, k1: float = 1.0,
     if X.shape[-1:] != (4,):
         raise ValueError(f"congruity: states have shape {X.shape}; expected (..., 4)")
     dt = b.t - t0
-    px = X[..., 0, None] + dt * X[..., 2, None] - b.origin[:, 0]
-    py = X[..., 1, None] + dt * X[..., 3, None] - b.origin[:, 1]
+    px = X[..., 0, None] + dt * X[..., 2, None] - b.sensor[:, 0]
+    py = X[..., 1, None] + dt * X[..., 3, None] - b.sensor[:, 1]
     zeta = wrap(np.arctan2(px, py) - b.z) / b.sigma
     return (k1 * -np.expm1(-k2 * zeta * zeta)).sum(-1)
 
@@ -116,7 +108,7 @@ class Initiation(NamedTuple):
     support: int
 
 
-def initiate(bearing: int, bearings: Bearings, r_min: float, r_max: float, v_max: float,
+def initiate(bearing: int, bearings: BearingSet, r_min: float, r_max: float, v_max: float,
              rng: np.random.Generator, n_candidates: int = 2000, k1: float = 1.0,
              k2: float = 0.5) -> Initiation:
     """The best of ``n_candidates`` drawn around ``bearings[bearing]`` by their congruity
@@ -128,14 +120,14 @@ def initiate(bearing: int, bearings: Bearings, r_min: float, r_max: float, v_max
     if not (isinstance(bearing, int | np.integer) and 0 <= bearing < b.z.size):
         raise ValueError(f"initiate: bearing = {bearing!r}; expected an index into the "
                          f"{b.z.size} bearings")
-    z, t0, o, s = b.z[bearing], b.t[bearing], b.origin[bearing], b.sigma[bearing]
+    z, t0, o, s = b.z[bearing], b.t[bearing], b.sensor[bearing], b.sigma[bearing]
     X = candidates(z, s, o, r_min, r_max, v_max, n_candidates, rng)
     cost = congruity(X, t0, b, k1, k2)
     best = int(np.argmin(cost))
     x = X[best]
     dt = b.t - t0
-    zeta = wrap(np.arctan2(x[0] + dt * x[2] - b.origin[:, 0],
-                           x[1] + dt * x[3] - b.origin[:, 1]) - b.z) / b.sigma
+    zeta = wrap(np.arctan2(x[0] + dt * x[2] - b.sensor[:, 0],
+                           x[1] + dt * x[3] - b.sensor[:, 1]) - b.z) / b.sigma
     r = math.hypot(x[0] - o[0], x[1] - o[1])
     u = np.array([math.sin(z), math.cos(z)])  # along the line of sight
     w = np.array([u[1], -u[0]])
