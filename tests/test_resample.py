@@ -19,6 +19,7 @@ import pytest
 
 from trackkit.angles import wrap
 from trackkit.filters import resample as rs
+from trackkit.linalg import psd_factor
 
 NAMES = ["systematic", "stratified", "residual", "multinomial"]
 
@@ -246,13 +247,13 @@ def test_weighted_mean_cov_with_equal_weights():
 def test_psd_factor_handles_singular_and_refuses_indefinite():
     Q = np.diag([1.0, 0.0, 4.0])
     Q[0, 2] = Q[2, 0] = 1.0
-    L = rs.psd_factor(Q, "Q")
+    L = psd_factor(Q, "Q")
     np.testing.assert_allclose(L @ L.T, Q, rtol=0, atol=1e-14)
     stack = np.stack([Q, 2 * Q])
-    L = rs.psd_factor(stack, "Q")
+    L = psd_factor(stack, "Q")
     np.testing.assert_allclose(L @ L.mT, stack, rtol=0, atol=1e-14)
     with pytest.raises(ValueError, match="Q is not positive semi-definite"):
-        rs.psd_factor(np.diag([1.0, -1.0]), "Q")
+        psd_factor(np.diag([1.0, -1.0]), "Q")
 
 
 def test_a_sample_covariance_collapsed_to_a_point_is_factored():
@@ -266,8 +267,8 @@ def test_a_sample_covariance_collapsed_to_a_point_is_factored():
     S = V @ np.diag([-4e-16, 1e-6]) @ V.T
     S = 0.5 * (S + S.T)[None]  # a stack: the eigen-decomposition path
     with pytest.raises(ValueError, match="S is not positive semi-definite"):
-        rs.psd_factor(S, "S")
-    L = rs.psd_factor(S, "S", sample=True)
+        psd_factor(S, "S")
+    L = psd_factor(S, "S", sample=True)
     np.testing.assert_allclose(L[0] @ L[0].T, V @ np.diag([0.0, 1e-6]) @ V.T, rtol=0, atol=1e-20)
 
 

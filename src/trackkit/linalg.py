@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "symmetrize",
@@ -21,6 +21,7 @@ __all__ = [
     "quadratic_form",
     "mm",
     "mmT",
+    "psd_factor",
 ]
 
 Array = NDArray[np.float64]
@@ -272,3 +273,28 @@ def check_covariance(P: Array, name: str, n: int | None = None, psd: bool = True
                 f"{float(np.min(eig_min)):.3g} in {_where_bad(np.atleast_1d(bad))}"
             )
     return P
+
+
+def psd_factor(P: ArrayLike, name: str = "covariance", sample: bool = False) -> Array:
+    """A factor ``L`` with ``L L^T = P`` for symmetric positive semi-definite ``P``
+    ``(..., n, n)``: the Cholesky factor for one matrix when it exists, else (and always for
+    a stack, so that each row's factor depends on that row alone) ``V sqrt(diag(lambda))`` from
+    the eigen-decomposition, with eigenvalues down to ``-1e-10 max|P|`` taken as 0. A
+    singular P (a component without noise) is fine; an indefinite one raises ValueError
+    naming ``name``. ``sample``: P is a weighted sample covariance (PSD by construction), so
+    a negative eigenvalue is the rounding of its sums and is taken as 0 whatever its size: a
+    cloud collapsed to a point has ``max|P|`` at the rounding level of its offsets."""
+    P = np.asarray(P, dtype=float)
+    if P.ndim == 2:
+        try:
+            return np.linalg.cholesky(P)
+        except np.linalg.LinAlgError:
+            pass
+    lam, V = np.linalg.eigh(P)
+    scale = np.abs(P).max(axis=(-2, -1)) if P.size else np.zeros(P.shape[:-2])
+    bad = lam[..., 0] < -1e-10 * scale
+    if not sample and np.any(bad):
+        raise ValueError(f"{name} is not positive semi-definite: smallest eigenvalue "
+                         f"{float(lam[..., 0].min()):.3g} in {int(np.sum(bad))} of "
+                         f"{max(1, bad.size)} matrices; expected a symmetric PSD matrix")
+    return V * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]

@@ -21,7 +21,8 @@ import pytest
 
 import trackkit as tk
 from trackkit.angles import wrap
-from trackkit.sim.simulate import noise_factor, run_rng
+from trackkit.linalg import psd_factor
+from trackkit.sim.simulate import run_rng
 from trackkit.tracking.gaps import (
     Coast,
     HoldLast,
@@ -48,10 +49,10 @@ def simulate(motion, sensor, x0, P0, steps, dt, runs, seed):
         u0[r] = g.standard_normal(n)
         w[:, r] = g.standard_normal((steps, n))
         e[:, r] = g.standard_normal((steps, m))
-    LQ = noise_factor(np.asarray(motion.noise(None, dt)))
+    LQ = psd_factor(np.asarray(motion.noise(None, dt)))
     LR = np.linalg.cholesky(sensor.noise)
     x = np.empty((steps + 1, runs, n))
-    x[0] = x0 + u0 @ noise_factor(P0).T
+    x[0] = x0 + u0 @ psd_factor(P0).T
     z = np.empty((steps, runs, m))
     for k in range(steps):
         x[k + 1] = motion.f(x[k], dt) + w[k] @ LQ.T

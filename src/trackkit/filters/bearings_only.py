@@ -50,7 +50,7 @@ from trackkit.filters.base import (
 from trackkit.filters.imm import combine, mixture_innovation
 from trackkit.filters.kalman import EKF, _condition, _predict
 from trackkit.filters.particle import PF, resample_rows
-from trackkit.linalg import cholesky, gaussian_loglik, mm, mmT, symmetrize
+from trackkit.linalg import cholesky, gaussian_loglik, mm, mmT, psd_factor, symmetrize
 from trackkit.models.motion import ConstantVelocity
 
 __all__ = [
@@ -700,7 +700,7 @@ def conditioned_on_bearing(x: Array, P: Array, origin: Array, beta: Array, sigma
     if n > 2:
         G = P[..., 2:, :2] @ Lam  # P_vp Lambda
         Xv = x[..., None, 2:] + (X[..., :2] - x[..., None, :2]) @ G.mT
-        L = rs.psd_factor(P[..., 2:, 2:] - G @ P[..., :2, 2:], "PF.update: prior velocity")
+        L = psd_factor(P[..., 2:, 2:] - G @ P[..., :2, 2:], "PF.update: prior velocity")
         X[..., 2:] = Xv + rng.standard_normal(batch + (N, n - 2)) @ L.mT
     dLd = (d * (Lam @ d[..., None])[..., 0]).sum(-1)
     lw = -0.5 * (dLd[..., None] - a * mu * mu) + log_ndtr(mu / s) - 0.5 * np.log(a) + np.log(r)

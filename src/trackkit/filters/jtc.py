@@ -75,8 +75,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.belief import Gaussian, Innovation
 from trackkit.filters.base import check_dt, check_measurement, register
-from trackkit.filters.resample import logsumexp, psd_factor, systematic
-from trackkit.linalg import check_covariance
+from trackkit.filters.resample import logsumexp, systematic
+from trackkit.linalg import check_covariance, psd_factor
 from trackkit.models.classes import (
     ALONG,
     PAPER_CLASSES,

@@ -57,7 +57,7 @@ from trackkit.filters.base import (
     produced,
     register,
 )
-from trackkit.linalg import cholesky
+from trackkit.linalg import cholesky, psd_factor
 
 __all__ = ["PF", "sample_gaussian", "propagate", "log_likelihood", "predicted_measurement",
            "resample_rows"]
@@ -131,7 +131,7 @@ def sample_gaussian(mean: Array, cov: Array, n_particles: int,
     m = np.asarray(mean, dtype=float)
     P = np.asarray(cov, dtype=float)
     batch = np.broadcast_shapes(m.shape[:-1], P.shape[:-2])
-    L = rs.psd_factor(P, "prior covariance")
+    L = psd_factor(P, "prior covariance")
     e = rng.standard_normal(batch + (n_particles, m.shape[-1]))
     return m[..., None, :] + (e @ L.T if L.ndim == 2 else e @ L.mT)
 
@@ -160,10 +160,10 @@ def propagate(states: Array, motion, dt: ArrayLike, rng: np.random.Generator,
     Q = np.asarray(motion.noise(X, d), dtype=float)
     e = rng.standard_normal(X.shape)
     if Q.ndim == 2:
-        L = _cached(Q, "sqrt", lambda M: rs.psd_factor(M, "process noise Q"))
+        L = _cached(Q, "sqrt", lambda M: psd_factor(M, "process noise Q"))
         x += e @ L.T
     else:
-        L = rs.psd_factor(_per_row(Q, batch), "process noise Q")
+        L = psd_factor(_per_row(Q, batch), "process noise Q")
         if L.shape[-3] == 1:  # one factor per batch row: a batched GEMM
             x += e @ L[..., 0, :, :].mT
         else:

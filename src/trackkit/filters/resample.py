@@ -60,6 +60,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from trackkit import linalg
 from trackkit.angles import wrap
 
 __all__ = [
@@ -75,7 +76,6 @@ __all__ = [
     "regularise",
     "roughen",
     "optimal_bandwidth",
-    "psd_factor",
 ]
 
 Array = NDArray[np.float64]
@@ -333,31 +333,6 @@ def weighted_mean_cov(states: ArrayLike, weights: ArrayLike | None,
     return m, P
 
 
-def psd_factor(P: ArrayLike, name: str = "covariance", sample: bool = False) -> Array:
-    """A factor ``L`` with ``L L^T = P`` for symmetric positive semi-definite ``P``
-    ``(..., n, n)``: the Cholesky factor for one matrix when it exists, else (and always for
-    a stack, so that each row's factor depends on that row alone) ``V sqrt(diag(lambda))`` from
-    the eigen-decomposition, with eigenvalues down to ``-1e-10 max|P|`` taken as 0. A
-    singular P (a component without noise) is fine; an indefinite one raises ValueError
-    naming ``name``. ``sample``: P is a weighted sample covariance (PSD by construction), so
-    a negative eigenvalue is the rounding of its sums and is taken as 0 whatever its size: a
-    cloud collapsed to a point has ``max|P|`` at the rounding level of its offsets."""
-    P = np.asarray(P, dtype=float)
-    if P.ndim == 2:
-        try:
-            return np.linalg.cholesky(P)
-        except np.linalg.LinAlgError:
-            pass
-    lam, V = np.linalg.eigh(P)
-    scale = np.abs(P).max(axis=(-2, -1)) if P.size else np.zeros(P.shape[:-2])
-    bad = lam[..., 0] < -1e-10 * scale
-    if not sample and np.any(bad):
-        raise ValueError(f"{name} is not positive semi-definite: smallest eigenvalue "
-                         f"{float(lam[..., 0].min()):.3g} in {int(np.sum(bad))} of "
-                         f"{max(1, bad.size)} matrices; expected a symmetric PSD matrix")
-    return V * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]
-
-
 def optimal_bandwidth(n_particles: int, dim: int) -> float:
     """``h = (4 / (n + 2))^(1/(n+4)) N^(-1/(n+4))``: the Gaussian kernel's bandwidth that
     minimises the mean integrated squared error for a Gaussian density (Musso et al.)."""
@@ -395,7 +370,7 @@ def regularise(states: ArrayLike, weights: ArrayLike, rng: np.random.Generator |
         m, S = weighted_mean_cov(X, w, ang)
     if cov is not None:
         S = np.asarray(cov, dtype=float)
-    D = psd_factor(S, "regularise: the particles' covariance",
+    D = linalg.psd_factor(S, "regularise: the particles' covariance",
                    sample=cov is None or cov_is_sample)
     rng = np.random.default_rng() if rng is None else rng
     e = rng.standard_normal(X.shape)

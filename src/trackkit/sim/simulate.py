@@ -15,12 +15,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackkit.angles import wrap
+from trackkit.linalg import psd_factor
 from trackkit.scenario.build import Plan
 from trackkit.sim.kinematics import step as platform_step
 
 Array = NDArray[np.float64]
 
-__all__ = ["BlockData", "run_rng", "simulate_block", "noise_factor"]
+__all__ = ["BlockData", "run_rng", "simulate_block"]
 
 
 def run_rng(seed: int, run: int) -> np.random.Generator:
@@ -58,7 +59,7 @@ def simulate_block(plan: Plan, r0: int, r1: int, seed: int | None = None) -> Blo
     kin = 2 * d
     for k in range(T):
         dt = plan.times[k + 1] - plan.times[k]
-        L = noise_factor(np.asarray(plan.truth_motion.noise(truth[k], dt)))
+        L = psd_factor(np.asarray(plan.truth_motion.noise(truth[k], dt)), "truth process noise Q")
         if s.linear_system:
             nxt = plan.truth_motion.f(truth[k], dt)
         else:
@@ -75,13 +76,3 @@ def simulate_block(plan: Plan, r0: int, r1: int, seed: int | None = None) -> Blo
     if plan.p_detect < 1.0:
         z[det >= plan.p_detect] = np.nan
     return BlockData(truth, z, u0)
-
-
-def noise_factor(Q: Array) -> Array:
-    """A factor L with L L^T = Q: Cholesky, or for a singular Q (deterministic components,
-    zero process noise) the scaled eigenvectors; no jitter is added to the noise."""
-    try:
-        return np.linalg.cholesky(Q)
-    except np.linalg.LinAlgError:
-        vals, vecs = np.linalg.eigh(Q)
-        return vecs * np.sqrt(np.clip(vals, 0, None))
