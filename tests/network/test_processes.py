@@ -110,6 +110,42 @@ def test_processes_equal_in_process_bit_for_bit(pair):
     assert got.lost == 0 and got.late == 0
 
 
+def _own_address() -> str:
+    """This machine's outbound interface address (no packet is sent), else loopback."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.connect(("10.255.255.255", 1))
+            return s.getsockname()[0]
+        except OSError:
+            return "127.0.0.1"
+
+
+def test_agents_started_by_a_launcher_dial_the_advertised_address():
+    """The way agents run on other machines: the environment listens on every interface,
+    each agent is started through a command prefix (here ``env``, where ``ssh host`` would
+    go) and dials the advertised address (this machine's own interface address): the same
+    tracks as in process, bit for bit, and no process left. Without ``advertise`` the
+    wildcard address is refused, naming it."""
+    import sys
+
+    args, kw = _setup(90.0)
+    ref = run_network(*args, **kw)
+    got = run_network_processes(*args, host="0.0.0.0", advertise=_own_address(),
+                                launch={a: ["env", "TRACKKIT_LAUNCHED=1"] for a in range(3)},
+                                remote_python=sys.executable, **kw)
+    for x, y in zip(ref.agents, got.agents, strict=True):
+        np.testing.assert_array_equal(x.mean, y.mean)
+        np.testing.assert_array_equal(x.offsets, y.offsets)
+    assert got.endpoint.startswith("tcp://0.0.0.0:")
+    assert _agent_children() == []
+    with pytest.raises(ValueError, match="advertise"):
+        run_network_processes(*args, host="0.0.0.0", launch={0: ["env"]}, **kw)
+    with pytest.raises(ValueError, match="launch"):
+        run_network_processes(*args, launch={5: ["env"]}, **kw)
+
+
 def test_no_process_socket_or_port_left_after_a_run(pair):
     _, got, before, after = pair
     assert _agent_children() == []

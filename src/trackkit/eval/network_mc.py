@@ -329,6 +329,9 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                    delay: float = 0.0,
                    outages: Sequence[tuple[int, float, float | None]] = (),
                    host: str = "127.0.0.1",
+                   advertise: str | None = None,
+                   launch: dict[int, Sequence[str]] | None = None,
+                   remote_python: str = "python3",
                    ) -> NetworkMonteCarlo:
     """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
     ``runs``, ``seed``, ``steering`` and ``loss`` override the file's; ``progress(done,
@@ -337,8 +340,9 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     (``network.processes.run_network_processes``: every agent its own OS process, talking
     over ZeroMQ; without loss, delay and outages the same results bit for bit, only slower),
     which also takes ``delay`` (the channel's delivery delay, simulated s), ``outages``
-    (``(agent, kill_at, restart_at or None)``, 0-based agent) and ``host`` (the address the
-    environment binds)."""
+    (``(agent, kill_at, restart_at or None)``, 0-based agent), ``host`` (the address the
+    environment binds), ``advertise``, ``launch`` and ``remote_python`` (agents on other
+    machines: ``run_network_processes``)."""
     from dataclasses import replace
 
     from trackkit.network.agents import AgentSettings
@@ -346,15 +350,17 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     extra: dict = {}
     if agents == "inprocess":
         runner = run_network
-        if delay != 0.0 or outages or host != "127.0.0.1":
+        if delay != 0.0 or outages or host != "127.0.0.1" or advertise or launch:
             raise ValueError(f"delay = {delay!r}, outages = {list(outages)!r}, host = "
-                             f"{host!r}: a channel delay, killing agents and the address "
-                             "need agents='processes'")
+                             f"{host!r}, advertise = {advertise!r}, launch = {launch!r}: a "
+                             "channel delay, killing agents, addresses and launchers need "
+                             "agents='processes'")
     elif agents == "processes":
         from trackkit.network.processes import run_network_processes
 
         runner = run_network_processes
-        extra = {"delay": delay, "outages": tuple(outages), "host": host}
+        extra = {"delay": delay, "outages": tuple(outages), "host": host,
+                 "advertise": advertise, "launch": launch, "remote_python": remote_python}
     else:
         raise ValueError(f"agents = {agents!r}; expected 'inprocess' or 'processes'")
 

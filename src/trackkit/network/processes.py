@@ -119,6 +119,9 @@ Array = NDArray[np.float64]
 #: version of the envelope and message types above (``decode`` refuses any other)
 PROTOCOL_VERSION = 1
 
+#: listening addresses that mean "every interface" (an agent cannot dial them)
+_WILDCARD = ("0.0.0.0", "*", "::")
+
 
 class AgentError(RuntimeError):
     """An agent process failed, answered with an error, or did not answer in time."""
@@ -310,7 +313,9 @@ class _Environment:
     """The ROUTER socket, the agent processes and their shutdown."""
 
     def __init__(self, host: str, port: int, timeout_s: float, start_timeout_s: float,
-                 idle_timeout_s: float) -> None:
+                 idle_timeout_s: float, advertise: str | None = None,
+                 launch: dict[int, list[str]] | None = None,
+                 remote_python: str = "python3") -> None:
         self.ctx = zmq.Context()
         self.sock = self.ctx.socket(zmq.ROUTER)
         self.sock.setsockopt(zmq.LINGER, 0)
@@ -327,6 +332,12 @@ class _Environment:
             raise ValueError(f"host = {host!r}, port = {port!r}: cannot listen there "
                              f"({err}); expected a local address and a free port") from None
         self.endpoint = f"tcp://{host}:{port}"
+        # the address the agents dial: where the environment listens on every interface,
+        # the one given (another machine cannot dial 0.0.0.0)
+        local = "127.0.0.1" if host in _WILDCARD else host
+        self.connect = f"tcp://{advertise or local}:{port}"
+        self.launch = launch or {}
+        self.remote_python = remote_python
         self.timeout_s, self.start_timeout_s = timeout_s, start_timeout_s
         self.idle_timeout_s = idle_timeout_s
         self.links: dict[int, _Link] = {}
@@ -340,8 +351,12 @@ class _Environment:
             k = self.incarnations.get(a, -1) + 1
             self.incarnations[a] = k
             ident = f"agent-{a}-{k}".encode()
-            cmd = [sys.executable, "-m", "trackkit.network.processes", "agent",
-                   "--endpoint", self.endpoint, "--index", str(a), "--incarnation", str(k),
+            # a launcher prefix (e.g. ["ssh", "boat2"]) runs the agent on another machine,
+            # whose python must have trackkit installed
+            python = [self.remote_python] if self.launch.get(a) else [sys.executable]
+            cmd = [*self.launch.get(a, []), *python, "-m", "trackkit.network.processes",
+                   "agent", "--endpoint", self.connect, "--index", str(a),
+                   "--incarnation", str(k),
                    "--seed", str(seed), "--key", ",".join(str(int(v)) for v in key),
                    "--idle-timeout", repr(float(self.idle_timeout_s)),
                    "--settings", json.dumps(settings_to_dict(s))]
@@ -450,6 +465,9 @@ def run_network_processes(
     outages: Sequence[tuple[int, float, float | None]] = (),
     host: str = "127.0.0.1",
     port: int = 0,
+    advertise: str | None = None,
+    launch: dict[int, Sequence[str]] | None = None,
+    remote_python: str = "python3",
     timeout_s: float = 60.0,
     start_timeout_s: float = 120.0,
     idle_timeout_s: float = 300.0,
@@ -464,7 +482,17 @@ def run_network_processes(
         delay: the channel's delivery delay (simulated s, >= 0).
         outages: ``(agent, kill_at, restart_at)`` (0-based agent index, simulated s;
             ``restart_at`` None: never restarted, else > ``kill_at``).
-        host, port: the environment's ROUTER address (port 0: chosen by the OS).
+        host, port: the environment's ROUTER address (port 0: chosen by the OS; host
+            "0.0.0.0" listens on every interface, for agents on other machines).
+        advertise: the address the agents dial (default ``host``): this machine's name or
+            address as the agents' machines see it, when ``host`` is "0.0.0.0".
+        launch: per agent (0-based), a command prefix that starts its process elsewhere,
+            e.g. ``{2: ["ssh", "boat2"]}``: the agent runs ``remote_python -m
+            trackkit.network.processes agent ...`` there (``remote_python``: an interpreter
+            with trackkit installed, "python3" on the remote PATH by default) and dials
+            ``advertise``. Killing it
+            (``outages``) kills the local launcher; the remote agent, hearing nothing for
+            ``idle_timeout_s``, exits by itself.
         timeout_s: the longest wait for one agent's answer (wall-clock s);
             ``start_timeout_s`` for the processes to start; ``idle_timeout_s``: an agent
             that hears nothing that long exits by itself.
@@ -511,7 +539,16 @@ def run_network_processes(
     held_before = dict.fromkeys(kills, 0)
     recovered = {a: math.nan for a in kills}
     t0 = _time.perf_counter()
-    env = _Environment(host, port, timeout_s, start_timeout_s, idle_timeout_s)
+    launch = {int(a): [str(c) for c in cmd] for a, cmd in (launch or {}).items()}
+    for a, cmd in launch.items():
+        if not 0 <= a < A or not cmd:
+            raise ValueError(f"launch[{a}] = {cmd!r}; expected an agent index in 0..{A - 1} "
+                             "and a non-empty command prefix such as ['ssh', 'host']")
+    if host in _WILDCARD and advertise is None and launch:
+        raise ValueError(f"host = {host!r} with agents launched elsewhere; expected "
+                         "advertise = this machine's address as the agents see it")
+    env = _Environment(host, port, timeout_s, start_timeout_s, idle_timeout_s, advertise,
+                       launch, remote_python)
     try:
         env.start(range(A), w.settings, seed, [(run, 3, a) for a in range(A)])
         for a, e in w.order:
