@@ -332,7 +332,10 @@ def test_cli_network_processes_with_loss_delay_and_a_kill(tmp_path):
                                                                            "RESTART > T"]),
                         (["--agents", "processes", "--kill", "x"], ["--kill", "'x'",
                                                                      "AGENT@T"]),
-                        (["--loss", "1.5"], ["--loss", "1.5", "[0, 1)"])):
+                        (["--loss", "1.5"], ["--loss", "1.5", "[0, 1)"]),
+                        (["--agents", "processes", "--launch", "9=ssh x"], ["--launch",
+                                                                            "9=ssh x"]),
+                        (["--launch", "1=env"], ["--launch", "--agents processes"])):
         assert_user_error(trackkit("network", str(f), *args), 2, *names)
 
 

@@ -8,6 +8,9 @@ recorded data.
                      [--agents inprocess|processes]
     trackkit track FILE [--format ais|opensky|detections] [--as-radar] [radar, tracker and
                    input options] [--on-bad skip|stop] [--out DIR]
+    trackkit identify LOG --inputs INPUTS.csv [--filter ekf|ukf|ckf|ls] [--period 1]
+                      [--on-bad skip|stop] [--out DIR]
+    trackkit identify NAME|FILE [--runs N] [--seed S] [--filter ...] [--out DIR]
 
 Exit codes: 0 done; 1 a system error (disk full, a Dask scheduler that does not answer, an
 unexpected failure); 2 bad input (a scenario error, a bad option value, an output directory
@@ -106,9 +109,12 @@ def _load(name_or_path: str) -> Any:
     from trackkit.scenario import load
     from trackkit.scenario.multitarget import is_multitarget, load_multitarget
     from trackkit.scenario.network import is_network, load_network
+    from trackkit.scenario.vessel import is_vessel, load_vessel
 
     if is_network(name_or_path):  # [[agents]]: a seed-004 network (trackkit network)
         return load_network(name_or_path)
+    if is_vessel(name_or_path):  # a [vessel] table: seed 003's identification (identify)
+        return load_vessel(name_or_path)
     if is_multitarget(name_or_path):  # a [scene] table: the multi-target tracker comparison
         return load_multitarget(name_or_path)
     return load(name_or_path)
@@ -120,6 +126,10 @@ def _is_multitarget(scenario: Any) -> bool:
 
 def _is_network(scenario: Any) -> bool:
     return hasattr(scenario, "agents") and hasattr(scenario, "network")
+
+
+def _is_vessel(scenario: Any) -> bool:
+    return hasattr(scenario, "vessel") and hasattr(scenario, "identification")
 
 
 def _dumps(scenario: Any) -> str:
@@ -449,7 +459,8 @@ def list_scenarios() -> None:
         from trackkit.scenario.multitarget import bundled_multitarget
         from trackkit.scenario.network import bundled_network
 
-        scenarios = {**_bundled(), **bundled_multitarget(), **bundled_network()}
+        scenarios = {**_bundled(), **bundled_multitarget(), **bundled_network(),
+                     **_bundled_vessel()}
         default = _default_name()
         table = Table("scenario", "description", title="bundled scenarios",
                       title_justify="left")
@@ -517,6 +528,9 @@ def run(
         if _is_network(sc):
             raise ValueError(f"{scenario} is a network scenario (seed 004); run it with "
                              f"`trackkit network {scenario}`")
+        if _is_vessel(sc):
+            raise ValueError(f"{scenario} is a vessel scenario (seed 003); run it with "
+                             f"`trackkit identify {scenario}`")
         target, label = _output_dir(out, str(sc.name))
         total = runs or getattr(getattr(sc, "run", None), "runs", None) or 1
         with OutputDir(target, label) as where:
@@ -626,6 +640,15 @@ def network(
         "--host", help="Address the environment binds for the agents' ZeroMQ connections "
         "(with --agents processes; 0.0.0.0 to accept agents from other machines).")]
         = "127.0.0.1",
+    advertise: Annotated[str | None, typer.Option(
+        "--advertise", help="This machine's address as the agents' machines see it (with "
+        "--host 0.0.0.0 and --launch).")] = None,
+    launch: Annotated[list[str] | None, typer.Option(
+        "--launch", help="AGENT=COMMAND: start agent AGENT (from 1) through COMMAND, e.g. "
+        "'2=ssh boat2', on a machine with trackkit installed (may be repeated).")] = None,
+    remote_python: Annotated[str, typer.Option(
+        "--remote-python", help="The Python with trackkit installed on the --launch "
+        "machines.")] = "python3",
 ) -> None:
     """Run a network scenario (seed 004: agents with bearing sensors that track targets
     together): Monte Carlo runs of the agents beside the centralised reference and the
@@ -653,9 +676,12 @@ def network(
                              "courses; expected a scenario with settings.steering = true "
                              "and no --straight")
         outages = _outages(kill or [], len(sc.agents), sc.network.duration_s)
-        if agents != AgentsMode.processes and (delay != 0.0 or outages or host != "127.0.0.1"):
-            raise ValueError("--delay, --kill and --host act on agents in their own "
-                             "processes; expected --agents processes with them")
+        launchers = _launchers(launch or [], len(sc.agents))
+        if agents != AgentsMode.processes and (delay != 0.0 or outages or launchers
+                                               or host != "127.0.0.1" or advertise):
+            raise ValueError("--delay, --kill, --host, --advertise and --launch act on "
+                             "agents in their own processes; expected --agents processes "
+                             "with them")
         if loss is not None and not 0.0 <= loss < 1.0:
             raise ValueError(f"--loss {loss!r}; expected a probability in [0, 1)")
         if not (math.isfinite(delay) and delay >= 0.0):
@@ -669,7 +695,8 @@ def network(
             _run_network(sc, where.path, runs=runs, seed=seed,
                          steering=False if straight else None, agents=str(agents.value),
                          compare_straight=compare_straight, loss=loss, delay=delay,
-                         outages=outages, host=host)
+                         outages=outages, host=host, advertise=advertise,
+                         launch=launchers or None, remote_python=remote_python)
             state.interrupted = "interrupted"
 
 
@@ -693,6 +720,26 @@ def _outages(specs: list[str], n_agents: int, duration: float
             raise ValueError(f"--kill {spec!r}: kill at {k:g} s, restart at {r}; expected "
                              f"0 <= T < {duration:g} s and RESTART > T")
         out.append((a - 1, k, r))
+    return out
+
+
+def _launchers(specs: list[str], n_agents: int) -> dict[int, list[str]]:
+    """``--launch AGENT=COMMAND`` (agent from 1) as ``run_network_processes``' launch
+    prefixes (agent from 0)."""
+    import shlex
+
+    out: dict[int, list[str]] = {}
+    for spec in specs:
+        agent, _, command = spec.partition("=")
+        try:
+            a = int(agent)
+        except ValueError:
+            a = 0
+        cmd = shlex.split(command)
+        if not (1 <= a <= n_agents and cmd):
+            raise ValueError(f"--launch {spec!r}; expected AGENT=COMMAND with AGENT from 1 "
+                             f"to {n_agents}, e.g. '2=ssh boat2'")
+        out[a - 1] = cmd
     return out
 
 
@@ -1283,6 +1330,341 @@ def _print_track_summary(read: Any, job: SimpleNamespace, paths: dict[str, Path]
                        style="green"), soft_wrap=True)
     if html is not None:
         console.print(Text(f"report: {html}", style="green"), soft_wrap=True)
+
+
+# --- trackkit identify: seed 003's vessel model from a GPS/INS log or a vessel scenario -------
+
+
+class VesselFilter(StrEnum):
+    ekf = "ekf"
+    ukf = "ukf"
+    ckf = "ckf"
+    ls = "ls"
+
+
+#: the NMEA log suffixes; any other log is the CSV form (.csv)
+NMEA_SUFFIXES = (".nmea", ".log", ".txt")
+#: a log shorter than this cannot show converged coefficients (the paper: 500 s)
+_CONVERGED_AFTER_S = 500.0
+
+
+def _bundled_vessel() -> dict[str, str]:
+    from trackkit.scenario.vessel import bundled_vessel
+
+    return bundled_vessel()
+
+
+def _identify_kind(what: str) -> str:
+    """``"log"`` or ``"scenario"`` for ``trackkit identify WHAT``; a ValueError in words when
+    it is neither."""
+    from trackkit.scenario.vessel import is_vessel
+
+    p = Path(what)
+    suffix = p.suffix.lower()
+    if suffix in (*NMEA_SUFFIXES, ".csv"):
+        if not p.is_file():
+            why = "is not a file" if p.exists() else "no such file"
+            raise ValueError(f"{what}: {why}; expected a GPS/INS log (NMEA 0183 "
+                             f"{', '.join(NMEA_SUFFIXES)} or CSV .csv)")
+        return "log"
+    if suffix == ".toml" or p.exists():
+        if suffix != ".toml" and p.is_file():
+            raise ValueError(f"{what}: unknown log type {suffix or '(no suffix)'!r}; expected "
+                             f"an NMEA 0183 log ({', '.join(NMEA_SUFFIXES)}), the CSV form "
+                             "(.csv) or a vessel scenario (.toml)")
+        if p.is_file() and not is_vessel(what):
+            raise ValueError(f"{what}: not a vessel scenario (it has no [vessel] table); see "
+                             "`trackkit show vessel-turning` for a vessel scenario's fields")
+        return "scenario"  # (a missing or unreadable .toml: load_vessel says so)
+    if is_vessel(what):
+        return "scenario"
+    others = {**_bundled(), **_bundled_multitarget()}
+    from trackkit.scenario.network import bundled_network
+
+    if what in others or what in bundled_network():
+        raise ValueError(f"{what!r} is not a vessel scenario; `trackkit identify` takes a "
+                         f"GPS/INS log or one of {sorted(_bundled_vessel())}")
+    raise ValueError(f"{what}: no such log file and no bundled vessel scenario of that name; "
+                     f"expected a GPS/INS log ({', '.join(NMEA_SUFFIXES)}, .csv) with "
+                     f"--inputs, a vessel scenario .toml or one of {sorted(_bundled_vessel())}")
+
+
+@app.command()
+def identify(
+    what: Annotated[str, typer.Argument(
+        metavar="LOG|SCENARIO",
+        help="A GPS/INS log, NMEA 0183 (.nmea, .log, .txt: GGA RMC VTG HDT THS ROT) or the "
+        "CSV form (.csv: time, lat, lon, sog_kn, cog_deg, heading_deg, rot_deg_min), with "
+        "--inputs; or a bundled vessel scenario (vessel-zigzag-20, vessel-turning, "
+        "vessel-identify; see trackkit list) or a vessel scenario TOML file.")],
+    inputs: Annotated[Path | None, typer.Option(
+        "--inputs", "-i", help="The log's measured inputs, CSV with columns time, "
+        "nozzle_deg (positive to starboard), rpm; they must cover the log's time span.",
+        show_default="required with a log")] = None,
+    filt: Annotated[VesselFilter | None, typer.Option(
+        "--filter", help="Identifier: augmented EKF, UKF or CKF, or batch least squares "
+        "(ls).", show_default="ekf; a scenario: its identification.filters")] = None,
+    period: Annotated[float | None, typer.Option(
+        "--period", callback=_number(0, 60), help="Grid period T of the pre-processed u, v, "
+        "r (s), for a log.", show_default="1")] = None,
+    runs: Annotated[int | None, typer.Option(
+        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs (a scenario).",
+        show_default="the scenario's run.runs")] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", "-s", callback=_at_least(0), help="Master seed (a scenario).",
+        show_default="the scenario's run.seed")] = None,
+    on_bad: Annotated[OnBad, typer.Option(
+        "--on-bad", help="Skip bad log and input lines (counted and named by line) or stop "
+        "at the first.")] = OnBad.skip,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output directory (created if missing).",
+        show_default="trackkit-out/identify-STEM, or trackkit-out/SCENARIO")] = None,
+) -> None:
+    """Identify seed 003's 16-coefficient manoeuvring model (augmented EKF on u, v, r): from
+    a recorded GPS/INS log and its inputs, or by running a vessel scenario (simulated sea
+    trials, Monte Carlo). Prints the coefficients with their standard deviations and writes
+    results.json, convergence, track, heading and trial plots and report.html; the
+    identified model's 20 deg turn and 10/10 and 20/20 zig-zags with the IMO table."""
+    with _user_errors() as state:
+        kind = _identify_kind(what)
+        if kind == "scenario":
+            from trackkit.scenario.vessel import load_vessel
+
+            given = [o for o, v in (("--inputs", inputs), ("--period", period)) if v is not None]
+            if given:
+                raise ValueError(f"{' and '.join(given)}: for a GPS/INS log; {what} is a "
+                                 "vessel scenario, which simulates its sensors (its period is "
+                                 "identification.period_s)")
+            sc = load_vessel(what)
+            target, label = _output_dir(out, str(sc.name))
+            with OutputDir(target, label) as where:
+                state.interrupted = f"interrupted; nothing was written to {target}"
+                if where.note:
+                    _stderr().print(Text(f"note: {where.note}", style="yellow"),
+                                    soft_wrap=True)
+                _run_vessel(sc, where.path, runs=runs, seed=seed,
+                            filters=None if filt is None else [filt.value])
+                state.interrupted = "interrupted"
+            return
+        given = [o for o, v in (("--runs", runs), ("--seed", seed)) if v is not None]
+        if given:
+            raise ValueError(f"{' and '.join(given)}: for a vessel scenario's Monte Carlo; "
+                             f"{what} is a recorded log")
+        if inputs is None:
+            raise ValueError(f"{what}: a log needs its inputs: --inputs FILE.csv with columns "
+                             "time, nozzle_deg, rpm")
+        if not inputs.is_file():
+            why = "is not a file" if inputs.exists() else "no such file"
+            raise ValueError(f"--inputs {inputs}: {why}; expected a CSV with columns time, "
+                             "nozzle_deg, rpm")
+        log = Path(what)
+        target, label = _output_dir(out, f"identify-{log.stem}")
+        with OutputDir(target, label) as where:
+            state.interrupted = f"interrupted; nothing was written to {target}"
+            if where.note:
+                _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
+            _identify_log(log, inputs, where.path, filt=(filt or VesselFilter.ekf).value,
+                          period=1.0 if period is None else period, on_bad=on_bad.value)
+            state.interrupted = "interrupted"
+
+
+def _stop_hint(err: ValueError, columns: str) -> ValueError:
+    """A reader's message in the command's words (its options, not the function's)."""
+    return ValueError(str(err).replace(
+        "[on_bad='stop'; pass on_bad='skip' to skip bad records]",
+        "[--on-bad stop; pass --on-bad skip to skip bad records]").replace(
+        " (pass a column mapping)", f"; expected the columns {columns}"))
+
+
+def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: float,
+                  on_bad: str) -> None:
+    """Read, pre-process and identify a recorded log; write its report; print the
+    coefficients, the standard trials and the IMO table."""
+    from trackkit.eval.vessel_mc import identify_recorded
+    from trackkit.io.navigation import INPUT_COLUMNS, preprocess, read_inputs_csv
+    from trackkit.io.nmea import NAV_CSV_COLUMNS, read_nav_csv, read_nmea
+    from trackkit.report.vessel_report import write_recorded_report
+
+    console = Console()
+    notes: list[str] = []
+    with _stderr().status(f"reading {log}"):
+        try:
+            if log.suffix.lower() == ".csv":
+                nav, read = read_nav_csv(log, on_bad)
+            else:
+                nav, read = read_nmea(log, on_bad)
+        except ValueError as err:
+            raise _stop_hint(err, ", ".join(NAV_CSV_COLUMNS)) from None
+        fmt = "iso" if nav.epoch is not None else "seconds"  # a log without a date: both
+        try:
+            ins, iread = read_inputs_csv(inputs, on_bad, epoch=nav.epoch, time_format=fmt)
+        except ValueError as err:
+            raise _stop_hint(err, ", ".join(INPUT_COLUMNS)) from None
+    console.print(Text(read.summary()), soft_wrap=True)
+    console.print(Text(iread.summary()), soft_wrap=True)
+    if nav.unsupported:
+        console.print(Text("  sentence types not used: " + ", ".join(
+            f"{k} {v}" for k, v in sorted(nav.unsupported.items()))), soft_wrap=True)
+    if ins.t.size < 2:
+        raise ValueError(f"--inputs {inputs}: {ins.t.size} usable records "
+                         f"({iread.n_skipped} skipped); expected nozzle angle and rpm over "
+                         "the log's time span")
+    rate_source = "gyro"
+    if nav.t_rate.size < 2 and nav.t_heading.size >= 2:  # no ROT: differentiate the heading
+        rate_source = "heading"
+        notes.append("the log has no rate of turn (ROT); the yaw rate is the differenced INS "
+                     "heading")
+    try:
+        m = preprocess(nav, T=period, rate_source=rate_source)
+    except ValueError as err:
+        raise ValueError(f"{log}: {err}") from None
+    if m.gaps:
+        notes.append(f"{len(m.gaps)} gap(s) in the log's streams ("
+                     + ", ".join(f"{g.stream} {g.start:.1f}-{g.end:.1f} s" for g in m.gaps[:5])
+                     + ("..." if len(m.gaps) > 5 else "") + "): no measurement there, the "
+                     "filter predicts across")
+    with _stderr().status(f"identifying with {filt}"):
+        rec = identify_recorded(m, ins, filter=filt, inputs_name=f"--inputs {inputs}")
+    span = rec.t[-1] - rec.t[0]
+    if span < _CONVERGED_AFTER_S:
+        notes.append(f"the log is {span:.0f} s long; the paper's coefficients converged only "
+                     f"after {_CONVERGED_AFTER_S:.0f} s: expect wide standard deviations")
+    if not rec.stable:
+        notes.append(f"the identified model is unstable in a straight line at the log's "
+                     f"{rec.speed / 1852.0 * 3600.0:.1f} kn and {rec.rpm:.0f} rpm (an eigenvalue "
+                     "of df/dx with a positive real part): its simulated trials diverge and "
+                     "their metrics are not meaningful")
+    if rec.dropped:
+        notes.append(f"the first {rec.dropped} grid sample(s) lack a measurement and were "
+                     "left out")
+    with _stderr().status("writing the report"):
+        paths = write_recorded_report(rec, out, title=log.name, notes=notes, log_read=read,
+                                      inputs_read=iread)
+    _print_recorded_summary(paths, log, notes)
+
+
+def _print_recorded_summary(paths: dict[str, Path], log: Path, notes: list[str]) -> None:
+    doc = json.loads(paths["results"].read_text(encoding="utf-8"))
+    console = Console()
+    limit = 100 * doc["rel_sd_limit"]
+    table = Table("coefficient", "value", "std", "relative std", "identified",
+                  title=f"{log.name}: {doc['filter']}, {doc['samples']} samples of "
+                  f"{doc['period_s']:g} s (prime units: L = 19.6 m, U0 = 18 kn, n0 = 2000 rpm)",
+                  title_justify="left")
+    for name, c in doc["coefficients"].items():
+        rel = "-" if c["rel_std"] is None else f"{100 * c['rel_std']:.0f}%"
+        flag = (Text("yes") if c["identified"]
+                else Text(f"no: std > {limit:.0f}% of the value", style="yellow"))
+        table.add_row(name, _signed4(c["value"]), _signed4(c["std"]).lstrip("+"), rel, flag)
+    console.print(table)
+    n_id = doc["identified_count"]
+    console.print(Text(f"{16 - n_id} of 16 coefficients are not identified by this log "
+                       f"(standard deviation above {limit:.0f}% of the value)",
+                       style="yellow" if n_id < 16 else ""), soft_wrap=True)
+    _print_trials(doc["model_trials"])
+    for note in notes:
+        console.print(Text(f"note: {note}", style="yellow"), soft_wrap=True)
+    console.print(Text(f"wrote {len(paths)} files to {paths['results'].parent}",
+                       style="green"), soft_wrap=True)
+    console.print(Text(f"report: {paths['html']}", style="green"), soft_wrap=True)
+
+
+def _signed4(v: float | None) -> str:
+    return "-" if v is None else f"{v:+.4f}"
+
+
+def _print_trials(mt: dict) -> None:
+    """The standard trials' metrics and the IMO table of results.json's ``model_trials``."""
+    from rich.markup import escape
+
+    from trackkit.report.vessel_report import imo_rows
+
+    truth = "truth" in mt
+    console = Console()
+    kn = mt["speed_mps"] * 3600.0 / 1852.0
+    turn, z10, z20 = (mt["identified_run0"][k] for k in ("turn", "zigzag10", "zigzag20"))
+
+    def f(v: float | None, spec: str, scale: float = 1.0) -> str:
+        return "-" if v is None else format(v * scale, spec)
+
+    deg = 180.0 / math.pi
+    console.print(Text(
+        f"identified model at {kn:.1f} kn, {mt['rpm']:.0f} rpm: 20 deg turn D/L "
+        f"{f(turn['diameter_to_length'], '.2f')} (steady diameter "
+        f"{f(turn['steady_diameter_m'], '.0f')} m, advance {f(turn['advance_m'], '.0f')} m, "
+        f"tactical diameter {f(turn['tactical_diameter_m'], '.0f')} m); 10/10 overshoots "
+        f"{f(z10['first_overshoot_rad'], '.1f', deg)} and "
+        f"{f(z10['second_overshoot_rad'], '.1f', deg)} deg; 20/20 first overshoot "
+        f"{f(z20['first_overshoot_rad'], '.1f', deg)} deg"), soft_wrap=True)
+    head = ["criterion", "identified" + (" (run 0)" if truth else "")]
+    head += (["truth", "runs passing"] if truth else []) + ["limit", "source"]
+    table = Table(*(escape(h) for h in head), title="IMO MSC.137(76) (for reference only "
+                  "below 100 m) and the paper's 2 <= D/L <= 7", title_justify="left")
+    for row in imo_rows(mt["imo"], truth):
+        table.add_row(*(escape(c) for c in row))
+    console.print(table)
+
+
+def _run_vessel(sc: Any, out: Path, **kwargs: Any) -> None:
+    """A vessel scenario's Monte Carlo (``eval.vessel_mc.run_vessel``), its report written
+    into ``out`` and a summary printed."""
+    from trackkit.eval.vessel_mc import run_vessel
+    from trackkit.report.vessel_report import write_vessel_report
+
+    runs = kwargs.get("runs") or sc.run.runs
+    with _stderr().status(f"{sc.name}: simulating and identifying, {runs} runs"):
+        result = run_vessel(sc, **kwargs)
+        _deliver_interrupt()
+    with _stderr().status("writing the report"):
+        paths = write_vessel_report(result, sc, out)
+    _print_vessel_summary(paths, sc.notes)
+
+
+def _print_vessel_summary(paths: dict[str, Path], notes: list[str]) -> None:
+    from rich.markup import escape
+
+    doc = json.loads(paths["results"].read_text(encoding="utf-8"))
+    console = Console()
+    shown = doc["shown_filter"]
+    names = list(doc["filters"])
+    truth = doc["truth"]["coefficients"]
+    f0 = doc["filters"][shown]["coefficients_run0"]
+    head = ["coefficient", "truth", f"{shown} run 0", "std"]
+    head += [f"{n} median error" for n in names]
+    table = Table(*head, title=f"{doc['scenario']}: {doc['runs']} runs, seed {doc['seed']}, "
+                  f"identified from the {doc['data']} ({doc['samples']} samples of "
+                  f"{doc['period_s']:g} s)", title_justify="left")
+    for k, t in truth.items():
+        errs = [doc["filters"][n]["rel_error_median"][k] for n in names]
+        table.add_row(k, f"{t:+.3f}", f"{f0[k]['value']:+.4f}", f"{f0[k]['std']:.4f}",
+                      *("-" if e is None else f"{100 * e:.1f}%" for e in errs))
+    console.print(table)
+    lo, hi = doc["nees_band"]
+    per = Table("filter", "NEES median", escape(f"NEES in [{lo:.1f}, {hi:.1f}]"),
+                "filtered u / v / r RMSE over the measurement's",
+                title="per filter (medians over runs)", title_justify="left")
+    for n, f in doc["filters"].items():
+        r = f["body_rmse_over_noise_median"]
+        per.add_row(n, f"{f['nees_median']:.1f}", f"{100 * f['nees_inside_fraction']:.0f}%",
+                    "-" if r[0] is None else f"{r[0]:.2f} / {r[1]:.2f} / {r[2]:.2f}")
+    console.print(per)
+    tr = doc["trial"]
+    if tr is not None:
+        def m(v: float | None) -> str:
+            return "-" if v is None else f"{v:.2f} m"
+
+        console.print(Text(
+            f"{tr['kind']} trial, {tr['duration_s']:g} s (medians over runs): raw GPS "
+            f"{m(tr['gps_rmse_median_m'])} RMS from the truth, filtered track "
+            f"{m(tr['filtered_rmse_median_m'])}; the identified model driven by the inputs "
+            f"{m(tr['model_rmse_median_m'])} (largest {m(tr['model_max_error_median_m'])})"),
+            soft_wrap=True)
+    _print_trials(doc["model_trials"])
+    for note in notes:
+        console.print(Text(f"note: {note}", style="yellow"), soft_wrap=True)
+    console.print(Text(f"wrote {len(paths)} files to {paths['results'].parent}",
+                       style="green"), soft_wrap=True)
+    console.print(Text(f"report: {paths['html']}", style="green"), soft_wrap=True)
 
 
 # --- the entry point --------------------------------------------------------------------------
