@@ -49,7 +49,7 @@ from trackkit.report.files import (
     write_atomically,
 )
 from trackkit.report.html import _CSS, notes_and_figures
-from trackkit.report.plots import _distance_scale, _save
+from trackkit.report.plots import _distance_scale, _save, finish_gospa_panels, gospa_panels
 
 __all__ = ["NETWORK_FILES", "network_results_document", "network_timings_document",
            "paths_figure", "errors_figure", "gospa_figure", "courses_figure",
@@ -363,8 +363,8 @@ def errors_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
 def gospa_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
     """Mean GOSPA against time per agent (and the centralised reference), and the mean
     number of confirmed tracks against the number of targets."""
-    fig = Figure(figsize=(8.0, 6.5), layout="constrained")
-    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    fig, top, bottom = gospa_panels(f"{scenario.name}: GOSPA (c = {mc.c:g} m, p = 2, "
+                                    f"alpha = 2), mean of {mc.runs} runs")
     t = mc.time
     for a in range(mc.n_agents):
         top.plot(t, mc.gospa[:, a].mean(0), color=f"C{a}", lw=1.2, label=f"agent {a + 1}")
@@ -373,16 +373,7 @@ def gospa_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
         top.plot(t, mc.central_gospa.mean(axis=(0, 1)), color="0.3", ls="--", lw=1.1,
                  label="centralised")
     bottom.axhline(mc.n_targets, color="black", ls="--", lw=1.0, label="targets")
-    top.set_ylabel("GOSPA [m]")
-    top.set_ylim(bottom=0)
-    top.set_title(f"{scenario.name}: GOSPA (c = {mc.c:g} m, p = 2, alpha = 2), mean of "
-                  f"{mc.runs} runs", fontsize="medium")
-    bottom.set_ylabel("confirmed tracks")
-    bottom.set_xlabel("time [s]")
-    bottom.set_ylim(bottom=0)
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize="small")
+    finish_gospa_panels(top, bottom)
     return fig
 
 

@@ -10,6 +10,7 @@ pyplot state and no global backend switch (safe in worker threads, CI and notebo
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -535,3 +536,25 @@ def make_plots(result: MonteCarloResult, out_dir: str | Path) -> dict[str, Path]
         if path is not None:
             written[name] = path
     return written
+
+
+def gospa_panels(title: str) -> tuple[Figure, Any, Any]:
+    """The GOSPA figure of the tracking and network reports: GOSPA against time (top, with
+    ``title``) over the number of confirmed tracks (bottom). Draw, then
+    :func:`finish_gospa_panels`."""
+    fig = Figure(figsize=(8.0, 6.5), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    top.set_title(title, fontsize="medium")
+    return fig, top, bottom
+
+
+def finish_gospa_panels(top: Any, bottom: Any) -> None:
+    top.set_ylabel("GOSPA [m]")
+    top.set_ylim(bottom=0)
+    bottom.set_ylabel("confirmed tracks")
+    bottom.set_xlabel("time [s]")
+    bottom.set_ylim(bottom=0)
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize="small")
+

@@ -51,7 +51,7 @@ from trackkit.report.files import (
 )
 from trackkit.report.glossary import _code_spans
 from trackkit.report.html import _CSS, notes_and_figures
-from trackkit.report.plots import _distance_scale, _save
+from trackkit.report.plots import _distance_scale, _save, finish_gospa_panels, gospa_panels
 from trackkit.scenario.multitarget import MultiTargetScenario, build_scene
 
 __all__ = [
@@ -397,8 +397,8 @@ def gospa_figure(result: TrackingResult, scenario: MultiTargetScenario,
     """Mean GOSPA against time per tracker (top) and the mean number of confirmed tracks
     against the number of true targets (bottom)."""
     t = np.asarray(result.times, dtype=float)
-    fig = Figure(figsize=(8.0, 6.5), layout="constrained")
-    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    fig, top, bottom = gospa_panels(f"{scenario.name}: GOSPA (c = {result.c:g} m, p = 2, "
+                                    f"alpha = 2), mean of {result.runs} runs")
     for i, (name, tr) in enumerate(result.trackers.items()):
         top.plot(t, tr.gospa, color=f"C{i}", lw=1.3,
                  label=f"{name} (mean {float(np.mean(tr.gospa)):.1f} m)")
@@ -406,16 +406,7 @@ def gospa_figure(result: TrackingResult, scenario: MultiTargetScenario,
     if truths is not None:
         bottom.step(t, truths, where="post", color="black", ls="--", lw=1.0,
                     label="true targets")
-    top.set_ylabel("GOSPA [m]")
-    top.set_ylim(bottom=0)
-    top.set_title(f"{scenario.name}: GOSPA (c = {result.c:g} m, p = 2, alpha = 2), mean of "
-                  f"{result.runs} runs", fontsize="medium")
-    bottom.set_ylabel("confirmed tracks")
-    bottom.set_xlabel("time [s]")
-    bottom.set_ylim(bottom=0)
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize="small")
+    finish_gospa_panels(top, bottom)
     return fig
 
 
