@@ -237,6 +237,9 @@ def test_monte_carlo_shapes_and_reference(tiny_mc):
     # the bound falls as bearings accumulate
     b = mc.bound_over_time("pos", pooled=True)
     assert np.all(b[:, -1] < b[:, 0])
+    # the range bound is the position bound's projection on the line of sight: at most the
+    # whole position bound
+    assert np.all((mc.bound_rng > 0) & (mc.bound_rng <= mc.bound_pos * (1 + 1e-12)))
 
 
 def test_report_keys_and_byte_identical_results(tiny_mc, tmp_path):

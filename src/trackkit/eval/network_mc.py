@@ -72,7 +72,9 @@ class RunScores:
 
     ``count (A, E)``, ``gospa (A, E)``, ``err[kind] (A, E, Nt)`` for kind in pos, vel, rng;
     ``central_*`` the same for the centralised reference beside each agent (None without
-    it); ``bound_pos``, ``bound_vel`` ``(A, E, Nt)`` the centralised PCRLB;
+    it); ``bound_pos``, ``bound_vel``, ``bound_rng`` ``(A, E, Nt)`` the centralised PCRLB
+    (``bound_rng``: on the range from the agent, ``sqrt(e^T J^-1 e)``, e the unit line of
+    sight in the position block);
     ``held_final (A,)`` whether the agent ends with exactly one confirmed track per target,
     each assigned; ``final_range (A, Nt)`` the true agent-target distance at the agent's
     last execution; ``spacing (2,)`` the run's least and greatest agent-pair distance as a
@@ -90,6 +92,7 @@ class RunScores:
     central_held_final: bool | None
     bound_pos: Array
     bound_vel: Array
+    bound_rng: Array
     held_final: NDArray[np.bool_]
     final_range: Array
     spacing: Array
@@ -183,17 +186,24 @@ def score_run(result: NetworkResult, sigma: Array, meas_range: Array, prior_cov:
     sig = np.broadcast_to(sigma[:, None], (A, E))
     b = network_pcrlb(prior_cov, t.reshape(A * E), pos.reshape(A * E, 2),
                       truth.reshape(A * E, Nt, 4), sig.reshape(A * E),
-                      valid.reshape(A * E, Nt), q=q)
+                      valid.reshape(A * E, Nt), q=q, history=True)
     back = np.empty(A * E, np.intp)
     back[b.order] = np.arange(A * E)  # sorted position of every input event
     bound_pos = b.position_rmse[back].reshape(A, E, Nt)
     bound_vel = b.velocity_rmse[back].reshape(A, E, Nt)
+    # the range from the agent: |p_hat - s| - |p - s| ~ u^T (p_hat - p), u the unit line of
+    # sight, so its bound is sqrt(e^T J^-1 e) with e = [u, 0, 0]
+    u = truth[..., :2] - pos[..., None, :]
+    u /= np.hypot(u[..., 0], u[..., 1])[..., None]
+    e = np.concatenate([u, np.zeros_like(u)], -1).reshape(A * E, Nt, 4, 1)
+    J = b.history[back]
+    bound_rng = np.sqrt((e * np.linalg.solve(J, e)).sum((-2, -1))).reshape(A, E, Nt)
     final_range = np.hypot(truth[:, -1, :, 0] - pos[:, -1, None, 0],
                            truth[:, -1, :, 1] - pos[:, -1, None, 1])
     return RunScores(count, gospa, err, c_count, c_gospa, c_err, c_held, bound_pos, bound_vel,
-                     held, final_range, np.asarray(result.spacing, float), int(result.sent),
-                     int(result.delivered), int(result.lost), int(result.late),
-                     float(result.seconds))
+                     bound_rng, held, final_range, np.asarray(result.spacing, float),
+                     int(result.sent), int(result.delivered), int(result.lost),
+                     int(result.late), float(result.seconds))
 
 
 def _rms(x: Array, axis) -> Array:
@@ -212,7 +222,7 @@ class NetworkMonteCarlo:
     ``time (E,)``: the slot times ``e P + jitter / 2`` (s). Arrays of :class:`RunScores`
     with a leading runs axis: ``count``, ``gospa`` ``(R, A, E)``; ``err[kind]``
     ``(R, A, E, Nt)``; ``central_*`` likewise (None without the reference);
-    ``bound_pos``, ``bound_vel``; ``held_final (R, A)``, ``central_held_final (R,)``;
+    ``bound_pos``, ``bound_vel``, ``bound_rng``; ``held_final (R, A)``, ``central_held_final (R,)``;
     ``final_range (R, A, Nt)`` the true agent-target distance at the end; ``spacing (R, 2)``
     each run's least and greatest agent-pair distance over the communication range;
     ``sent``, ``delivered``, ``lost``, ``late`` ``(R,)``; ``recovered (R, K)`` per outage
@@ -242,6 +252,7 @@ class NetworkMonteCarlo:
     central_held_final: NDArray[np.bool_] | None
     bound_pos: Array
     bound_vel: Array
+    bound_rng: Array
     held_final: NDArray[np.bool_]
     final_range: Array
     spacing: Array
@@ -292,16 +303,18 @@ class NetworkMonteCarlo:
         e = self.central_err[kind] if central else self.err[kind]
         return _rms(e, (0, 3) if pooled else 0)
 
-    def bound_over_time(self, kind: Literal["pos", "vel"], pooled: bool = False) -> Array:
+    def bound_over_time(self, kind: Kind, pooled: bool = False) -> Array:
         """The PCRLB, ``sqrt(mean over runs of bound^2)``, ``(A, E, Nt)`` or pooled over
         targets ``(A, E)``."""
-        b = self.bound_pos if kind == "pos" else self.bound_vel
-        return _rms(b, (0, 3) if pooled else 0)
+        return _rms(self._bound(kind), (0, 3) if pooled else 0)
 
     def held_over_time(self, central: bool = False) -> Array:
         """Fraction of runs where each target has a track, ``(A, E, Nt)``."""
         e = self.central_err["pos"] if central else self.err["pos"]
         return (~np.isnan(e)).mean(0)
+
+    def _bound(self, kind: Kind) -> Array:
+        return {"pos": self.bound_pos, "vel": self.bound_vel, "rng": self.bound_rng}[kind]
 
     # -- windows ----------------------------------------------------------------------------
 
@@ -312,11 +325,11 @@ class NetworkMonteCarlo:
         e = (self.central_err[kind] if central else self.err[kind])[:, :, self.window(which)]
         return _rms(e, (0, 2, 3) if pooled else (0, 2))
 
-    def window_bound(self, kind: Literal["pos", "vel"], which: Literal["first", "last", "all"],
+    def window_bound(self, kind: Kind, which: Literal["first", "last", "all"],
                      pooled: bool = False) -> Array:
         """The PCRLB's RMS over the runs and the window's executions, ``(A, Nt)`` or
         ``(A,)``."""
-        b = (self.bound_pos if kind == "pos" else self.bound_vel)[:, :, self.window(which)]
+        b = self._bound(kind)[:, :, self.window(which)]
         return _rms(b, (0, 2, 3) if pooled else (0, 2))
 
 
@@ -418,6 +431,7 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
         central_held_final=(np.array([s.central_held_final for s in per_run])
                             if have_c else None),
         bound_pos=stack(lambda s: s.bound_pos), bound_vel=stack(lambda s: s.bound_vel),
+        bound_rng=stack(lambda s: s.bound_rng),
         held_final=stack(lambda s: s.held_final),
         final_range=stack(lambda s: s.final_range), spacing=stack(lambda s: s.spacing),
         sent=np.array([s.sent for s in per_run], np.int64),

@@ -83,6 +83,8 @@ AGENT_UNITS: dict[str, str] = {
     "pcrlb_pos_last": "m, per target: sqrt(mean over runs and the last window's executions of "
                       "the centralised PCRLB^2)",
     "pcrlb_vel_last": "m/s, per target, likewise",
+    "pcrlb_range_last": "m, per target, likewise, on the range from this agent "
+                        "(sqrt(e^T J^-1 e), e the unit line of sight)",
     "ratio_to_central_pos_last": "1, per target: rmse_pos_last / central_rmse_pos_last",
     "ratio_to_pcrlb_pos_last": "1, per target: rmse_pos_last / pcrlb_pos_last",
 }
@@ -108,7 +110,8 @@ TOP_UNITS: dict[str, Any] = {
                "whole_run: the pooled comparison over the whole run",
     "series": "time_s: s (slot times e P + jitter / 2); per agent over executions: "
               "confirmed_mean tracks, gospa_mean m, rmse_pos m, rmse_vel m/s, rmse_range m "
-              "(pooled over targets), central_* likewise, pcrlb_pos m, pcrlb_vel m/s",
+              "(pooled over targets), central_* likewise, pcrlb_pos m, pcrlb_vel m/s, "
+              "pcrlb_range m",
 }
 
 
@@ -148,7 +151,7 @@ def _agent_entries(mc: NetworkMonteCarlo) -> list[dict[str, Any]]:
     held = (~np.isnan(mc.err["pos"])).mean(axis=(0, 2))  # (A, Nt)
     first_all = mc.window_rmse("pos", "first", pooled=True)
     last_all = mc.window_rmse("pos", "last", pooled=True)
-    bound = {k: mc.window_bound(k, "last") for k in ("pos", "vel")}
+    bound = {k: mc.window_bound(k, "last") for k in ("pos", "vel", "rng")}
     nan = np.full(last["pos"].shape, np.nan)
     central = ({k: mc.window_rmse(k, "last", central=True) for k in ("pos", "vel", "rng")}
                if mc.has_central else {"pos": nan, "vel": nan, "rng": nan})
@@ -170,6 +173,7 @@ def _agent_entries(mc: NetworkMonteCarlo) -> list[dict[str, Any]]:
             "central_rmse_range_last": _list(central["rng"][a]),
             "pcrlb_pos_last": _list(bound["pos"][a]),
             "pcrlb_vel_last": _list(bound["vel"][a]),
+            "pcrlb_range_last": _list(bound["rng"][a]),
             "ratio_to_central_pos_last": _list(_ratio(last["pos"][a], central["pos"][a])),
             "ratio_to_pcrlb_pos_last": _list(_ratio(last["pos"][a], bound["pos"][a])),
         })
@@ -188,6 +192,7 @@ def _series(mc: NetworkMonteCarlo) -> dict[str, Any]:
             "rmse_range": _list(pooled["rng"][a]),
             "pcrlb_pos": _list(mc.bound_over_time("pos", pooled=True)[a]),
             "pcrlb_vel": _list(mc.bound_over_time("vel", pooled=True)[a]),
+            "pcrlb_range": _list(mc.bound_over_time("rng", pooled=True)[a]),
         }
         if mc.has_central:
             s["central_confirmed_mean"] = _list(mc.central_count[:, a].mean(0))
@@ -345,9 +350,8 @@ def errors_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
             if mc.has_central:
                 ax.plot(t, mc.rmse_over_time(kind, central=True, pooled=True)[a], color="0.3",
                         ls="--", lw=1.1, label="centralised")
-            if kind != "rng":
-                ax.plot(t, mc.bound_over_time(kind, pooled=True)[a], color="black", ls=":",
-                        lw=1.1, label="PCRLB (centralised)")
+            ax.plot(t, mc.bound_over_time(kind, pooled=True)[a], color="black", ls=":",
+                    lw=1.1, label="PCRLB (centralised)")
             ax.set_yscale("log")
             ax.set_ylabel(label)
             ax.grid(True, alpha=0.3, which="both")
@@ -446,7 +450,8 @@ def _summary_table(doc: Mapping[str, Any]) -> str:
             ("ratio_to_central_pos_last", "ratio to centralised", ".2f"),
             ("ratio_to_pcrlb_pos_last", "ratio to PCRLB", ".2f"),
             ("rmse_vel_last", "velocity RMSE, last window [m/s]", ".2f"),
-            ("rmse_range_last", "range RMSE, last window [m]", ".0f"))
+            ("rmse_range_last", "range RMSE, last window [m]", ".0f"),
+            ("pcrlb_range_last", "range PCRLB, last window [m]", ".0f"))
     agents = doc["per_agent"]
     head = "".join(f"<th>agent {e['agent']}</th>" for e in agents)
     body = []
