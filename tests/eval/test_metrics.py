@@ -1,5 +1,5 @@
-"""Streamed Monte Carlo metrics: exact chunk merging, RMSE, NEES/NIS consistency, missing
-measurements and the divergence rule."""
+"""Streamed Monte Carlo metrics: chunk merging (batch totals combined exactly), the window of
+steps, RMSE, NEES/NIS consistency, missing measurements and the divergence rule."""
 
 from __future__ import annotations
 
@@ -12,9 +12,10 @@ from hypothesis import strategies as st
 from scipy.stats import chi2
 
 import trackkit as tk
+import trackkit.eval.metrics as metrics_module
 from trackkit.angles import wrap
 from trackkit.eval import MonteCarloMetrics, chi2_bounds, merge_all
-from trackkit.eval.metrics import _LIMBS, _exact_add, _exact_value
+from trackkit.eval.metrics import _LIMBS, _exact_add, _exact_value, _quadratic
 
 GROUPS = {"position": [0, 1], "velocity": [2, 3]}
 
@@ -91,36 +92,79 @@ def _position_independent(truths, ests, innovs):
 
 
 @pytest.mark.portability
-def test_chunked_accumulation_merged_equals_one_shot_exactly():
-    # the exact accumulator alone: the same per-run terms, chunked differently, sum to the
-    # same bits in any merge order (on any CPU: the terms are position-independent)
+def test_merged_chunks_are_the_same_bits_in_any_order_and_combine_batch_totals_exactly():
+    # the accumulator alone: the same per-run terms, in the same chunks, give the same bits in
+    # any merge order and grouping (on any CPU: the terms are position-independent); each
+    # chunk contributes its float64 batch total per step, combined exactly
     data = _position_independent(*run_kf(runs=300, steps=40, seed=11, p_missing=0.2))
     kw = {"groups": {**GROUPS, "course": [4]}, "nees_indices": (0, 1, 2, 3)}
     whole = accumulate(*data, **kw)
-    chunks = [accumulate(*data, rows=slice(a, b), **kw)
-              for a, b in [(0, 97), (97, 130), (130, 300)]]
+    cuts = [(0, 97), (97, 130), (130, 300)]
+    chunks = [accumulate(*data, rows=slice(a, b), **kw) for a, b in cuts]
     merged_orders = [
         merge_all(chunks),
         chunks[2].merge(chunks[0]).merge(chunks[1]),
         chunks[0].merge(chunks[1].merge(chunks[2])),
     ]
+    first = merged_orders[0]
     for merged in merged_orders:
         assert merged.runs == whole.runs == 300
         assert merged.n_steps == whole.n_steps == 40
         for name in whole.names:
-            np.testing.assert_array_equal(merged.total(name), whole.total(name))  # bitwise
+            np.testing.assert_array_equal(merged.total(name), first.total(name))  # bitwise
             np.testing.assert_array_equal(merged.count(name), whole.count(name))
-        assert merged.summary(start=5) == whole.summary(start=5)
+            # other batches, other float64 batch totals: equal to rounding
+            np.testing.assert_allclose(merged.total(name), whole.total(name), rtol=1e-14)
+        assert merged.summary(start=5) == first.summary(start=5)
     # chunks in the natural order also keep the per-run divergence counters in run order
-    np.testing.assert_array_equal(merged_orders[0].diverged(), whole.diverged())
-    np.testing.assert_array_equal(merged_orders[0].run_bad, whole.run_bad)
+    np.testing.assert_array_equal(first.diverged(), whole.diverged())
+    np.testing.assert_array_equal(first.run_bad, whole.run_bad)
 
-    # the exact sums are the correctly rounded sums (math.fsum) of the per-run terms
+    # each step's sum is the correctly rounded exact sum (math.fsum) of the chunks' float64
+    # totals, each np.sum of that chunk's vector of per-run terms
     truths, ests, _ = data
     for k in (0, 17, 39):
         e = truths[k] - ests[k].mean
-        assert whole.total("position")[k] == math.fsum((e[:, :2] ** 2).sum(-1))
-        assert whole.total("course")[k] == math.fsum(e[:, 4] ** 2)
+        pos, course = (e[:, :2] ** 2).sum(-1), e[:, 4] ** 2
+        assert whole.total("position")[k] == np.sum(pos)
+        assert first.total("position")[k] == math.fsum(np.sum(pos[a:b]) for a, b in cuts)
+        assert first.total("course")[k] == math.fsum(np.sum(course[a:b]) for a, b in cuts)
+
+
+@pytest.mark.parametrize("window", [1, 7, 300, 10**5])
+def test_the_window_of_steps_does_not_change_a_bit(monkeypatch, window):
+    # add() evaluates a window of steps at a time; every per-run term is elementwise, so
+    # the window (one step, a few, every step at once) changes no bit of any result
+    data = run_kf(runs=60, steps=30, seed=17, p_missing=0.2)
+    groups = {**GROUPS, "course": course_error}
+    ref = accumulate(*data, groups=groups)
+    monkeypatch.setattr(metrics_module, "WINDOW_ROWS", window)
+    acc = accumulate(*data, groups=groups)
+    for name in ref.names:
+        np.testing.assert_array_equal(acc.total(name), ref.total(name))
+        np.testing.assert_array_equal(acc.count(name), ref.count(name))
+    assert acc.summary(start=3) == ref.summary(start=3)
+    np.testing.assert_array_equal(acc.diverged(), ref.diverged())
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 4, 6])
+def test_quadratic_forms_are_position_independent_and_correct(m):
+    # each row's r^T S^-1 r is the same bits alone or in any batch, and agrees with a solve
+    rng = np.random.default_rng(m)
+    A = rng.standard_normal((50, m, m))
+    S = A @ A.mT + 0.1 * np.eye(m)
+    r = rng.standard_normal((50, m))
+    q, ok = _quadratic(S, r)
+    assert ok.all()
+    for i in (0, 13, 49):
+        qi, _ = _quadratic(S[i : i + 1], r[i : i + 1])
+        assert qi[0] == q[i]
+    np.testing.assert_allclose(q, np.einsum("ri,ri->r", r, np.linalg.solve(S, r[..., None])[
+        ..., 0]), rtol=1e-10)
+    S[7] = -np.eye(m)  # not positive definite: flagged, the others unchanged
+    q2, ok2 = _quadratic(S, r)
+    assert not ok2[7] and ok2.sum() == 49
+    np.testing.assert_array_equal(q2[ok2], q[ok2])
 
 
 def test_merge_of_different_lengths_and_configurations():

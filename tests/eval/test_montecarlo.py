@@ -7,6 +7,7 @@ import copy
 import numpy as np
 import pytest
 
+import trackkit.eval.metrics as metrics_module
 import trackkit.scenario as S
 from trackkit.eval.crlb import pcrlb, rmse_bound
 from trackkit.eval.montecarlo import PROGRESS_STEPS, RunBudgetError, plan_of, run_scenario
@@ -84,6 +85,25 @@ def test_same_numbers_for_any_chunking():
     one = _numbers(run_scenario(s))
     _same(one, _numbers(run_scenario(s, chunk=30)))
     _same(one, _numbers(run_scenario(s, chunk=20)))
+
+
+@pytest.mark.portability
+def test_same_numbers_for_any_chunking_with_many_windows_of_steps(monkeypatch):
+    # each filter's estimates reach the metrics a window of steps at a time; with windows of
+    # 2 steps (a block of 10 runs, 25 run-steps) a block spans 180 windows, whose bounds
+    # depend on the block alone: the chunking still changes no bit, and the windows only
+    # move where a vectorised function rounds an element (the course's arctan2)
+    s = _small("bo-cv", runs=20, block=10)
+    default = _numbers(run_scenario(s))
+    monkeypatch.setattr(metrics_module, "WINDOW_ROWS", 25)
+    one = _numbers(run_scenario(s))
+    _same(one, _numbers(run_scenario(s, chunk=20)))
+    for name, f in one[0]["filters"].items():
+        for key in ("anees", "anis"):
+            assert f[key] == pytest.approx(default[0]["filters"][name][key], rel=1e-12)
+        for g, v in f["rmse"].items():
+            assert v == pytest.approx(default[0]["filters"][name]["rmse"][g], rel=1e-12)
+        assert f["diverged"] == default[0]["filters"][name]["diverged"]
 
 
 @pytest.mark.slow

@@ -9,17 +9,32 @@
   measurement, are not counted), giving the average NIS;
 
 and the counts N_k and chi-square degrees of freedom behind them. Nothing is kept per run and
-step: memory is O(steps) plus three small per-run counters for the divergence rule.
+step beyond a window of a few thousand run-steps: memory is O(steps) plus three small per-run
+counters for the divergence rule.
 
 Consistency bounds: if the filter is consistent, N times the average NEES of N independent
 runs is chi-square with N n degrees of freedom, so the two-sided ``confidence`` interval of the
 average is ``[chi2.ppf(a/2, N n) / N, chi2.ppf(1 - a/2, N n) / N]`` with ``a = 1 - confidence``
 (likewise NIS with the measurement dimension m; see ``chi2_bounds``).
 
-Exact merging: the sums are kept in an exact fixed-point (Kulisch) accumulator, so adding the
-runs in one batch, in chunks, on several workers and in any order gives bit-identical results
-(``a.merge(b)`` of two chunks equals the one-shot accumulation of all their runs), and every
-reported mean is the correctly rounded value of the exact sum.
+Summation, and what is bit-identical. One accumulator takes one fixed batch of runs (in the
+Monte Carlo engine, one block). Within it, the terms of a step are summed in float64 over the
+batch, ``np.sum`` of the batch's vector of terms (numpy's pairwise order, which depends only on
+the batch size), and only these batch totals enter an exact fixed-point (Kulisch)
+accumulator. Merging accumulators adds their exact sums, so merging in any order, in any
+grouping, on any worker gives bit-identical sums, and every reported mean is the correctly
+rounded value of the exact sum of the batch totals. The same runs split into other batches
+give other batch totals, equal to within float64 rounding of a sum (relative 1e-16 times the
+batch size at worst for these non-negative terms): the engine keeps its batches fixed
+(``run.block``), which is why a result is bit-identical for any chunking at one block size.
+
+The terms are evaluated a window of steps at a time (``add`` copies its inputs into the
+window; at most ``WINDOW_ROWS`` run-steps), with one numpy pass per quantity over the
+window instead of one per step. Every per-run term is an elementwise computation (the NEES
+and, for m > 2, the NIS through a Cholesky-Crout factor and a forward substitution written
+out over the batch, ``_quadratic``), so a term's bits do not depend on the window or on the
+run's place in it. Group functions (``groups`` given as callables) are called at ``add``, on
+that step's batch, since they may depend on the step (an observer's position).
 
 Divergence rule (per run). A run is *bad* at a step when its estimate (mean or covariance) is
 not finite, or its NEES exceeds ``nees_threshold`` (default
@@ -29,7 +44,9 @@ orders of magnitude: the track is lost, not merely overconfident), or, when ``di
 set, the error norm of the group ``distance_group`` (default "position") exceeds it. A run has
 *diverged* when it is bad at its last accumulated step or on more than ``max_bad_fraction`` of
 its steps. Runs with a non-finite estimate are left out of the RMSE and NEES sums of that step
-(they are counted by the divergence rule and in ``invalid``).
+(they are counted by the divergence rule and in ``invalid``), and so are, at a step where some
+covariance is not positive definite, the runs whose covariance is not safely so (smallest
+eigenvalue not above 1e-12 times the largest).
 """
 
 from __future__ import annotations
@@ -44,7 +61,6 @@ from scipy.stats import chi2
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation
-from trackkit.linalg import quadratic_form
 
 __all__ = ["MonteCarloMetrics", "chi2_bounds", "merge_all"]
 
@@ -146,6 +162,121 @@ def chi2_bounds(
     return lo, hi
 
 
+#: run-steps whose terms are evaluated together: ``add`` copies a step's inputs into a window
+#: of ``max(1, WINDOW_ROWS // runs)`` steps and evaluates the window in one pass
+WINDOW_ROWS = 8192
+
+
+def _quadratic(S: Array, r: Array) -> tuple[Array, NDArray[np.bool_]]:
+    """``r^T S^{-1} r`` per row (``S (N, m, m)``, ``r (N, m)``) and whether each ``S`` is
+    positive definite (where it is not, the value is meaningless: callers mask it).
+
+    m = 1: ``r (r / S)``; m = 2: the explicit inverse of ``trackkit.linalg.solve_psd``, its
+    products written out (no einsum, whose SIMD loops may fuse a multiply-add in a loop's
+    body and not in its tail). m > 2: the Cholesky-Crout factor
+    ``L L^T = S`` (lower triangle of S read), ``y = L^{-1} r`` by forward substitution and
+    ``|y|^2``, each scalar formula one numpy operation over the N rows, in a fixed order: a
+    row's bits do not depend on the other rows (LAPACK's per-matrix calls cost ~0.3 us a
+    matrix for a 4 x 4; these, about 40 ns at a few thousand rows).
+    """
+    N, m = r.shape
+    if m == 1:
+        s = S[:, 0, 0]
+        ok = s > 0
+        s = np.where(ok, s, 1.0)
+        return r[:, 0] * (r[:, 0] / s), ok
+    if m == 2:
+        a, b, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+        det = a * d - b * b
+        ok = (det > 0) & (a > 0)
+        if not ok.all():
+            a, b, d, det = (np.where(ok, v, w) for v, w in ((a, 1.0), (b, 0.0), (d, 1.0),
+                                                            (det, 1.0)))
+        i00, i11, i01 = d / det, a / det, -b / det
+        r0, r1 = r[:, 0], r[:, 1]
+        return r0 * (i00 * r0 + i01 * r1) + r1 * (i01 * r0 + i11 * r1), ok
+    L = np.empty((m, m, N))  # L[i, j]: entry (i, j) of every factor, i >= j
+    y = np.empty((m, N))
+    tmp = np.empty(N)
+    ok = np.ones(N, bool)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a bad pivot is masked by ok
+        for j in range(m):
+            d = L[j, j]
+            np.copyto(d, S[:, j, j])
+            for k in range(j):
+                np.multiply(L[j, k], L[j, k], out=tmp)
+                d -= tmp
+            ok &= d > 0
+            np.sqrt(d, out=d)
+            for i in range(j + 1, m):
+                t = L[i, j]
+                np.copyto(t, S[:, i, j])
+                for k in range(j):
+                    np.multiply(L[i, k], L[j, k], out=tmp)
+                    t -= tmp
+                t /= d
+        for i in range(m):
+            t = y[i]
+            np.copyto(t, r[:, i])
+            for k in range(i):
+                np.multiply(L[i, k], y[k], out=tmp)
+                t -= tmp
+            t /= L[i, i]
+        q = y[0] * y[0]
+        for i in range(1, m):
+            np.multiply(y[i], y[i], out=tmp)
+            q += tmp
+    return q, ok
+
+
+def _batch_sums(values: Array, valid: NDArray[np.bool_]) -> Array:
+    """Per window step, the float64 sum over the batch of ``values (steps, R)`` where
+    ``valid``: ``np.sum`` of each step's contiguous run vector (numpy's pairwise order, fixed
+    by R), zeros standing in for the invalid terms."""
+    if not valid.all():
+        values = np.where(valid, values, 0.0)
+    return np.ascontiguousarray(values).sum(axis=1)
+
+
+def _finite_rows(a: Array, axes: int) -> NDArray[np.bool_]:
+    """Whether every entry over the last ``axes`` axes of ``a`` is finite. A finite sum over
+    them proves it (an inf or nan entry makes the sum inf or nan); only the rows whose sum is
+    not finite (a bad entry, or an overflow of finite ones) are checked entry by entry."""
+    flat = a.reshape(a.shape[: a.ndim - axes] + (-1,))
+    with np.errstate(over="ignore", invalid="ignore"):
+        ok = np.isfinite(np.einsum("...i->...", flat))
+    if not ok.all():
+        bad = ~ok
+        ok[bad] = np.isfinite(flat[bad]).all(-1)
+    return ok
+
+
+def _squared_norm(e: Array) -> Array:
+    """``|e|^2`` over the last axis, with the bits of ``(e * e).sum(-1)`` on a contiguous
+    array (one or two components, the usual groups, written out: the same sums in any
+    order, without a reduction over a length-2 axis)."""
+    d = e.shape[-1]
+    if d == 1:
+        return e[..., 0] * e[..., 0]
+    if d == 2:
+        a, b = e[..., 0], e[..., 1]
+        return a * a + b * b
+    e = np.ascontiguousarray(e)
+    return (e * e).sum(-1)
+
+
+class _Window:
+    """Copies of the inputs of up to ``size`` ``add`` calls of R runs, n states."""
+
+    def __init__(self, size: int, R: int, n: int, derived: Sequence[int]) -> None:
+        self.size, self.R, self.n, self.used = size, R, n, 0
+        self.k = np.empty(size, np.int64)
+        self.x = np.empty((size, R, n))
+        self.mean = np.empty((size, R, n))
+        self.P = np.empty((size, R, n, n))
+        self.derived = [np.empty((size, R, d)) for d in derived]
+
+
 def _as_spec(spec: GroupSpec) -> tuple[int, ...] | ErrorFn:
     if callable(spec):
         return spec
@@ -168,8 +299,11 @@ class MonteCarloMetrics:
 
         acc.add(k, truth, estimate, innovation)   # truth (runs, n), estimate a tk.Gaussian
 
-    and chunks combine with ``acc.merge(other)``. See the module docstring for the maths and
-    the divergence rule.
+    and chunks combine with ``acc.merge(other)``. One accumulator takes one fixed batch of
+    runs. ``add`` only copies its inputs into a window of steps; every read (and ``merge``)
+    evaluates what is pending first, and ``flush()`` does so and releases the window (call it
+    when the batch is done, before the accumulator is kept or sent to another process). See
+    the module docstring for the maths, the summation and the divergence rule.
     """
 
     groups: Mapping[str, GroupSpec] = field(default_factory=dict)
@@ -181,19 +315,6 @@ class MonteCarloMetrics:
     max_bad_fraction: float = 0.25
 
     n_steps: int = field(default=0, init=False)
-    #: exact sums, ``(len(groups) + 2, capacity, _LIMBS)``: groups..., NEES, NIS
-    sums: NDArray[np.int64] = field(init=False, repr=False)
-    #: terms per sum ``(len(groups) + 2, capacity)``
-    counts: NDArray[np.int64] = field(init=False, repr=False)
-    #: chi-square degrees of freedom per sum (NEES and NIS rows; group rows: components)
-    dof: NDArray[np.int64] = field(init=False, repr=False)
-    #: runs with a non-finite estimate, per step
-    invalid: NDArray[np.int64] = field(init=False, repr=False)
-    #: per run: steps accumulated, bad steps, last step index, bad at the last step
-    run_steps: NDArray[np.int64] = field(init=False, repr=False)
-    run_bad: NDArray[np.int64] = field(init=False, repr=False)
-    run_last: NDArray[np.int64] = field(init=False, repr=False)
-    run_last_bad: NDArray[np.bool_] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.groups = {str(k): _as_spec(v) for k, v in dict(self.groups).items()}
@@ -214,17 +335,71 @@ class MonteCarloMetrics:
         if self.nees_indices is not None:
             self.nees_indices = tuple(int(i) for i in self.nees_indices)
         K = len(self.groups) + 2
-        self.sums = np.zeros((K, 0, _LIMBS), np.int64)
-        self.counts = np.zeros((K, 0), np.int64)
-        self.dof = np.zeros((K, 0), np.int64)
-        self.invalid = np.zeros(0, np.int64)
-        self.run_steps = np.zeros(0, np.int64)
-        self.run_bad = np.zeros(0, np.int64)
-        self.run_last = np.zeros(0, np.int64)
-        self.run_last_bad = np.zeros(0, bool)
+        self._sums = np.zeros((K, 0, _LIMBS), np.int64)
+        self._counts = np.zeros((K, 0), np.int64)
+        self._dof = np.zeros((K, 0), np.int64)
+        self._invalid = np.zeros(0, np.int64)
+        self._run_steps = np.zeros(0, np.int64)
+        self._run_bad = np.zeros(0, np.int64)
+        self._run_last = np.zeros(0, np.int64)
+        self._run_last_bad = np.zeros(0, bool)
         self._started = False
+        self._window: _Window | None = None
+        self._innovations: list[tuple[int, Array, Array]] = []
+        self._innovation_rows = 0
+        self._totals: dict[int, Array] = {}
+        #: batch totals waiting for their exact addition: (sum rows, steps, values)
+        self._pending: list[tuple[NDArray[np.intp], NDArray[np.int64], Array]] = []
 
-    # -- bookkeeping ---------------------------------------------------------------------------
+    # -- state (every read evaluates what is pending first) ------------------------------------
+
+    @property
+    def sums(self) -> NDArray[np.int64]:
+        """Exact sums ``(len(groups) + 2, capacity, _LIMBS)``: groups..., NEES, NIS."""
+        self.flush()
+        return self._sums
+
+    @property
+    def counts(self) -> NDArray[np.int64]:
+        """Terms per sum ``(len(groups) + 2, capacity)``."""
+        self.flush()
+        return self._counts
+
+    @property
+    def dof(self) -> NDArray[np.int64]:
+        """Chi-square degrees of freedom per sum (NEES and NIS rows; group rows: components)."""
+        self.flush()
+        return self._dof
+
+    @property
+    def invalid(self) -> NDArray[np.int64]:
+        """Runs with a non-finite (or not positive definite) estimate, per step."""
+        self.flush()
+        return self._invalid
+
+    @property
+    def run_steps(self) -> NDArray[np.int64]:
+        """Per run: steps accumulated."""
+        self.flush()
+        return self._run_steps
+
+    @property
+    def run_bad(self) -> NDArray[np.int64]:
+        """Per run: bad steps."""
+        self.flush()
+        return self._run_bad
+
+    @property
+    def run_last(self) -> NDArray[np.int64]:
+        """Per run: the last step index accumulated."""
+        self.flush()
+        return self._run_last
+
+    @property
+    def run_last_bad(self) -> NDArray[np.bool_]:
+        """Per run: bad at the last step."""
+        self.flush()
+        return self._run_last_bad
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -234,7 +409,7 @@ class MonteCarloMetrics:
     @property
     def runs(self) -> int:
         """Number of runs accumulated (the per-run counters' length)."""
-        return int(self.run_steps.size)
+        return int(self._run_steps.size)
 
     def _row(self, name: str) -> int:
         try:
@@ -245,22 +420,29 @@ class MonteCarloMetrics:
     def _grow(self, k: int) -> None:
         if k < 0:
             raise ValueError(f"step k = {k}; expected an index >= 0")
-        cap = self.counts.shape[1]
+        cap = self._counts.shape[1]
         if k >= cap:
             new = max(k + 1, 2 * cap, 16)
-            pad = new - cap
-            self.sums = np.pad(self.sums, ((0, 0), (0, pad), (0, 0)))
-            self.counts = np.pad(self.counts, ((0, 0), (0, pad)))
-            self.dof = np.pad(self.dof, ((0, 0), (0, pad)))
-            self.invalid = np.pad(self.invalid, (0, pad))
+
+            def wider(a: NDArray, axis: int) -> NDArray:
+                shape = list(a.shape)
+                shape[axis] = new
+                out = np.zeros(shape, a.dtype)
+                out[(slice(None),) * axis + (slice(0, cap),)] = a
+                return out
+
+            self._sums = wider(self._sums, 1)
+            self._counts = wider(self._counts, 1)
+            self._dof = wider(self._dof, 1)
+            self._invalid = wider(self._invalid, 0)
         self.n_steps = max(self.n_steps, k + 1)
 
     def _runs(self, R: int) -> None:
         if not self._started and self.runs == 0:
-            self.run_steps = np.zeros(R, np.int64)
-            self.run_bad = np.zeros(R, np.int64)
-            self.run_last = np.full(R, -1, np.int64)
-            self.run_last_bad = np.zeros(R, bool)
+            self._run_steps = np.zeros(R, np.int64)
+            self._run_bad = np.zeros(R, np.int64)
+            self._run_last = np.full(R, -1, np.int64)
+            self._run_last_bad = np.zeros(R, bool)
             self._started = True
         elif R != self.runs:
             raise ValueError(
@@ -268,18 +450,19 @@ class MonteCarloMetrics:
                 "takes a fixed set of runs (merge accumulators of other chunks)"
             )
 
-    def _accumulate(self, k: int, rows: Sequence[int], values: Array, ok: NDArray[np.bool_],
-                    dof: Sequence[int]) -> None:
-        """Add ``values[i][ok[i]]`` to sum ``rows[i]`` at step k, with counts and dof."""
-        vals, slots = [], []
-        cap = self.counts.shape[1]
-        for r, v, mask, d in zip(rows, values, ok, dof, strict=True):
-            vals.append(v[mask])
-            slots.append(np.full(int(mask.sum()), r * cap + k, np.intp))
-            self.counts[r, k] += int(mask.sum())
-            self.dof[r, k] += int(mask.sum()) * d
-        flat = self.sums.reshape(-1, _LIMBS)  # a view: the sums are contiguous
-        _exact_add(flat, np.concatenate(slots), np.concatenate(vals))
+    def _add_exact(self, rows: Sequence[int], ks: NDArray[np.int64], totals: Array,
+                   counts: NDArray[np.int64], dof: Sequence[int]) -> None:
+        """Add the batch totals ``totals[i, j]`` of sum ``rows[i]`` at step ``ks[j]`` exactly
+        (they wait in ``_pending`` for one exact addition at the next read), with
+        ``counts[j]`` terms of ``dof[i]`` degrees of freedom each."""
+        r = np.asarray(rows, np.intp)[:, None]
+        self._pending.append((np.broadcast_to(r, (r.size, ks.size)).ravel(),
+                              np.broadcast_to(ks, (r.size, ks.size)).ravel(),
+                              np.asarray(totals, dtype=float).ravel()))
+        np.add.at(self._counts, (r, ks[None, :]), counts[None, :])
+        np.add.at(self._dof, (r, ks[None, :]),
+                  counts[None, :] * np.asarray(dof, np.int64)[:, None])
+        self._totals = {}
 
     # -- accumulation --------------------------------------------------------------------------
 
@@ -307,74 +490,44 @@ class MonteCarloMetrics:
         P = np.asarray(estimate.cov, dtype=float)
         if P.shape[-2:] != (n, n):
             raise ValueError(f"estimate.cov has shape {P.shape}; expected (..., {n}, {n})")
-        P = np.broadcast_to(P, batch + (n, n)).reshape(R, n, n)
+        if P.ndim > 2:
+            P = np.broadcast_to(P, batch + (n, n)).reshape(R, n, n)
+        if self.angular is not None and len(self.angular) != n:
+            raise ValueError(f"angular has {len(self.angular)} entries; the state has {n}")
+        if self.nees_indices is not None and not all(-n <= i < n for i in self.nees_indices):
+            raise ValueError(f"nees_indices = {self.nees_indices}; the state has {n} components")
         self._runs(R)
         self._grow(k)
-
-        e = x - mean
-        if self.angular is not None:
-            if len(self.angular) != n:
-                raise ValueError(f"angular has {len(self.angular)} entries; the state has {n}")
-            mask = np.asarray(self.angular)
-            e = np.where(mask, wrap(e), e)
-        valid = np.isfinite(e).all(-1) & np.isfinite(P).all((-1, -2))
-
-        values, rows, dofs = [], [], []
-        sq_norms = {}
-        e0 = np.where(valid[:, None], e, 0.0)
-        for r, (name, spec) in enumerate(self.groups.items()):
-            if callable(spec):
-                eg = np.asarray(spec(x, mean), dtype=float).reshape(R, -1)
-                eg = np.where(valid[:, None], eg, 0.0)
-            else:
-                eg = e0[:, list(spec)]
-            sq = (eg * eg).sum(-1)
-            sq_norms[name] = sq
-            values.append(sq)
-            rows.append(r)
-            dofs.append(eg.shape[-1])
-
-        idx = list(self.nees_indices) if self.nees_indices is not None else list(range(n))
-        Ps = P[:, idx][:, :, idx]
-        Ps = np.where(valid[:, None, None], Ps, np.eye(len(idx)))
-        try:
-            nees = quadratic_form(Ps, e0[:, idx], "estimate covariance (for NEES)")
-        except ValueError:
-            # a filter that lost positive definiteness has failed on those runs: count them
-            # as invalid (and so bad for the divergence rule) instead of stopping the study
-            eig = np.linalg.eigvalsh(Ps)
-            pd = eig[:, 0] > 1e-12 * np.abs(eig[:, -1])  # condition number below 1e12
-            valid &= pd
-            Ps = np.where(pd[:, None, None], Ps, np.eye(len(idx)))
-            e0 = np.where(valid[:, None], e0, 0.0)
-            values = [np.where(valid, v, 0.0) for v in values]
-            nees = quadratic_form(Ps, e0[:, idx], "estimate covariance (for NEES)")
-        values.append(nees)
-        rows.append(len(self.groups))
-        dofs.append(len(idx))
-        self._accumulate(k, rows, values, [valid] * len(rows), dofs)
-        self.invalid[k] += int((~valid).sum())
-
-        # divergence bookkeeping
-        thr = self.nees_threshold
-        if thr is None:
-            thr = _default_nees_threshold(len(idx))
-        bad = ~valid | (nees > thr)
-        if self.distance is not None:
-            bad |= sq_norms[self.distance_group] > self.distance**2
-        self.run_steps += 1
-        self.run_bad += bad
-        later = k >= self.run_last
-        self.run_last_bad = np.where(later, bad, self.run_last_bad)
-        self.run_last = np.where(later, k, self.run_last)
-
+        # group functions see this step's batch (they may depend on the step)
+        derived = [np.asarray(spec(x, mean), dtype=float).reshape(R, -1)
+                   for spec in self.groups.values() if callable(spec)]
+        w = self._window
+        if w is not None and (w.n != n or [d.shape[-1] for d in w.derived]
+                              != [d.shape[-1] for d in derived]):
+            self._flush_states()
+            w = None
+        if w is None:
+            w = self._window = _Window(max(1, WINDOW_ROWS // max(R, 1)), R, n,
+                                       [d.shape[-1] for d in derived])
+        j = w.used
+        w.k[j] = k
+        w.x[j] = x
+        w.mean[j] = mean
+        w.P[j] = P
+        for buf, d in zip(w.derived, derived, strict=True):
+            buf[j] = d
+        w.used = j + 1
         if innovation is not None:
             self.add_innovation(k, innovation)
+        if w.used == w.size:
+            self._flush_states()
 
     def add_innovation(self, k: int, innovation: Innovation) -> None:
         """Accumulate the NIS ``r^T S^{-1} r`` of step ``k``; rows whose residual has a
         ``nan`` (missing measurement) are skipped. Several calls at one step (several
-        sensors) pool their terms and degrees of freedom."""
+        sensors) pool their terms and degrees of freedom. An ``S`` that is not positive
+        definite raises ``ValueError`` when the step is evaluated (at the latest at the
+        next read or ``flush()``)."""
         r = np.asarray(innovation.residual, dtype=float)
         if r.ndim < 1:
             raise ValueError(f"innovation.residual has shape {r.shape}; expected (..., m)")
@@ -382,13 +535,185 @@ class MonteCarloMetrics:
         S = np.asarray(innovation.cov, dtype=float)
         if S.shape[-2:] != (m, m):
             raise ValueError(f"innovation.cov has shape {S.shape}; expected (..., {m}, {m})")
-        present = np.isfinite(r).all(-1)
         S = np.broadcast_to(S, r.shape[:-1] + (m, m))
-        r0 = np.where(present[..., None], r, 0.0)
-        nis = quadratic_form(S, r0, "innovation covariance (for NIS)")
         self._grow(k)
-        self._accumulate(k, [len(self.groups) + 1], [nis.reshape(-1)], [present.reshape(-1)],
-                         [m])
+        self._innovations.append((k, np.array(r.reshape(-1, m)), np.array(S.reshape(-1, m, m))))
+        self._innovation_rows += r.size // max(m, 1)
+        if self._innovation_rows >= WINDOW_ROWS:
+            self._flush_innovations()
+
+    def add_steps(self, k0: int, truth: ArrayLike, estimate: Gaussian,
+                  innovation: Innovation | None = None) -> None:
+        """Accumulate the steps ``k0, k0 + 1, ...`` of a batch of runs at once: the first
+        axis of every array is the step, the rest as in ``add`` (``truth (w, ..., n)``, the
+        estimate's mean ``(w, ..., n)`` and covariance ``(w, ..., n, n)``, or ``(n, n)``
+        shared, the innovation's residual ``(w, ..., m)``). The same sums as ``add`` step by
+        step, except that group functions are called once with ``(w, R, n)`` arrays (the
+        Monte Carlo engine's run over a window of steps)."""
+        x = np.asarray(truth, dtype=float)
+        mean = np.asarray(estimate.mean, dtype=float)
+        if x.ndim < 2 or mean.shape != x.shape:
+            raise ValueError(
+                f"estimate.mean has shape {mean.shape} and truth {x.shape}; expected equal "
+                "shapes (steps, runs, n)"
+            )
+        w, n = x.shape[0], x.shape[-1]
+        x, mean = x.reshape(w, -1, n), mean.reshape(w, -1, n)
+        R = x.shape[1]
+        P = np.asarray(estimate.cov, dtype=float)
+        if P.shape[-2:] != (n, n):
+            raise ValueError(f"estimate.cov has shape {P.shape}; expected (..., {n}, {n})")
+        P = np.broadcast_to(P, np.shape(truth)[:-1] + (n, n)).reshape(w, R, n, n)
+        if self.angular is not None and len(self.angular) != n:
+            raise ValueError(f"angular has {len(self.angular)} entries; the state has {n}")
+        if self.nees_indices is not None and not all(-n <= i < n for i in self.nees_indices):
+            raise ValueError(f"nees_indices = {self.nees_indices}; the state has {n} components")
+        if w == 0:
+            return
+        self._runs(R)
+        self._grow(k0 + w - 1)
+        self._flush_steps()  # steps given one by one before these come first
+        derived = [np.asarray(spec(x, mean), dtype=float).reshape(w, R, -1)
+                   for spec in self.groups.values() if callable(spec)]
+        ks = np.arange(k0, k0 + w, dtype=np.int64)
+        self._evaluate(ks, x, mean, P, derived)
+        if innovation is not None:
+            r = np.asarray(innovation.residual, dtype=float)
+            m = r.shape[-1]
+            S = np.asarray(innovation.cov, dtype=float)
+            if r.ndim < 2 or r.shape[0] != w or S.shape[-2:] != (m, m):
+                raise ValueError(
+                    f"innovation residual {r.shape} and cov {S.shape}; expected (steps = {w}, "
+                    "..., m) and (..., m, m)")
+            S = np.broadcast_to(S, r.shape[:-1] + (m, m))
+            self._evaluate_innovations(ks, r.reshape(w, -1, m), S.reshape(w, -1, m, m))
+
+    # -- evaluation of a window ----------------------------------------------------------------
+
+    def flush(self) -> None:
+        """Evaluate the pending steps, add their batch totals to the exact sums and release
+        the window (reads do this themselves)."""
+        self._flush_steps()
+        self._window = None
+        self._fold()
+
+    def _flush_steps(self) -> None:
+        if self._window is not None:
+            self._flush_states()
+        if self._innovations:
+            self._flush_innovations()
+
+    def _fold(self) -> None:
+        """The exact addition of the batch totals waiting in ``_pending``."""
+        if self._pending:
+            rows, ks, totals = (np.concatenate(a) for a in zip(*self._pending, strict=True))
+            self._pending = []
+            cap = self._counts.shape[1]
+            _exact_add(self._sums.reshape(-1, _LIMBS), rows * cap + ks, totals)
+
+    def _flush_states(self) -> None:
+        w = self._window
+        u = 0 if w is None else w.used
+        if u == 0:
+            return
+        w.used = 0
+        self._evaluate(w.k[:u].copy(), w.x[:u], w.mean[:u], w.P[:u],
+                       [d[:u] for d in w.derived])
+
+    def _evaluate(self, ks: NDArray[np.int64], X: Array, M: Array, P: Array,
+                  derived: list[Array]) -> None:
+        """Accumulate ``u`` steps ``ks`` of R runs at once: truths and means ``(u, R, n)``,
+        covariances ``(u, R, n, n)`` (a broadcast view is fine) and each group function's
+        errors ``(u, R, d)``."""
+        u, R, n = X.shape
+        e = X - M
+        if self.angular is not None:
+            e = np.where(np.asarray(self.angular), wrap(e), e)
+        valid = _finite_rows(e, 1) & _finite_rows(P, 2)  # (u, R)
+        everywhere = bool(valid.all())
+        e0 = e if everywhere else np.where(valid[..., None], e, 0.0)
+        sq, dofs = [], []
+        fns = iter(derived)
+        for spec in self.groups.values():
+            if callable(spec):
+                eg = next(fns)
+                if not everywhere:
+                    eg = np.where(valid[..., None], eg, 0.0)
+            else:
+                eg = e0[..., list(spec)]
+            sq.append(_squared_norm(eg))
+            dofs.append(eg.shape[-1])
+
+        full = self.nees_indices is None or list(self.nees_indices) == list(range(n))
+        idx = list(range(n)) if full else list(self.nees_indices)
+        ni = len(idx)
+        Ps = P if full else P[..., idx, :][..., idx]
+        if not everywhere:
+            Ps = np.where(valid[..., None, None], Ps, np.eye(ni))
+        en = e0 if full else e0[..., idx]
+        nees, ok = _quadratic(Ps.reshape(-1, ni, ni), en.reshape(-1, ni))
+        nees, ok = nees.reshape(u, R), ok.reshape(u, R)
+        failed = np.flatnonzero(~ok.all(1))
+        if failed.size:
+            # a step where a filter lost positive definiteness: it has failed on those runs,
+            # which count as invalid (and so bad for the divergence rule) instead of
+            # stopping the study; the criterion is applied to every run of such a step
+            Pf = Ps[failed]
+            eig = np.linalg.eigvalsh(Pf)
+            pd = eig[..., 0] > 1e-12 * np.abs(eig[..., -1])  # condition number below 1e12
+            Pf = np.where(pd[..., None, None], Pf, np.eye(ni))
+            vf = valid[failed] & pd
+            ef = np.where(vf[..., None], en[failed], 0.0)
+            q, ok2 = _quadratic(Pf.reshape(-1, ni, ni), ef.reshape(-1, ni))
+            vf &= ok2.reshape(vf.shape)
+            valid[failed] = vf
+            nees[failed] = np.where(vf, q.reshape(vf.shape), 0.0)
+        count = valid.sum(1)
+        G = len(self.groups)
+        totals = np.stack([_batch_sums(v, valid) for v in (*sq, nees)])
+        self._add_exact([*range(G), G], ks, totals, count, [*dofs, ni])
+        np.add.at(self._invalid, ks, R - count)
+
+        # divergence bookkeeping
+        thr = self.nees_threshold
+        if thr is None:
+            thr = _default_nees_threshold(ni)
+        bad = ~valid | (nees > thr)
+        if self.distance is not None:
+            bad |= sq[list(self.groups).index(self.distance_group)] > self.distance**2
+        self._run_steps += u
+        self._run_bad += bad.sum(0)
+        last = int(ks.max())
+        j = u - 1 - int(np.argmax(ks[::-1] == last))  # the last add of the latest step
+        later = last >= self._run_last
+        self._run_last_bad = np.where(later, bad[j], self._run_last_bad)
+        self._run_last = np.where(later, last, self._run_last)
+
+    def _flush_innovations(self) -> None:
+        entries, self._innovations, self._innovation_rows = self._innovations, [], 0
+        shapes: dict[tuple[int, ...], list[int]] = {}
+        for i, (_, r, _) in enumerate(entries):
+            shapes.setdefault(r.shape, []).append(i)
+        for which in shapes.values():
+            self._evaluate_innovations(np.array([entries[i][0] for i in which], np.int64),
+                                       np.stack([entries[i][1] for i in which]),
+                                       np.stack([entries[i][2] for i in which]))
+
+    def _evaluate_innovations(self, ks: NDArray[np.int64], r: Array, S: Array) -> None:
+        """NIS of ``u`` steps ``ks`` at once: residuals ``(u, R, m)``, covariances
+        ``(u, R, m, m)``."""
+        m = r.shape[-1]
+        present = np.isfinite(r).all(-1)
+        r0 = np.where(present[..., None], r, 0.0)
+        nis, ok = _quadratic(S.reshape(-1, m, m), r0.reshape(-1, m))
+        if not ok.all():
+            bad = np.argwhere(~ok.reshape(present.shape))
+            step, run = int(ks[bad[0, 0]]), int(bad[0, 1])
+            raise ValueError(
+                "innovation covariance (for NIS) is not positive definite: "
+                f"{len(bad)} of {ok.size} rows (first at step {step}, run {run})")
+        totals = _batch_sums(nis.reshape(present.shape), present)
+        self._add_exact([len(self.groups) + 1], ks, totals[None, :], present.sum(1), [m])
 
     # -- merging -------------------------------------------------------------------------------
 
@@ -405,6 +730,8 @@ class MonteCarloMetrics:
                 "cannot merge accumulators with different configurations: "
                 f"{self._config()} vs {other._config()}"
             )
+        self.flush()
+        other.flush()
         out = MonteCarloMetrics(**{
             "groups": self.groups, "angular": self.angular, "nees_indices": self.nees_indices,
             "nees_threshold": self.nees_threshold, "distance": self.distance,
@@ -415,23 +742,28 @@ class MonteCarloMetrics:
             out._grow(T - 1)
         for src in (self, other):
             t = src.n_steps
-            out.sums[:, :t] += src.sums[:, :t]
-            out.counts[:, :t] += src.counts[:, :t]
-            out.dof[:, :t] += src.dof[:, :t]
-            out.invalid[:t] += src.invalid[:t]
-        _carry(out.sums)
-        out.run_steps = np.concatenate([self.run_steps, other.run_steps])
-        out.run_bad = np.concatenate([self.run_bad, other.run_bad])
-        out.run_last = np.concatenate([self.run_last, other.run_last])
-        out.run_last_bad = np.concatenate([self.run_last_bad, other.run_last_bad])
+            out._sums[:, :t] += src._sums[:, :t]
+            out._counts[:, :t] += src._counts[:, :t]
+            out._dof[:, :t] += src._dof[:, :t]
+            out._invalid[:t] += src._invalid[:t]
+        _carry(out._sums)
+        out._run_steps = np.concatenate([self._run_steps, other._run_steps])
+        out._run_bad = np.concatenate([self._run_bad, other._run_bad])
+        out._run_last = np.concatenate([self._run_last, other._run_last])
+        out._run_last_bad = np.concatenate([self._run_last_bad, other._run_last_bad])
         out._started = self._started or other._started
         return out
 
     # -- results -------------------------------------------------------------------------------
 
     def total(self, name: str) -> Array:
-        """The exact per-step sum over runs (correctly rounded), shape ``(n_steps,)``."""
-        return _exact_value(self.sums[self._row(name), : self.n_steps])
+        """The per-step sum over runs, shape ``(n_steps,)``: the correctly rounded exact sum
+        of the batch totals (see the module docstring)."""
+        self.flush()
+        row = self._row(name)
+        if row not in self._totals:
+            self._totals[row] = _exact_value(self._sums[row, : self.n_steps])
+        return self._totals[row].copy()
 
     def count(self, name: str) -> NDArray[np.int64]:
         """Number of terms in each step's sum, shape ``(n_steps,)``."""
@@ -489,8 +821,9 @@ class MonteCarloMetrics:
 
     def diverged(self) -> NDArray[np.bool_]:
         """Per run: diverged by the rule in the module docstring."""
-        frac = self.run_bad / np.maximum(self.run_steps, 1)
-        return self.run_last_bad | (frac > self.max_bad_fraction)
+        self.flush()
+        frac = self._run_bad / np.maximum(self._run_steps, 1)
+        return self._run_last_bad | (frac > self.max_bad_fraction)
 
     def summary(self, start: int = 0, confidence: float = 0.95) -> dict[str, float]:
         """Plain-float summary: runs, steps, time-averaged RMSE per group from ``start``, mean

@@ -1,19 +1,22 @@
 """Monte Carlo comparison of filters on a scenario: simulate, estimate, evaluate, streamed.
 
 The runs are cut into fixed blocks (``scenario.run.block`` runs each). A block is simulated
-(``trackkit.sim.simulate``) and filtered as one batch; its statistics are accumulated exactly
-(``MonteCarloMetrics``) and its PCRLB information sums are added in block order.
+(``trackkit.sim.simulate``) and filtered as one batch. Its statistics are accumulated as it
+streams (``MonteCarloMetrics``, fed a window of steps at a time): each step's terms are summed
+in float64 over the block, and only these block totals enter an exact accumulator, so the
+blocks merge exactly and in any order. Its PCRLB information sums are added in block order.
 
 What is bit-identical: with the same scenario, seed and block size, every number (timings
 aside) on one machine, whatever the executor, the chunking or the number of Dask workers. Run
 r always draws from its own generator (``run_rng(seed, r)``) and always sits at the same place
-in the same block, and the exact accumulator's sums do not depend on the order they are merged
-in. What agrees only to a tolerance: the same computation on another CPU (numpy's SIMD loops
-and the BLAS kernels round differently with AVX2 and AVX-512), and a run placed in another
-block or at another position in its block (a vectorised transcendental function may round an
-element differently in a loop's body and its tail). Both are checked to 1e-12 relative on the
-goldens (tests/goldens), which CI also runs with numpy's AVX-512 paths and OpenBLAS's AVX-512
-kernels disabled.
+in the same block, a block's float64 totals depend on that block alone (and its windows of
+steps on the block size alone), and the exact accumulator's sums do not depend on the order
+they are merged in. What agrees only to a tolerance: the same computation on another CPU
+(numpy's SIMD loops and the BLAS kernels round differently with AVX2 and AVX-512), and a run
+placed in another block or at another position in its block (a vectorised transcendental
+function may round an element differently in a loop's body and its tail, and the block totals
+are float64 sums). Both are checked to 1e-12 relative on the goldens (tests/goldens), which CI
+also runs with numpy's AVX-512 paths and OpenBLAS's AVX-512 kernels disabled.
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackkit.angles import wrap
-from trackkit.belief import Gaussian
+from trackkit.belief import Gaussian, Innovation
+from trackkit.eval import metrics as _metrics
 from trackkit.eval.crlb import PCRLB, rmse_bound
 from trackkit.eval.matching import MatchingMetrics, measurement_noise_rms, noise_in_use
 from trackkit.eval.metrics import MonteCarloMetrics
@@ -65,8 +69,10 @@ def plan_of(scenario: Scenario) -> Plan:
 
 def _speed_error(dim: int):
     def err(truth: Array, mean: Array) -> Array:
-        vt = np.linalg.norm(truth[..., dim:dim + 2], axis=-1)
-        ve = np.linalg.norm(mean[..., dim:dim + 2], axis=-1)
+        # |v| as np.linalg.norm computes it (sqrt of the sum of squares), without its
+        # reduction over a length-2 axis
+        vt = np.sqrt(truth[..., dim] * truth[..., dim] + truth[..., dim + 1] * truth[..., dim + 1])
+        ve = np.sqrt(mean[..., dim] * mean[..., dim] + mean[..., dim + 1] * mean[..., dim + 1])
         return (vt - ve)[..., None]
     return err
 
@@ -81,7 +87,8 @@ def _course_error(dim: int):
 
 class BearingError:
     """Error of the bearing from the first observer to the target, wrapped (rad). The
-    observer's position at the current step is set by the engine before each use."""
+    observer's position is set by the engine before each use: ``(2,)`` for one step, or
+    ``(steps, 1, 2)`` for a window of steps (``MonteCarloMetrics.add_steps``)."""
 
     def __init__(self) -> None:
         self.origin = np.zeros(2)
@@ -112,10 +119,11 @@ def groups_for(plan: Plan) -> dict:
 
 
 def _derived_gradient(group: str, dim: int, n: int, x: Array, origin: Array) -> Array:
-    """Gradient of speed, course or bearing (from ``origin``) at true states ``x`` (runs, n)."""
+    """Gradient of speed, course or bearing (from ``origin``, ``(..., 2)`` broadcast against
+    the batch axes) at true states ``x`` (..., n)."""
     g = np.zeros(x.shape)
     if group == "bearing":
-        u, v = x[..., 0] - origin[0], x[..., 1] - origin[1]
+        u, v = x[..., 0] - origin[..., 0], x[..., 1] - origin[..., 1]
         r2 = u * u + v * v
         g[..., 0], g[..., 1] = v / r2, -u / r2
         return g
@@ -146,6 +154,96 @@ class BlockResult:
     j1: Array | None = None  # (runs, m) per-run raw noise RMS
     gaps: dict[str, dict] | None = None  # filter -> _GapAccumulator.result
     classes: dict[str, dict] | None = None  # filter -> _ClassAccumulator.result (classifiers)
+
+
+class _StepWindow:
+    """A filter's estimates and innovations over a window of consecutive steps of a block,
+    handed to ``MonteCarloMetrics.add_steps`` at once (``metrics.WINDOW_ROWS`` run-steps: one
+    numpy pass per quantity over the window instead of one per step). The windows depend on
+    the block size and the steps alone, so the sums are the same bits on any executor."""
+
+    def __init__(self, acc: MonteCarloMetrics, plan: Plan, truth: Array, groups: dict) -> None:
+        self.acc, self.plan, self.truth, self.groups = acc, plan, truth, groups
+        self.size = max(1, _metrics.WINDOW_ROWS // max(truth.shape[1], 1))
+        self.k0, self.used = 0, 0
+        self.buffers: list[Array] | None = None
+
+    def add(self, k: int, g: Gaussian, innov) -> None:
+        if self.used and k != self.k0 + self.used:
+            self.flush()
+        if not self.used:
+            self.k0 = k
+        parts = (g.mean, g.cov) if innov is None else (g.mean, g.cov, innov.residual,
+                                                       innov.cov)
+        bufs = self.buffers
+        try:
+            if bufs is None or len(bufs) != len(parts):
+                raise ValueError("new buffers")
+            j = self.used
+            for b, p in zip(bufs, parts):  # noqa: B905 (lengths checked above)
+                b[j] = p  # a shared covariance is broadcast over the runs
+        except ValueError:  # the first step, or shapes that changed: start a new window
+            self.flush()
+            self.k0 = k
+            self.buffers = [np.empty((self.size, *np.shape(p))) for p in parts]
+            for b, p in zip(self.buffers, parts, strict=True):
+                b[0] = p
+        self.used += 1
+        if self.used == self.size:
+            self.flush()
+
+    def flush(self) -> None:
+        u, k0 = self.used, self.k0
+        if not u:
+            return
+        self.used = 0
+        b = [x[:u] for x in self.buffers]
+        bearing = self.groups.get("bearing")
+        if bearing is not None:
+            saved = bearing.origin
+            bearing.origin = self.plan.observer_states[0, k0 + 1:k0 + u + 1, None, :2]
+        try:
+            self.acc.add_steps(k0, self.truth[k0 + 1:k0 + u + 1], Gaussian._make(b[:2]),
+                               Innovation(*b[2:]) if len(b) == 4 else None)
+        finally:
+            if bearing is not None:
+                bearing.origin = saved
+
+
+def _pcrlb_ingredients(plan: Plan, truth: Array, groups: dict) -> tuple[Array, dict]:
+    """Per step, summed over the block's runs: the measurement information
+    ``p_d H^T R^-1 H`` at the true states ``truth (T + 1, B, n)`` ``(T, n, n)``, and the
+    gradient of each derived group (speed, course, bearing) ``(T, n)``. The Jacobians come
+    from each step's sensor; the rest is done a window of steps at a time."""
+    T, n, d = plan.steps, plan.n, plan.dim
+    B = truth.shape[1]
+    info = np.empty((T, n, n))
+    size = max(1, _metrics.WINDOW_ROWS // max(B, 1))
+    for k0 in range(0, T, size):
+        k1 = min(T, k0 + size)
+        sensors = plan.sensors[k0:k1]
+        m = sensors[0].dim_z
+        if any(s.dim_z != m for s in sensors):  # sensors of several sizes: step by step
+            for k in range(k0, k1):
+                info[k:k + 1] = _information(plan, sensors[k - k0:k - k0 + 1],
+                                             truth[k + 1:k + 2])
+        else:
+            info[k0:k1] = _information(plan, sensors, truth[k0 + 1:k1 + 1])
+    grads = {g: _derived_gradient(g, d, n, truth[1:], plan.observer_states[0, 1:, None, :2])
+             .sum(1) for g in groups if g in ("speed", "course", "bearing")}
+    return info, grads
+
+
+def _information(plan: Plan, sensors: list, truth: Array) -> Array:
+    """``p_d sum_runs H^T R^-1 H`` for steps of equal measurement size: ``truth (w, B, n)``,
+    one sensor per step."""
+    w, B, n = truth.shape
+    m = sensors[0].dim_z
+    H = np.stack([np.broadcast_to(s.jacobian(x), (B, m, n)) for s, x in
+                  zip(sensors, truth, strict=True)])  # (w, B, m, n)
+    Rinv = np.linalg.inv(np.stack([np.asarray(s.noise, dtype=float) for s in sensors]))
+    RinvH = Rinv[:, None] @ H if m > 1 else H * Rinv[:, None]
+    return plan.p_detect * np.einsum("wbmi,wbmj->wij", H, RinvH)
 
 
 def run_block(scenario: Scenario, block: int,
@@ -180,6 +278,7 @@ def run_block(scenario: Scenario, block: int,
     for i, (name, f, motion, (mean0, P0)) in enumerate(zip(
             plan.filter_names, plan.filters, plan.filter_motions, plan.priors, strict=True)):
         acc = MonteCarloMetrics(groups=groups, angular=angular)
+        window = _StepWindow(acc, plan, data.truth, groups)
         match = None if matching is None else MatchingMetrics(r1 - r0, n, m, T, log=keep)
         L0 = np.linalg.cholesky(P0)
         m0 = (data.truth[0] + data.prior_offset @ L0.T) if mean0 is None else (
@@ -204,9 +303,9 @@ def run_block(scenario: Scenario, block: int,
             b, innov = f.update(b, data.z[k], sensor)
             elapsed += time.perf_counter() - t0
             g = f.estimate(b)
+            window.add(k, g, innov)
             if "bearing" in groups:
                 groups["bearing"].origin = plan.observer_states[0, k + 1, :2]
-            acc.add(k, data.truth[k + 1], g, innov)
             gap.add(k, data.truth[k + 1], g.mean, b)
             if cls is not None:
                 cls.add(k, b.class_prob)  # the classifier's own belief (class_names above)
@@ -218,6 +317,8 @@ def run_block(scenario: Scenario, block: int,
                 hm[k], hP[k] = g.mean[0], g.cov[0]
             if progress is not None and (k + 1) % PROGRESS_STEPS == 0:
                 progress((i + (k + 1) / T) / len(plan.filters))
+        window.flush()  # the last steps
+        acc.flush()  # their batch totals into the exact sums, before the block is kept or sent
         metrics[name], seconds[name] = acc, elapsed
         gaps[name] = gap.result(handler)
         if cls is not None:
@@ -232,17 +333,7 @@ def run_block(scenario: Scenario, block: int,
             est_hist[name] = (hm, hP)
         if progress is not None:
             progress((i + 1) / len(plan.filters))
-    # PCRLB ingredients: measurement information and derived-group gradients, summed over runs
-    info = np.empty((T, n, n))
-    for k in range(T):
-        sensor = plan.sensors[k]
-        H = np.broadcast_to(sensor.jacobian(data.truth[k + 1]), (r1 - r0, sensor.dim_z, n))
-        RinvH = np.linalg.solve(sensor.noise, H)
-        info[k] = plan.p_detect * np.einsum("bmi,bmj->ij", H, RinvH)
-    grads = {g: np.stack([_derived_gradient(g, d, n, data.truth[k + 1],
-                                            plan.observer_states[0, k + 1, :2]).sum(0)
-                          for k in range(T)])
-             for g in groups if g in ("speed", "course", "bearing")}
+    info, grads = _pcrlb_ingredients(plan, data.truth, groups)
     if keep:
         example = Example(times=plan.times[1:], truth=data.truth[1:, 0],
                           observer=plan.observer_states[0, 1:, :d], estimates=est_hist,
