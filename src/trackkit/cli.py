@@ -4,6 +4,9 @@ recorded data.
     trackkit list
     trackkit show bo-cv [--format toml|json]
     trackkit run [NAME|FILE] [--runs N] [--seed S] [--out DIR] [--workers K] [--scheduler ADDR]
+    trackkit sweep [NAME|FILE] --param PATH=V1,V2,... [--param ...] [--design grid|random|lhs]
+                   [--points N] [--runs N] [--seed S] [--block B] [--workers K | --scheduler ADDR]
+                   [--out DIR] [--fresh]
     trackkit network NAME|FILE [--runs N] [--seed S] [--out DIR] [--straight]
                      [--agents inprocess|processes]
     trackkit track FILE [--format ais|opensky|detections] [--as-radar] [radar, tracker and
@@ -592,6 +595,206 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     console.print(Text(f"wrote {len(paths)} files to {out}", style="green"))
     if html is not None:
         console.print(Text(f"report: {html}", style="green"))
+
+
+# --- trackkit sweep: campaigns ---------------------------------------------------------------
+
+
+class DesignName(StrEnum):
+    grid = "grid"
+    random = "random"
+    lhs = "lhs"
+
+
+#: point bars shown at once (the overall bars count every point)
+_POINT_BARS = 8
+
+
+def _sweep_listener(bar: Progress, console: Console) -> Any:
+    """The campaign's progress on ``bar``: runs over the campaign, points finished, and a bar
+    per point in progress. Dask's progress events arrive on another thread: only the main
+    thread delivers a pending Ctrl-C."""
+    import threading
+
+    from trackkit.eval.sweep import Listener
+
+    class Bars(Listener):
+        def start(self, campaign: Any, stored_runs: list[int], stored_blocks: list[int],
+                  finished: list[bool]) -> None:
+            self.lock = threading.Lock()
+            self.campaign, self.done, self.finished_ = campaign, list(stored_runs), finished
+            self.rows: dict[int, Any] = {}
+            n, runs = len(campaign.points), campaign.runs
+            nb = campaign.blocks_per_point
+            if any(stored_blocks):
+                console.print(Text(
+                    f"resuming: {sum(stored_blocks)} of {n * nb} blocks already stored "
+                    f"({sum(finished)} of {n} points complete)", style="yellow"),
+                    soft_wrap=True)
+            self.overall = bar.add_task("campaign", total=n * runs, unit="runs",
+                                        completed=sum(stored_runs))
+            self.points = bar.add_task("points", total=n, unit="points",
+                                       completed=sum(finished))
+
+        def progress(self, i: int, runs_done: float) -> None:
+            if threading.current_thread() is threading.main_thread():
+                _deliver_interrupt()
+            with self.lock:
+                self.done[i] = max(self.done[i], runs_done)
+                if i not in self.rows and len(self.rows) < _POINT_BARS and not (
+                        self.finished_[i]):
+                    label = self.campaign.points[i].label()
+                    label = label if len(label) <= 48 else label[:45] + "..."
+                    self.rows[i] = bar.add_task(f"  {label}", total=self.campaign.runs,
+                                                unit="runs")
+                if i in self.rows:
+                    bar.update(self.rows[i], completed=self.done[i])
+                bar.update(self.overall, completed=sum(self.done))
+
+        def finished(self, i: int) -> None:
+            with self.lock:
+                self.finished_[i] = True
+                bar.update(self.points, advance=1)
+                task = self.rows.pop(i, None)
+                if task is not None:
+                    bar.remove_task(task)
+
+    return Bars()
+
+
+@app.command()
+def sweep(
+    scenario: Annotated[str | None, typer.Argument(
+        help=SCENARIO_HELP, show_default="the bundled default")] = None,
+    param: Annotated[list[str] | None, typer.Option(
+        "--param", "-p", help="A swept field by its dotted path (as trackkit show prints it: "
+        "observers.0.sensor.sigma_deg, sensor.sigma_deg for every observer, "
+        "filters.EKF.motion.q for a filter's own assumption): PATH=V1,V2,... or, for "
+        "--points, PATH=LOW:HIGH or PATH=log:LOW:HIGH. Repeat for each parameter.",
+        show_default="the scenario's [sweep] table")] = None,
+    design: Annotated[DesignName | None, typer.Option(
+        "--design", help="The full grid of the values, or --points points drawn at random "
+        "or by Latin hypercube (seeded by --seed).",
+        show_default="the [sweep] table's, else grid")] = None,
+    points: Annotated[int | None, typer.Option(
+        "--points", callback=_at_least(1), help="random, lhs: the number of points; grid: "
+        "the values per range.")] = None,
+    runs: Annotated[int | None, typer.Option(
+        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs per point.",
+        show_default="the scenario's run.runs")] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", "-s", callback=_at_least(0), help="Campaign seed; each point's seed is a "
+        "hash of it and the point's values.", show_default="the scenario's run.seed")] = None,
+    block: Annotated[int | None, typer.Option(
+        "--block", callback=_at_least(1), help="Runs per block, the unit of work and of "
+        "checkpoints (results are bit-identical for the same block size).",
+        show_default="the scenario's run.block")] = None,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", "-w", callback=_at_least(1), help="Local Dask workers (at least 1).",
+        show_default="none: in this process")] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.",
+        show_default="none")] = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Campaign directory (created if missing): checkpoints and "
+        "report.", show_default="trackkit-out/SCENARIO-sweep")] = None,
+    fresh: Annotated[bool, typer.Option(
+        "--fresh", help="Discard the blocks stored in the campaign directory and start "
+        "afresh (needed when the scenario, sweep, runs, seed, block or code changed).")
+    ] = False,
+) -> None:
+    """Run a Monte Carlo comparison at every point of a sweep over scenario fields; write
+    sweep.parquet, sweep.csv, figures and report.html.
+
+    Every finished block is stored in the campaign directory: run the same command again
+    after an interruption and it resumes, with bit-identical results. A point's seed derives
+    from the campaign seed and its values, so adding points leaves the others unchanged."""
+    with _user_errors() as state:
+        if workers and scheduler:
+            raise ValueError(f"--workers {workers} and --scheduler {scheduler}: give one, "
+                             "--workers for a local Dask cluster or --scheduler for a running "
+                             "one")
+        sc = _load(scenario or _default_name())
+        if _is_network(sc) or _is_vessel(sc) or _is_multitarget(sc):
+            raise ValueError(f"{scenario}: trackkit sweep runs single-target Monte Carlo "
+                             "comparisons (the scenarios of trackkit run without [scene], "
+                             "[[agents]] or [vessel])")
+        from trackkit.eval.checkpoint import CampaignStore, CheckpointError
+        from trackkit.eval.sweep import BlockFailed, parse_param, plan_campaign, run_campaign
+        from trackkit.report.sweep_report import sweep_outputs, write_sweep_report
+
+        params = [parse_param(p) for p in param or []]
+        with _stderr().status("checking every point of the sweep"):
+            campaign = plan_campaign(sc, params, design.value if design else None, points,
+                                     runs, seed, block)
+        target, label = _output_dir(out, f"{sc.name}-sweep")
+        with OutputDir(target, label) as where:
+            state.interrupted = f"interrupted; nothing was stored in {target}"
+            if where.note:
+                _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
+            store = CampaignStore(where.path, label)
+            store.open(campaign.identity(), fresh=fresh, scenario_toml=_dumps(campaign.base),
+                       outputs=sweep_outputs(where.path))
+            state.interrupted = (f"interrupted; the finished blocks are stored in {target}: "
+                                 "run the same command again to resume")
+            console = _stderr()
+            console.print(Text(
+                f"{sc.name}: {campaign.design} design, {len(campaign.points)} points x "
+                f"{campaign.runs} runs (block {campaign.block}, seed {campaign.seed}) -> "
+                f"{target}", style="bold"), soft_wrap=True)
+            try:
+                with _progress_bar(console) as bar:
+                    docs = run_campaign(campaign, store, workers=workers, scheduler=scheduler,
+                                        listener=_sweep_listener(bar, console))
+                    _deliver_interrupt()
+            except BlockFailed as err:
+                _fail(f"{err}. The campaign stopped; the blocks finished so far are stored in "
+                      f"{target}: fix the cause and run the same command again to resume",
+                      1)
+            except CheckpointError as err:
+                _fail(str(err), 1)
+            with _stderr().status("writing the report"):
+                paths = write_sweep_report(campaign, docs, where.path,
+                                           [store.load_timings(p.id) for p in campaign.points])
+            state.interrupted = "interrupted"
+            _print_sweep_summary(campaign, docs, paths)
+
+
+def _print_sweep_summary(campaign: Any, docs: list[dict], paths: dict[str, Path]) -> None:
+    from rich.markup import escape
+
+    from trackkit.report.tables import display_unit
+
+    console = Console()
+    g = campaign.base.report.groups[0]
+    unit, factor = display_unit(docs[0]["units"].get(g, "") if docs else "")
+    table = Table("point", *(escape(p.path) for p in campaign.params), "filter",
+                  escape(f"{g} RMSE [{unit}]"), "RMSE / PCRLB", "ANEES", "diverged",
+                  title=f"{campaign.base.name}: {len(campaign.points)} points x "
+                  f"{campaign.runs} runs, seed {campaign.seed}", title_justify="left")
+
+    def num(v: Any, scale: float = 1.0) -> str:
+        return "n/a" if v is None else f"{v * scale:.4g}"
+
+    shown, limit = 0, 40
+    for d in docs:
+        for name, f in d["filters"].items():
+            if shown == limit:
+                break
+            shown += 1
+            table.add_row(d["point"], *(escape(str(d["values"][p.path]))
+                                        for p in campaign.params), name,
+                          num(f["rmse"].get(g), factor), num(f["rmse_pcrlb"].get(g)),
+                          num(f["anees"]), f"{f['diverged'] / d['runs']:.1%}")
+    console.print(table)
+    rows = sum(len(d["filters"]) for d in docs)
+    if rows > shown:
+        console.print(Text(f"... {rows - shown} more rows in {paths['csv']}", style="dim"))
+    for note in campaign.notes:
+        console.print(Text(f"note: {note}", style="yellow"), soft_wrap=True)
+    console.print(Text(f"wrote {len(paths)} files to {paths['html'].parent}", style="green"),
+                  soft_wrap=True)
+    console.print(Text(f"report: {paths['html']}", style="green"), soft_wrap=True)
 
 
 class AgentsMode(StrEnum):

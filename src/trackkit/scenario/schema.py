@@ -746,6 +746,70 @@ class FilterSpec(_Strict):
             raise_at(("options",), self.options, f"filter {self.name!r} ({self.type}): {err}")
         return self
 
+#: a sweep range: "LOW:HIGH" (uniform) or "log:LOW:HIGH" (log-uniform, LOW > 0)
+SWEEP_RANGE = re.compile(r"(log:)?([^:]+):([^:]+)")
+
+
+def parse_range(text: str) -> tuple[float, float, bool] | None:
+    """``(low, high, log)`` of a sweep range ``"LOW:HIGH"`` or ``"log:LOW:HIGH"``; None when
+    ``text`` is not of that form (a value); ValueError when it is but the numbers are not a
+    range (finite, low < high, low > 0 for log)."""
+    m = SWEEP_RANGE.fullmatch(text.strip())
+    if m is None:
+        return None
+    try:
+        low, high = float(m.group(2)), float(m.group(3))
+    except ValueError:
+        return None
+    log = m.group(1) is not None
+    if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        raise ValueError(f"range {text!r}: expected finite LOW < HIGH")
+    if log and low <= 0:
+        raise ValueError(f"range {text!r}: a log range needs 0 < LOW < HIGH")
+    return low, high, log
+
+
+class SweepSpec(_Strict):
+    """A parameter sweep for ``trackkit sweep`` (ignored by ``trackkit run``): each swept
+    field by its dotted path, as ``trackkit show`` prints it (``observers.0.sensor.sigma_deg``,
+    ``sensor.sigma_deg`` for every observer's sensor, ``filters.EKF.motion.q`` for a filter's
+    own assumption apart from the truth), with a list of values or a range; the command's
+    ``--param``, ``--design`` and ``--points`` replace these."""
+
+    params: dict[str, list[Any] | str] = Field(
+        description="path -> values (a list) or a range \"LOW:HIGH\" (uniform) or "
+        "\"log:LOW:HIGH\" (log-uniform); a grid takes `points` evenly spaced values of a range",
+        json_schema_extra=_unit("the field's"))
+    design: Literal["grid", "random", "lhs"] = Field(
+        "grid", description="the full grid of the values, or `points` points drawn at random "
+        "or by Latin hypercube (seeded by the campaign seed)")
+    points: Annotated[int, Field(ge=1)] | None = Field(
+        None, description="random, lhs: the number of points; grid: the values per range",
+        json_schema_extra=_unit("points"))
+
+    @model_validator(mode="after")
+    def _ranges(self) -> SweepSpec:
+        if not self.params:
+            raise ValueError("sweep.params is empty; expected at least one path = values")
+        for path, values in self.params.items():
+            if isinstance(values, list):
+                if not values:
+                    raise_at(("params", path), values, f"{path}: no values; expected a "
+                             "non-empty list or a range \"LOW:HIGH\"")
+                continue
+            try:
+                if parse_range(values) is None:
+                    raise ValueError(f"{values!r} is neither a list of values nor a range")
+            except ValueError as err:
+                raise_at(("params", path), values, f"{path}: {err}; expected a list of "
+                         "values, \"LOW:HIGH\" or \"log:LOW:HIGH\"")
+        ranged = [p for p, v in self.params.items() if isinstance(v, str)]
+        if (self.design != "grid" or ranged) and self.points is None:
+            what = (f"a {self.design} design" if self.design != "grid"
+                    else f"the ranges of {ranged} in a grid")
+            raise ValueError(f"sweep.points is missing; {what} needs it")
+        return self
+
 
 class RunSpec(_Strict):
     """The Monte Carlo runs."""
@@ -810,6 +874,8 @@ class Scenario(_Strict):
                              "results (sources, choices, readings of a paper)")
     gaps: GapsSpec | None = Field(None, description="missing measurements for every filter "
                                   "(see `gaps`)")
+    sweep: SweepSpec | None = Field(None, description="a parameter sweep for `trackkit sweep` "
+                                    "(see `sweep`); `trackkit run` ignores it")
 
     _plain_name = field_validator("name")(classmethod(lambda cls, v: check_plain_name(v)))
 

@@ -1,0 +1,483 @@
+"""A campaign's report files (``trackkit sweep``): the sweep table, its figures and one page.
+
+Files, written into the campaign directory all or nothing (``files.write_atomically``):
+
+- ``sweep.parquet`` and ``sweep.csv``: one row per point and filter: ``point`` (its id),
+  ``seed`` (its master seed), one column per swept parameter (named by its path), ``filter``,
+  ``runs``, then per error group ``g`` of the scenario's report: ``rmse_g``, ``pcrlb_g`` and
+  ``rmse_pcrlb_g`` (RMSE over the PCRLB, time averaged from ``report.average_from_s``), then
+  ``anees``, ``anis``, ``nees_in_bounds``, ``diverged`` (runs) and ``diverged_share``. SI
+  units (radians for angles; the Parquet fields carry them as ``unit`` metadata); a missing
+  value is null (Parquet) or empty (CSV); CSV floats are written as the shortest text that
+  reads back to the same double.
+- ``sweep.json``: the design: parameters, every point's id, values and seed.
+- ``lines-PARAM.png``: each headline metric against each swept parameter, one colour per
+  filter (the other parameters fixed at each of their levels, up to three line styles, else
+  at their middle level); a random or Latin-hypercube design is shown as points.
+- ``heatmap-METRIC.png``: for a grid over two parameters, each metric over the grid, one
+  panel per filter.
+- ``report.html``: the settings, the table of headline metrics and the figures inlined.
+- ``timings.json``: each point's filters' wall-clock time per run-step (not deterministic).
+
+The table, ``sweep.json`` and the points' results are the same bytes for the same command,
+whatever the executor, the workers or the interruptions.
+"""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import json
+import math
+import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from trackkit.report.files import write_atomically
+from trackkit.report.html import data_uri
+from trackkit.report.tables import display_unit
+
+__all__ = ["sweep_table", "write_sweep_csv", "write_sweep_report", "render_sweep_html",
+           "line_figures", "heatmap_figures", "sweep_outputs", "headline_metrics",
+           "SWEEP_PARQUET", "SWEEP_CSV", "SWEEP_JSON", "SWEEP_HTML", "SWEEP_TIMINGS"]
+
+SWEEP_PARQUET = "sweep.parquet"
+SWEEP_CSV = "sweep.csv"
+SWEEP_JSON = "sweep.json"
+SWEEP_HTML = "report.html"
+SWEEP_TIMINGS = "timings.json"
+_FIXED = (SWEEP_PARQUET, SWEEP_CSV, SWEEP_JSON, SWEEP_HTML, SWEEP_TIMINGS)
+_FIGURE = re.compile(r"(lines|heatmap)-[A-Za-z0-9._-]+\.png")
+_DPI = 100
+_STYLES = ("-", "--", ":")
+
+
+def sweep_outputs(out_dir: str | Path) -> list[str]:
+    """The report files of a campaign present in ``out_dir`` (what ``--fresh`` removes)."""
+    d = Path(out_dir)
+    figures = sorted(p.name for p in d.iterdir() if _FIGURE.fullmatch(p.name)) if (
+        d.is_dir()) else []
+    return [*_FIXED, *figures]
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_") or "x"
+
+
+# --- the table ----------------------------------------------------------------------------
+
+
+def _param_type(values: Iterable[Any]) -> pa.DataType:
+    values = list(values)
+    if all(isinstance(v, bool) for v in values):
+        return pa.bool_()
+    if all(isinstance(v, int) and not isinstance(v, bool) for v in values):
+        return pa.int64()
+    if all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+        return pa.float64()
+    return pa.string()
+
+
+def _param_cell(v: Any, kind: pa.DataType) -> Any:
+    if kind == pa.string():
+        return v if isinstance(v, str) else json.dumps(v)
+    if kind == pa.float64():
+        return float(v)
+    return v
+
+
+def sweep_table(campaign: Any, docs: Sequence[dict]) -> pa.Table:
+    """One row per point (design order) and filter (scenario order); see the module doc."""
+    groups = list(campaign.base.report.groups)
+    units = dict(docs[0]["units"]) if docs else {}
+    paths = [p.path for p in campaign.params]
+    kinds = {path: _param_type(d["values"][path] for d in docs) for path in paths}
+    cols: dict[str, list] = {"point": [], "seed": []}
+    cols.update({path: [] for path in paths})
+    cols.update({"filter": [], "runs": []})
+    for g in groups:
+        cols.update({f"rmse_{g}": [], f"pcrlb_{g}": [], f"rmse_pcrlb_{g}": []})
+    cols.update({"anees": [], "anis": [], "nees_in_bounds": [], "diverged": [],
+                 "diverged_share": []})
+    for d in docs:
+        for name, f in d["filters"].items():
+            cols["point"].append(d["point"])
+            cols["seed"].append(d["seed_point"])
+            for path in paths:
+                cols[path].append(_param_cell(d["values"][path], kinds[path]))
+            cols["filter"].append(name)
+            cols["runs"].append(d["runs"])
+            for g in groups:
+                cols[f"rmse_{g}"].append(f["rmse"].get(g))
+                cols[f"pcrlb_{g}"].append(d["pcrlb"].get(g))
+                cols[f"rmse_pcrlb_{g}"].append(f["rmse_pcrlb"].get(g))
+            for k in ("anees", "anis", "nees_in_bounds", "diverged"):
+                cols[k].append(f[k])
+            cols["diverged_share"].append(f["diverged"] / d["runs"])
+    fields = []
+    for name in cols:
+        unit = None
+        if name in ("point", "filter"):
+            kind = pa.string()
+        elif name in ("seed", "runs", "diverged"):
+            kind = pa.int64()
+            unit = "runs" if name != "seed" else None
+        elif name in kinds:
+            kind = kinds[name]
+        else:
+            kind = pa.float64()
+            for prefix in ("rmse_pcrlb_", "rmse_", "pcrlb_"):
+                if name.startswith(prefix):
+                    unit = "1" if prefix == "rmse_pcrlb_" else units.get(name[len(prefix):])
+                    break
+            else:
+                unit = "1"
+        fields.append(pa.field(name, kind, metadata={"unit": unit} if unit else None))
+    meta = {"scenario": campaign.base.name, "design": campaign.design, "seed": campaign.seed,
+            "runs": campaign.runs, "block": campaign.block, "parameters": paths,
+            "groups": units}
+    schema = pa.schema(fields, metadata={"trackkit": json.dumps(meta)})
+    return pa.Table.from_arrays([pa.array(v, type=f.type) for v, f in
+                                 zip(cols.values(), fields, strict=True)], schema=schema)
+
+
+def _csv_cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else ""
+    return str(v)
+
+
+def write_sweep_csv(table: pa.Table, path: str | Path) -> Path:
+    """The table as CSV (a header line, then rows; shortest round-trip floats)."""
+    path = Path(path)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(table.column_names)
+    for row in zip(*(table.column(i).to_pylist() for i in range(table.num_columns)),
+                   strict=True):
+        w.writerow([_csv_cell(v) for v in row])
+    path.write_text(buf.getvalue(), encoding="utf-8")
+    return path
+
+
+# --- figures ------------------------------------------------------------------------------
+
+
+def headline_metrics(campaign: Any, table: pa.Table) -> list[tuple[str, str]]:
+    """(column, label) of the plotted metrics: the first group's RMSE and RMSE/PCRLB, ANEES
+    and the share of runs that diverged."""
+    g = campaign.base.report.groups[0]
+    unit = json.loads(table.schema.metadata[b"trackkit"])["groups"].get(g, "")
+    shown, _ = display_unit(unit)
+    return [(f"rmse_{g}", f"{g} RMSE [{shown}]"), (f"rmse_pcrlb_{g}", f"{g} RMSE / PCRLB"),
+            ("anees", "ANEES"), ("diverged_share", "share of runs diverged")]
+
+
+def _column_values(table: pa.Table, name: str) -> np.ndarray:
+    vals = table.column(name).to_pylist()
+    return np.array([np.nan if v is None else v for v in vals], dtype=float)
+
+
+def _numeric(values: Sequence[Any]) -> bool:
+    return all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+
+
+def _levels(values: Sequence[Any]) -> list[Any]:
+    uniq = list(dict.fromkeys(values))
+    return sorted(uniq) if _numeric(uniq) else uniq
+
+
+def _figure(w: float, h: float):
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(w, h), layout="constrained")
+
+
+def _save(fig: Any, path: Path) -> Path:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=_DPI, format="png", metadata={"Software": None})
+    return path
+
+
+def _scaled(table: pa.Table, column: str) -> np.ndarray:
+    """A metric column in display units (degrees for an RMSE in radians)."""
+    v = _column_values(table, column)
+    if column.startswith("rmse_") and not column.startswith("rmse_pcrlb_"):
+        unit = json.loads(table.schema.metadata[b"trackkit"])["groups"].get(column[5:], "")
+        v = v * display_unit(unit)[1]
+    return v
+
+
+def line_figures(campaign: Any, table: pa.Table) -> dict[str, Any]:
+    """``lines-PARAM`` -> a figure of the headline metrics against that parameter."""
+    metrics = headline_metrics(campaign, table)
+    filters = list(dict.fromkeys(table.column("filter").to_pylist()))
+    colours = {f: f"C{i % 10}" for i, f in enumerate(filters)}
+    paths = [p.path for p in campaign.params]
+    values = {p: table.column(p).to_pylist() for p in paths}
+    rows_filter = table.column("filter").to_pylist()
+    scattered = campaign.design != "grid"
+    n = campaign.base.state_dim
+    out = {}
+    for param in campaign.params:
+        x_all = values[param.path]
+        levels = _levels(x_all)
+        numeric = _numeric(levels)
+        others = [p for p in paths if p != param.path]
+        combos = _levels([tuple(values[o][r] for o in others) for r in range(len(x_all))]) if (
+            others and not scattered) else [()]
+        note = ""
+        if len(combos) > len(_STYLES):
+            middle = tuple(_levels(values[o])[len(_levels(values[o])) // 2] for o in others)
+            combos = [middle]
+            note = "others at " + ", ".join(f"{o}={_fmt(v)}" for o, v in zip(others, middle,
+                                                                              strict=True))
+        fig = _figure(10.0, 7.0)
+        axes = fig.subplots(2, 2).ravel()
+        for ax, (column, label) in zip(axes, metrics, strict=True):
+            y_all = _scaled(table, column)
+            for f in filters:
+                for k, combo in enumerate(combos):
+                    rows = [r for r in range(len(x_all)) if rows_filter[r] == f and (
+                        scattered or tuple(values[o][r] for o in others) == combo)]
+                    if not rows:
+                        continue
+                    xs = [x_all[r] for r in rows]
+                    pos = np.array(xs, dtype=float) if numeric else np.array(
+                        [levels.index(x) for x in xs], dtype=float)
+                    order = np.argsort(pos, kind="stable")
+                    ys = y_all[rows][order]
+                    if scattered:
+                        ax.plot(pos[order], ys, "o", color=colours[f], ms=4, label=f)
+                    else:
+                        ax.plot(pos[order], ys, _STYLES[k], marker="o", ms=3,
+                                color=colours[f], label=f if k == 0 else None)
+            if column.startswith("rmse_pcrlb_"):
+                ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
+            if column == "anees":
+                ax.axhline(float(n), color="0.5", lw=0.8, ls=":")
+            finite = y_all[np.isfinite(y_all)]
+            if column != "diverged_share" and finite.size and finite.min() > 0 and (
+                    finite.max() / finite.min() > 30):
+                ax.set_yscale("log")
+            if numeric and all(v > 0 for v in levels) and (
+                    param.log or max(levels) / min(levels) >= 20):
+                ax.set_xscale("log")
+            if not numeric:
+                ax.set_xticks(range(len(levels)), [_fmt(v) for v in levels])
+            ax.set_xlabel(param.path)
+            ax.set_ylabel(label)
+            ax.grid(True, alpha=0.3)
+        handles, labels = axes[0].get_legend_handles_labels()
+        if len(combos) > 1:
+            from matplotlib.lines import Line2D
+
+            for k, combo in enumerate(combos):
+                handles.append(Line2D([], [], color="0.3", ls=_STYLES[k]))
+                labels.append(", ".join(f"{o}={_fmt(v)}" for o, v in zip(others, combo,
+                                                                         strict=True)))
+        axes[0].legend(handles, labels, fontsize=7)
+        title = f"{campaign.base.name}: metrics against {param.path}"
+        fig.suptitle(title + (f" ({note})" if note else ""), fontsize=10)
+        out[f"lines-{_slug(param.path)}"] = fig
+    return out
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    return v if isinstance(v, str) else json.dumps(v)
+
+
+def heatmap_figures(campaign: Any, table: pa.Table) -> dict[str, Any]:
+    """For a grid over two parameters: ``heatmap-METRIC`` -> each metric over the grid, one
+    panel per filter (a shared colour scale)."""
+    if campaign.design != "grid" or len(campaign.params) != 2:
+        return {}
+    px, py = (p.path for p in campaign.params)
+    xs, ys = table.column(px).to_pylist(), table.column(py).to_pylist()
+    lx, ly = _levels(xs), _levels(ys)
+    filters = list(dict.fromkeys(table.column("filter").to_pylist()))
+    rows_filter = table.column("filter").to_pylist()
+    ncol = min(len(filters), 4)
+    nrow = -(-len(filters) // ncol)
+    out = {}
+    for column, label in headline_metrics(campaign, table):
+        v = _scaled(table, column)
+        grids = {}
+        for f in filters:
+            m = np.full((len(ly), len(lx)), np.nan)
+            for r in range(len(xs)):
+                if rows_filter[r] == f:
+                    m[ly.index(ys[r]), lx.index(xs[r])] = v[r]
+            grids[f] = m
+        finite = v[np.isfinite(v)]
+        lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+        fig = _figure(3.2 * ncol + 1.0, 2.8 * nrow + 0.6)
+        axes = np.atleast_1d(fig.subplots(nrow, ncol)).ravel()
+        image = None
+        for ax, f in zip(axes, filters, strict=False):
+            image = ax.imshow(grids[f], origin="lower", aspect="auto", cmap="viridis",
+                              vmin=lo, vmax=hi if hi > lo else lo + 1.0)
+            for i in range(len(ly)):
+                for j in range(len(lx)):
+                    val = grids[f][i, j]
+                    if math.isfinite(val):
+                        ax.text(j, i, f"{val:.3g}", ha="center", va="center", fontsize=7,
+                                color="w" if val < 0.5 * (lo + hi) else "k")
+            ax.set_xticks(range(len(lx)), [_fmt(x) for x in lx], fontsize=7)
+            ax.set_yticks(range(len(ly)), [_fmt(y) for y in ly], fontsize=7)
+            ax.set_xlabel(px, fontsize=8)
+            ax.set_ylabel(py, fontsize=8)
+            ax.set_title(f, fontsize=9)
+        for ax in axes[len(filters):]:
+            ax.set_visible(False)
+        if image is not None:
+            fig.colorbar(image, ax=list(axes[:len(filters)]), label=label, shrink=0.9)
+        fig.suptitle(f"{campaign.base.name}: {label}", fontsize=10)
+        out[f"heatmap-{_slug(column)}"] = fig
+    return out
+
+
+# --- the page -----------------------------------------------------------------------------
+
+_CSS = """
+body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto;
+       max-width: 1100px; padding: 0 1em; color: #222; }
+h1 { font-size: 1.5em; margin-bottom: 0.2em; }
+.meta { color: #555; margin-top: 0; }
+table.sweep { border-collapse: collapse; margin: 1em 0; font-size: 0.85em; }
+table.sweep th, table.sweep td { border-bottom: 1px solid #ddd; padding: 0.25em 0.6em; }
+table.sweep td { text-align: right; font-variant-numeric: tabular-nums; }
+table.sweep td.text { text-align: left; }
+table.sweep thead th { border-bottom: 2px solid #888; text-align: left; }
+figure { margin: 1.5em 0; }
+figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
+figcaption { color: #555; font-size: 0.9em; }
+"""
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, float):
+        return f"{v:.4g}" if math.isfinite(v) else "n/a"
+    return html.escape(str(v))
+
+
+def render_sweep_html(campaign: Any, table: pa.Table, images: dict[str, Path | bytes],
+                      notes: Sequence[str] = ()) -> str:
+    """The campaign's page: settings, parameters, the headline table and the figures."""
+    from trackkit import __version__
+    from trackkit.eval.checkpoint import code_version
+
+    esc = html.escape
+    code = code_version()
+    metrics = headline_metrics(campaign, table)
+    paths = [p.path for p in campaign.params]
+    parts = ["<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
+             '<meta name="viewport" content="width=device-width, initial-scale=1">',
+             f"<title>trackkit sweep: {esc(campaign.base.name)}</title>",
+             f"<style>{_CSS}</style></head>", "<body>",
+             f"<h1>Sweep: {esc(campaign.base.name)}</h1>"]
+    if campaign.base.description:
+        parts.append(f"<p>{esc(campaign.base.description)}</p>")
+    parts.append(
+        f'<p class="meta">{campaign.design} design, {len(campaign.points)} points x '
+        f"{campaign.runs} Monte Carlo runs (block {campaign.block}), campaign seed "
+        f"{campaign.seed}. trackkit {esc(__version__)}, source {esc(code['source'])}, numpy "
+        f"{esc(code['numpy'])}.</p>")
+    parts.append("<h2>Parameters</h2><ul>")
+    parts += [f"<li><code>{esc(p.path)}</code>: {esc(p.describe())}</li>"
+              for p in campaign.params]
+    parts.append("</ul>")
+    head = ["point", *paths, "filter", *(label for _, label in metrics)]
+    parts.append('<h2>Results</h2><table class="sweep"><thead><tr>'
+                 + "".join(f"<th>{esc(h)}</th>" for h in head) + "</tr></thead><tbody>")
+    cols = {c: table.column(c).to_pylist() for c in ["point", *paths, "filter",
+                                                      *(c for c, _ in metrics)]}
+    for r in range(table.num_rows):
+        cells = [f'<td class="text">{_cell(cols["point"][r])}</td>']
+        cells += [f"<td>{_cell(cols[p][r])}</td>" for p in paths]
+        cells.append(f'<td class="text">{_cell(cols["filter"][r])}</td>')
+        for c, _ in metrics:
+            v = cols[c][r]
+            if v is not None and c.startswith("rmse_") and not c.startswith("rmse_pcrlb_"):
+                unit = json.loads(table.schema.metadata[b"trackkit"])["groups"].get(c[5:], "")
+                v = v * display_unit(unit)[1]
+            cells.append(f"<td>{_cell(v)}</td>")
+        parts.append("<tr>" + "".join(cells) + "</tr>")
+    parts.append("</tbody></table>")
+    parts.append('<p class="meta">Every column of every metric group is in sweep.csv and '
+                 "sweep.parquet (SI units); each point's full result in "
+                 "points/ID/result.json.</p>")
+    all_notes = [
+        "Each point's seed is a hash of the campaign seed and the point's values, so adding "
+        "points leaves the others' runs unchanged; all filters at a point see the same truths "
+        "and measurements.",
+        "RMSE / PCRLB and ANEES are averaged over the steps from report.average_from_s; "
+        f"ANEES is about n = {campaign.base.state_dim} for a consistent filter.",
+        *campaign.notes, *notes]
+    parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in all_notes)
+                 + "</ul>")
+    if images:
+        parts.append("<h2>Figures</h2>")
+    for name, png in images.items():
+        caption = ("Headline metrics against " + name[len("lines-"):] if name.startswith(
+            "lines-") else "Heat map over the grid: " + name[len("heatmap-"):])
+        parts.append(f'<figure><img src="{data_uri(png)}" alt="{esc(name)}">'
+                     f"<figcaption>{esc(caption)}</figcaption></figure>")
+    parts += ["</body>", "</html>", ""]
+    return "\n".join(parts)
+
+
+# --- writing ------------------------------------------------------------------------------
+
+
+def _timings(campaign: Any, timings: Sequence[dict | None]) -> dict:
+    return {"units": {"seconds_per_step": "s of filter time per run and step"},
+            "points": {p.id: (t or {}).get("seconds_per_step")
+                       for p, t in zip(campaign.points, timings, strict=True)}}
+
+
+def write_sweep_report(campaign: Any, docs: Sequence[dict], out_dir: str | Path,
+                       timings: Sequence[dict | None] | None = None,
+                       notes: Sequence[str] = ()) -> dict[str, Path]:
+    """Write the campaign's report files into ``out_dir`` (see the module doc), all or
+    nothing; figures of an earlier design that this one does not draw are removed."""
+    table = sweep_table(campaign, docs)
+
+    def write_all(folder: Path) -> dict[str, Path]:
+        written = {"parquet": folder / SWEEP_PARQUET}
+        pq.write_table(table, written["parquet"])
+        written["csv"] = write_sweep_csv(table, folder / SWEEP_CSV)
+        written["json"] = folder / SWEEP_JSON
+        written["json"].write_text(json.dumps(campaign.document(), indent=2) + "\n",
+                                   encoding="utf-8")
+        figures = {**line_figures(campaign, table), **heatmap_figures(campaign, table)}
+        images = {}
+        for name, fig in figures.items():
+            images[name] = _save(fig, folder / f"{name}.png")
+            written[name] = images[name]
+        written["html"] = folder / SWEEP_HTML
+        written["html"].write_text(render_sweep_html(campaign, table, images, notes),
+                                   encoding="utf-8")
+        written["timings"] = folder / SWEEP_TIMINGS
+        written["timings"].write_text(json.dumps(
+            _timings(campaign, timings or [None] * len(campaign.points)), indent=2,
+            allow_nan=False) + "\n", encoding="utf-8")
+        return written
+
+    return write_atomically(out_dir, write_all, sweep_outputs(out_dir))
