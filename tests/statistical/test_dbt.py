@@ -45,7 +45,8 @@ def test_proposed_filter_beats_the_ekf_on_position(results, name):
 
 
 @pytest.mark.xfail(strict=True, reason="the paper's margins (AMCEKF/EKF = 0.58, 0.47, 0.66) "
-                   "do not reproduce: we get 0.88-0.95 (docs/dbt-comparison.md)")
+                   "do not reproduce with well-specified noise: we get 0.88-0.95; with poor "
+                   "Q0 and R0 they do (test_dbt_premise.py, docs/dbt-comparison.md)")
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_proposed_filter_ratio_below_0_8(results, name):
     r = results[name]
@@ -79,3 +80,31 @@ def test_no_filter_diverges_and_all_stay_above_the_bound(results):
             assert r.filters[f].diverged == 0
             # an estimator cannot beat the PCRLB (position is a linear group: a true bound)
             assert _pos(r, f) > r.pcrlb_mean["position"]
+
+
+def _window_rmse(result, f, lo, hi=float("inf")):
+    """Position RMSE over the runs and the steps lo <= t < hi, from the per-step RMSE."""
+    m = (result.times >= lo - 1e-9) & (result.times < hi - 1e-9)
+    return float((result.filters[f].rmse["position"][m] ** 2).mean() ** 0.5)
+
+
+def test_with_well_specified_noise_adaptation_gains_little(results):
+    # The other side of the premise (tests/statistical/test_dbt_premise.py has the
+    # mis-specified variants): with a well-tuned q and the true R the EKF is at 1.3-1.4
+    # times the PCRLB, and the AMCEKF gains 12%, 5% and 10% on it from 600 s (transient
+    # 600-1000 s: 15%, 9%, 13%; steady 1000-2000 s: 5%, -1%, 7%). Asserted with a margin:
+    # at most 15% from 600 s and at most 10% in the steady window, in every geometry.
+    print()
+    for name, r in results.items():
+        bound = r.pcrlb_mean["position"]
+        print(f"{name}: position PCRLB {bound:.1f} m (from 600 s)")
+        for f in FILTERS:
+            fr = r.filters[f]
+            print(f"  {f:7s} RMSE {_pos(r, f):6.1f} m  RMSE/PCRLB {_pos(r, f) / bound:.2f}  "
+                  f"ANEES {fr.anees:.2f}  transient {_window_rmse(r, f, 600, 1000):6.1f} m  "
+                  f"steady {_window_rmse(r, f, 1000):6.1f} m  ratio to the EKF "
+                  f"{_pos(r, f) / _pos(r, 'EKF'):.3f}")
+        assert 1.2 < _pos(r, "EKF") / bound < 1.5, name
+        assert _pos(r, "AMCEKF") / _pos(r, "EKF") > 0.85, name
+        steady = _window_rmse(r, "AMCEKF", 1000) / _window_rmse(r, "EKF", 1000)
+        assert steady > 0.9, (name, steady)
