@@ -9,9 +9,11 @@ section 2.4 (``predict_x`` overridden with the nonlinear step, ``F`` set to the 
 Joseph-form update); trackkit runs ``identify`` batched over ``--runs`` runs. Before timing,
 trackkit's first run (in the batch) is checked against FilterPy's, sample by sample.
 
-Rows: ``identify(filter="ekf")`` (the EKF by blocks of F = [[A, B], [0, I]]), the generic
-``trackkit.filters.EKF()``, ``UKF()`` and ``CKF()`` on the same model, the structured EKF with
-ten Euler sub-steps per sample (the default identifier), and batch least squares. Ratio =
+Rows: ``identify(filter="ekf")`` (the EKF by blocks of F = [[A, B], [0, I]], compiled:
+``trackkit.identify.fused``; timed after a first call, which compiles or loads the kernel),
+the generic ``trackkit.filters.EKF()``, ``UKF()`` and ``CKF()`` on the same model, the
+compiled EKF with ten Euler sub-steps per sample (the default identifier), and batch least
+squares. Ratio =
 FilterPy's time per step / trackkit's time per run-step. Best of ``--repeat``, FilterPy and
 trackkit timed in turn.
 
@@ -130,12 +132,13 @@ def main() -> None:
         raise SystemExit("trackkit's first run differs from FilterPy's")
 
     rows = {
-        "EKF, `identify(filter=\"ekf\")` (by blocks)": lambda: identify(z, s, rec.T, **kw),
+        "EKF, `identify(filter=\"ekf\")` (by blocks, compiled)": lambda: identify(
+            z, s, rec.T, **kw),
         "EKF, generic `tk.filters.EKF()`": lambda: identify(z, s, rec.T, filter=tk.filters.EKF(),
                                                              **kw),
         "UKF, `tk.filters.UKF()`": lambda: identify(z, s, rec.T, filter="ukf", **kw),
         "CKF, `tk.filters.CKF()`": lambda: identify(z, s, rec.T, filter="ckf", **kw),
-        "EKF by blocks, 10 sub-steps per sample": lambda: identify(
+        "EKF by blocks, compiled, 10 sub-steps per sample": lambda: identify(
             z, s, rec.T, **(kw | {"substeps": 10})),
         "batch least squares (QR, three equations)": lambda: least_squares(
             z, s, rec.T, starts=starts),

@@ -156,18 +156,6 @@ def test_structured_ekf_equals_the_generic_filter(rec, m):
     np.testing.assert_array_equal(a.cov_history, np.swapaxes(a.cov_history, -1, -2))
 
 
-def test_the_3x3_inverse_and_its_check():
-    from trackkit.identify.augmented import _inverse_spd3
-
-    rng = np.random.default_rng(4)
-    M = rng.standard_normal((6, 3, 3))
-    S = M @ M.mT + 0.1 * np.eye(3)
-    np.testing.assert_allclose(_inverse_spd3(S), np.linalg.inv(S), rtol=1e-12, atol=1e-12)
-    S[4] = np.diag([1.0, -1.0, 1.0])
-    with pytest.raises(ValueError, match="not positive definite in 1 run"):
-        _inverse_spd3(S)
-
-
 def test_one_run_without_batch_axes(rec):
     one = identify(rec.z[2, :K], rec.s[2, :K], rec.T, starts=rec.starts[:K])
     batch = identify(rec.z[:, :K], rec.s[:, :K], rec.T, starts=rec.starts[:K])

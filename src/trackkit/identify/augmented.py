@@ -12,12 +12,13 @@ prediction takes ``substeps = m`` forward-Euler steps of ``h = T / m`` (``Sample
 ``s_m = (s_{k-1} + s_k) / 2`` (``AugmentedVessel`` itself). The update uses
 ``y_k = H x_a + e_k``, ``H = [I3 0]``, ``e ~ N(0, diag(sigma_z^2))``. Batched over the
 leading run axes of the data; only time is looped over. ``filter="ekf"`` (the default) runs
-the EKF equations by blocks, using ``F = [[A, B], [0, I]]`` and ``H = [I3 0]``
-(``_predict_blocks``, ``_update_blocks``: O(n^2) per run and step instead of O(n^3); 12
-times faster than the generic filter at 1000 runs, ``benchmarks/bench_vessel.py``); a filter
-instance (``trackkit.filters.EKF()``, ``UKF()``, ``CKF()``) runs that filter on the model
-(``SampledVessel``, or ``AugmentedVessel`` for m = 1). Both EKF paths match FilterPy
-(``tests/oracles/test_vessel_filterpy.py``).
+the EKF with ``F = [[A, B], [0, I]]`` and ``H = [I3 0]`` written out by blocks, one compiled
+pass over the runs per sample (``trackkit.identify.fused``: O(n^2) per run and step instead
+of O(n^3), and the same bits for a run alone or in any batch); a filter instance
+(``trackkit.filters.EKF()``, ``UKF()``, ``CKF()``) runs that filter on the model
+(``SampledVessel``, or ``AugmentedVessel`` for m = 1). The generic ``EKF()`` is the textbook
+form the compiled one is pinned to (``tests/identify/test_augmented.py``); both match
+FilterPy (``tests/oracles/test_vessel_filterpy.py``).
 
 Initialisation (k = 0) and trial joins (``starts[k]``): the body states are taken from the
 measurement, ``N(y_k, R)`` (the posterior of one measurement under a flat prior), independent
@@ -62,6 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 import trackkit as tk
 from trackkit.belief import Gaussian
 from trackkit.filters.base import Filter
+from trackkit.identify import fused
 from trackkit.identify.programme import DEFAULT_NOISE, run_seed
 from trackkit.models.motion import MotionModel
 from trackkit.models.vessel import (
@@ -89,7 +91,6 @@ __all__ = [
 Array = NDArray[np.float64]
 
 DEFAULT_Q_BODY = np.array([3e-4, 3e-4, 3e-6])
-_THETA_ROWS = np.arange(3, 3 + N_THETA)
 _FILTERS = {"ekf": tk.filters.EKF, "ukf": tk.filters.UKF, "ckf": tk.filters.CKF}
 
 
@@ -295,10 +296,10 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     mean = np.concatenate([z[..., 0, :], np.broadcast_to(theta0, batch + (N_THETA,))], -1)
     cov = np.zeros(batch + (19, 19))
     cov[..., 3:, 3:] = np.diag(sd0**2)
+    if f is None:
+        return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov)
     sensor = tk.models.Position(dim=3, sigma=sigma_z)
-    b = None  # the generic filters' belief (kept, so that its checks stay cheap)
-    # the structured EKF's covariances: predicted, updated and two intermediates, reused
-    buf = [np.empty(batch + (19, 19)) for _ in range(4)] if f is None else None
+    b = None  # the filter's belief (kept, so that its checks stay cheap)
     for k in range(K):
         if starts[k]:
             # (re-)initialise the body states from y_k; theta keeps its mean and covariance
@@ -308,17 +309,6 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
             cov[..., :, :3] = 0.0
             cov[..., :3, :3] = R
             b = None
-        elif f is None:
-            mk = model(k)
-            if substeps == 1:
-                A = step_jacobian_state(mean[..., :3], mk.s_m, mean[..., 3:], T, norm)
-                B = step_jacobian_theta(mean[..., :3], mk.s_m, T, norm)
-                body = step(mean[..., :3], mk.s_m, mean[..., 3:], T, norm)
-            else:
-                body, A, B = mk.blocks(mean, T)
-            mean, pred = _predict_blocks(mean, cov, body, A, B, Qd, out=buf[0])
-            mean, cov, nis[..., k] = _update_blocks(mean, pred, z[..., k, :], R, out=buf[1],
-                                                    work=buf[2:])
         else:
             b = f.predict(Gaussian(mean, cov) if b is None else b, model(k), T)
             b, innov = f.update(b, z[..., k, :], sensor)
@@ -331,83 +321,55 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
         out_body_sd[..., k, :] = sd[..., :3]
         if covs is not None:
             covs[..., k, :, :] = cov
-    name = "EKF" if f is None else getattr(f, "name", type(f).__name__)
+    name = getattr(f, "name", type(f).__name__)
     return Identification(theta=np.array(mean[..., 3:]), cov=np.array(cov),
                           theta_history=out_theta, theta_std=out_theta_sd, body=out_body,
                           body_std=out_body_sd, nis=nis, cov_history=covs, filter=name)
 
 
-def _predict_blocks(x: Array, P: Array, body: Array, A: Array, B: Array, Qd: Array,
-                    out: Array | None = None) -> tuple[Array, Array]:
-    """EKF prediction with ``F = [[A, B], [0, I]]`` (body rows, coefficient rows):
-    ``x- = [body, theta]`` and ``P- = F P F^T + diag(Qd)``, by blocks::
+def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: int,
+                  starts: Array, mean: Array, cov: Array, R: Array, Qd: Array,
+                  keep_cov: bool) -> Identification:
+    """``identify``'s EKF: the equations of ``trackkit.filters.EKF`` on ``SampledVessel``
+    with ``F = [[A, B], [0, I]]`` and ``H = [I3 0]`` written out, one compiled pass over the
+    runs per sample (``trackkit.identify.fused``), the runs as the last axis and the
+    covariance as its lower triangle. Initialisation and joins as in ``identify``."""
+    batch, K = z.shape[:-2], z.shape[-2]
+    N = math.prod(batch)
+    zs = np.ascontiguousarray(z.reshape(N, K, 3).transpose(1, 2, 0))  # (K, 3, N)
+    ss = np.ascontiguousarray(s.reshape(N, K, 2).transpose(1, 2, 0))  # (K, 2, N)
+    x = np.ascontiguousarray(mean.reshape(N, 19).T)
+    P = fused.pack(cov.reshape(N, 19, 19))
+    body_rows = np.unique(fused.TRI[:3])  # the rows of P with a body index
+    R_rows, R_tri = fused.TRI[:3, :3][np.tril_indices(3)], R[np.tril_indices(3)]
+    diagonal = fused.TRI[np.arange(19), np.arange(19)]
+    theta, theta_sd = np.empty((K, N_THETA, N)), np.empty((K, N_THETA, N))
+    body, body_sd = np.empty((K, 3, N)), np.empty((K, 3, N))
+    nis = np.full((K, N), np.nan)
+    covs = np.empty((K, N, 19, 19)) if keep_cov else None
+    plan = fused.plan(norm, substeps, T)
+    for k in range(K):
+        if starts[k]:
+            x[:3] = zs[k]
+            P[body_rows] = 0.0
+            P[R_rows] = R_tri[:, None]
+        else:
+            nis[k] = fused.predict_update(x, P, ss[k - 1], ss[k], plan, Qd, zs[k], R)
+        sd = np.sqrt(P[diagonal])
+        theta[k], theta_sd[k] = x[3:], sd[3:]
+        body[k], body_sd[k] = x[:3], sd[:3]
+        if covs is not None:
+            covs[k] = fused.unpack(P)
 
-        P-_tt = P_tt + Q_t,   P-_xt = A P_xt + B P_tt,
-        P-_xx = (A P_xx + B P_tx) A^T + P-_xt B^T + Q_x   (symmetrised)
+    def runs_first(a: Array) -> Array:  # (K, ..., N) -> batch + (K, ...)
+        return np.moveaxis(a, -1, 0).reshape(batch + a.shape[:-1])
 
-    which costs O(n^2) per run instead of the O(n^3) of the full product. ``out`` (not P) may
-    be given for P- (a reused buffer: a fresh array of a few MB per step costs more in page
-    faults than the arithmetic)."""
-    Pxx, Pxt, Ptt = P[..., :3, :3], P[..., :3, 3:], P[..., 3:, 3:]
-    Pxt_new = A @ Pxt + B @ Ptt
-    Pxx_new = (A @ Pxx + B @ Pxt.mT) @ A.mT + Pxt_new @ B.mT
-    shape = np.broadcast_shapes(P.shape, A.shape[:-2] + (19, 19))
-    out = np.empty(shape) if out is None else out
-    np.copyto(out, P)
-    out[..., :3, :3] = 0.5 * (Pxx_new + Pxx_new.mT) + np.diag(Qd[:3])
-    out[..., :3, 3:] = Pxt_new
-    out[..., 3:, :3] = Pxt_new.mT
-    if np.any(Qd[3:]):  # the random walk of the coefficients
-        out[..., _THETA_ROWS, _THETA_ROWS] += Qd[3:]
-    theta = np.broadcast_to(x[..., 3:], body.shape[:-1] + (N_THETA,))
-    return np.concatenate([body, theta], -1), out
-
-
-def _inverse_spd3(S: Array) -> Array:
-    """Inverse of symmetric positive-definite 3 x 3 matrices ``(..., 3, 3)`` by cofactors
-    (LAPACK's per-matrix overhead dominates at this size); raises if one is not PD."""
-    a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 0, 2]
-    d, e, g = S[..., 1, 1], S[..., 1, 2], S[..., 2, 2]
-    A, Bc, C = d * g - e * e, c * e - b * g, b * e - c * d
-    det = a * A + b * Bc + c * C
-    pd = (a > 0) & (a * d - b * b > 0) & (det > 0)
-    if not np.all(pd):
-        raise ValueError("innovation covariance S = P_xx + R is not positive definite in "
-                         f"{int(np.sum(~pd))} run(s); expected SPD 3 x 3 matrices")
-    inv = np.stack([A, Bc, C, Bc, a * g - c * c, b * c - a * e,
-                    C, b * c - a * e, a * d - b * b], -1) / det[..., None]
-    return inv.reshape(S.shape)
-
-
-def _update_blocks(x: Array, P: Array, z: Array, R: Array, out: Array | None = None,
-                   work: tuple[Array, Array] | None = None) -> tuple[Array, Array, Array]:
-    """EKF update with ``H = [I3 0]``: ``r = z - x_body``, ``S = P_xx + R``,
-    ``K = C S^-1`` with ``C = P H^T = P[:, :3]``, ``x+ = x + K r`` and the Joseph form
-
-        P+ = (I - K H) P (I - K H)^T + K R K^T = P - K C^T - C K^T + K S K^T
-           = P - (E + E^T),   E = K G,   G = C^T - S K^T / 2
-
-    (exactly symmetric as computed). Returns ``(x+, P+, NIS = r^T S^-1 r)``; rows with a
-    missing ``z`` (nan) keep the prediction and get a nan NIS. ``out`` (not P) and ``work``
-    (two arrays of P's shape) are optional buffers for P+ and the intermediates."""
-    r = z - x[..., :3]
-    miss = np.isnan(r).any(-1)
-    r = np.where(miss[..., None], 0.0, r)
-    S = P[..., :3, :3] + R
-    Si = _inverse_spd3(S)
-    C = P[..., :, :3]
-    K = C @ Si
-    xn = x + (K @ r[..., None])[..., 0]
-    E, Y = (None, None) if work is None else work
-    E = np.matmul(K, C.mT - 0.5 * (S @ K.mT), out=E)
-    Y = np.add(E, E.mT, out=Y)  # E_ij + E_ji == E_ji + E_ij: P+ exactly symmetric
-    Pn = np.subtract(P, Y, out=out)
-    nis = np.einsum("...i,...ij,...j->...", r, Si, r)
-    if miss.any():
-        xn = np.where(miss[..., None], x, xn)
-        Pn = np.where(miss[..., None, None], P, Pn)
-        nis = np.where(miss, np.nan, nis)
-    return xn, Pn, nis
+    return Identification(
+        theta=runs_first(x[3:]), cov=fused.unpack(P).reshape(batch + (19, 19)),
+        theta_history=runs_first(theta), theta_std=runs_first(theta_sd),
+        body=runs_first(body), body_std=runs_first(body_sd), nis=runs_first(nis),
+        cov_history=None if covs is None else np.moveaxis(covs, 0, 1).reshape(
+            batch + (K, 19, 19)), filter="EKF")
 
 
 def initial_guess(theta: ArrayLike, runs: int | Sequence[int], seed: int,

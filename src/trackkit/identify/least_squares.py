@@ -34,15 +34,21 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.models.vessel import N_THETA, Normalisation, reference_vessel, regressors
+from trackkit.models.vessel import (
+    EQUATION,
+    N_THETA,
+    Normalisation,
+    reference_vessel,
+    regressors,
+)
 
 __all__ = ["LeastSquaresFit", "EQUATIONS", "least_squares"]
 
 Array = NDArray[np.float64]
 
 #: the coefficients of the surge, sway and yaw equations (indices into theta)
-EQUATIONS: tuple[tuple[int, ...], ...] = (tuple(range(9)), tuple(range(9, 13)),
-                                          tuple(range(13, 16)))
+EQUATIONS: tuple[tuple[int, ...], ...] = tuple(
+    tuple(int(i) for i in np.flatnonzero(EQUATION == e)) for e in range(3))
 
 
 class LeastSquaresFit(NamedTuple):

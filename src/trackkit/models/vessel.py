@@ -156,6 +156,42 @@ class Normalisation:
 IDENTITY = Normalisation()
 
 
+#: The equation (0 surge, 1 sway, 2 yaw) of each coefficient a1..a9, b1..b4, c1..c3.
+EQUATION = np.array([0] * 9 + [1] * 4 + [2] * 3)
+
+
+# Eq. 2 on its components. These take prime scalars or equal-shape arrays and the coefficients
+# as anything indexed a[0] .. a[15], so numpy (arrays) and the compiled identifier
+# (``trackkit.identify.fused``, scalars) run the same expressions, operation for operation.
+
+
+def prime_rates(u, v, r, d, n, a):
+    """``f'(u', v', r', delta, n')``: the prime surge, sway and yaw rates of eq. 2."""
+    f1 = (a[0] * u * u + a[1] * v * v + a[2] * r * r + a[3] * d * d + a[4] * v * r
+          + a[5] * v * d + a[6] * r * d + a[7] * u * n + a[8] * n * n)
+    f2 = a[9] * v + a[10] * r + a[11] * d + a[12] * u * r
+    f3 = a[13] * v + a[14] * r + a[15] * d
+    return f1, f2, f3
+
+
+def prime_terms(u, v, r, d, n):
+    """The 16 regressors of eq. 2, coefficient by coefficient (``f'_e = sum of a_i t_i`` over
+    the coefficients of equation e, ``EQUATION``)."""
+    return (u * u, v * v, r * r, d * d, v * r, v * d, r * d, u * n, n * n,
+            v, r, d, u * r, v, r, d)
+
+
+def prime_jacobian(u, v, r, d, n, a):
+    """``J' = d f' / d(u', v', r')`` row by row (nine entries)::
+
+        [[2a1u + a8n, 2a2v + a5r + a6d, 2a3r + a5v + a7d], [b4r, b1, b2 + b4u], [0, c1, c2]]
+    """
+    return (2 * a[0] * u + a[7] * n, 2 * a[1] * v + a[4] * r + a[5] * d,
+            2 * a[2] * r + a[4] * v + a[6] * d,
+            a[12] * r, a[9], a[10] + a[12] * u,
+            0.0, a[13], a[14])
+
+
 def _prime(x: Array, s: Array, norm: Normalisation):
     """Prime components ``u, v, r, d, n`` (each of the broadcast batch shape)."""
     U0, L = norm.speed, norm.length
@@ -165,12 +201,7 @@ def _prime(x: Array, s: Array, norm: Normalisation):
 def _rhs(x: Array, s: Array, th: Array, norm: Normalisation) -> Array:
     """Unchecked f in SI: ``D f(x', s', theta)`` (elementwise, so batches are bitwise equal
     to single rows)."""
-    u, v, r, d, n = _prime(x, s, norm)
-    a = [th[..., i] for i in range(N_THETA)]
-    f1 = (a[0] * u * u + a[1] * v * v + a[2] * r * r + a[3] * d * d + a[4] * v * r
-          + a[5] * v * d + a[6] * r * d + a[7] * u * n + a[8] * n * n)
-    f2 = a[9] * v + a[10] * r + a[11] * d + a[12] * u * r
-    f3 = a[13] * v + a[14] * r + a[15] * d
+    f1, f2, f3 = prime_rates(*_prime(x, s, norm), [th[..., i] for i in range(N_THETA)])
     D = norm.rate_scale
     return np.stack([D[0] * f1, D[1] * f2, D[2] * f3], -1)
 
@@ -180,16 +211,10 @@ def regressors(x: ArrayLike, s: ArrayLike, norm: Normalisation = IDENTITY) -> Ar
     ``D1 [u^2, v^2, r^2, d^2, vr, vd, rd, un, n^2 | 0]``, ``D2 [0 | v, r, d, ur | 0]``,
     ``D3 [0 | v, r, d]`` in prime variables, D = ``norm.rate_scale``."""
     x, s = _array(x, 3, "x"), _array(s, 2, "s")
-    u, v, r, d, n = _prime(x, s, norm)
     shape = np.broadcast_shapes(x.shape[:-1], s.shape[:-1])
     P = np.zeros(shape + (3, N_THETA))
-    cols = (u * u, v * v, r * r, d * d, v * r, v * d, r * d, u * n, n * n)
-    for j, c in enumerate(cols):
-        P[..., 0, j] = c
-    for j, c in enumerate((v, r, d, u * r)):
-        P[..., 1, 9 + j] = c
-    for j, c in enumerate((v, r, d)):
-        P[..., 2, 13 + j] = c
+    for i, t in enumerate(prime_terms(*_prime(x, s, norm))):
+        P[..., EQUATION[i], i] = t
     return P * norm.rate_scale[:, None]
 
 
@@ -201,20 +226,13 @@ def rhs(x: ArrayLike, s: ArrayLike, theta: ArrayLike, norm: Normalisation = IDEN
 
 def _jac(x: Array, s: Array, th: Array, norm: Normalisation) -> Array:
     """Unchecked ``df/dx`` in SI: ``D J' diag(1 / state_scale)`` with the prime Jacobian
-    ``J' = [[2a1u + a8n, 2a2v + a5r + a6d, 2a3r + a5v + a7d], [b4r, b1, b2 + b4u],
-    [0, c1, c2]]``."""
+    ``J'`` of ``prime_jacobian``."""
     u, v, r, d, n = _prime(x, s, norm)
-    a = [th[..., i] for i in range(N_THETA)]
     shape = np.broadcast_shapes(u.shape, n.shape, th.shape[:-1])
     J = np.zeros(shape + (3, 3))
-    J[..., 0, 0] = 2 * a[0] * u + a[7] * n
-    J[..., 0, 1] = 2 * a[1] * v + a[4] * r + a[5] * d
-    J[..., 0, 2] = 2 * a[2] * r + a[4] * v + a[6] * d
-    J[..., 1, 0] = a[12] * r
-    J[..., 1, 1] = a[9]
-    J[..., 1, 2] = a[10] + a[12] * u
-    J[..., 2, 1] = a[13]
-    J[..., 2, 2] = a[14]
+    entries = prime_jacobian(u, v, r, d, n, [th[..., i] for i in range(N_THETA)])
+    for e, value in enumerate(entries):
+        J[..., e // 3, e % 3] = value
     return J * (norm.rate_scale[:, None] / norm.state_scale[None, :])
 
 
