@@ -168,3 +168,22 @@ def test_zigzag_results_are_byte_identical_for_one_seed(tmp_path):
     assert doc["trial"]["kind"] == "zigzag" and doc["seed"] == 5
     assert doc["trial"]["metrics"]["model_median"]["first_overshoot_rad"] is not None
     assert {"track.png", "heading.png", "convergence.png"} <= _files(tmp_path / "run0")
+
+
+def test_the_square_root_ckf_identifies_the_log_where_the_ckf_fails(tmp_path):
+    # the CKF's P- - K S K^T cancels into an indefinite covariance on this log (measured
+    # u, v, r far more precise than coefficients known to their order of magnitude); the
+    # square-root form's covariances are products of QR factors, and it agrees with the EKF
+    ckf = _run("identify", str(LOG), "--inputs", str(INPUTS), "--filter", "ckf",
+               "--out", str(tmp_path / "ckf"))
+    assert ckf.code != 0 and "not positive definite" in ckf.err
+    assert "Traceback" not in ckf.err
+    dl = {}
+    for f in ("srckf", "ekf"):
+        ran = _run("identify", str(LOG), "--inputs", str(INPUTS), "--filter", f, "--out",
+                   str(tmp_path / f))
+        assert ran.code == 0, ran.err
+        doc = json.loads((tmp_path / f / "results.json").read_text(encoding="utf-8"))
+        assert doc["filter"] == f
+        dl[f] = doc["model_trials"]["identified_run0"]["turn"]["diameter_to_length"]
+    assert abs(dl["srckf"] / dl["ekf"] - 1) < 0.05, dl

@@ -13,7 +13,7 @@ import pytest
 from scipy import stats
 
 import trackkit as tk
-from trackkit.filters import CKF, EKF, IEKF, KF, UKF, run_filter, smooth
+from trackkit.filters import CKF, EKF, IEKF, KF, SRCKF, UKF, run_filter, smooth
 from trackkit.models import (
     ConstantVelocity,
     CoordinatedTurn,
@@ -30,6 +30,7 @@ FILTERS = {
     "IEKF": IEKF,
     "UKF": UKF,
     "CKF": CKF,
+    "SRCKF": SRCKF,
 }
 NONLINEAR = [k for k in FILTERS if k != "KF"]
 
@@ -311,6 +312,38 @@ def test_ckf_equals_ukf_alpha1_beta0_kappa0():
     for (ba, _), (bb, _) in zip(a, b, strict=True):
         _close(ba.mean, bb.mean, 1e-10)
         _close(ba.cov, bb.cov, 1e-10)
+
+
+def test_square_root_ckf_equals_ckf():
+    # the same filter in exact arithmetic: the QR factors' products are the CKF's sums
+    motion, sensor, m0, P0, dts, zs = nonlinear_problem(T=5)
+    a = _run(SRCKF(), motion, sensor, m0, P0, dts, zs)
+    b = _run(CKF(), motion, sensor, m0, P0, dts, zs)
+    for (ba, ia), (bb, ib) in zip(a, b, strict=True):
+        _close(ba.mean, bb.mean, 1e-10)
+        _close(ba.cov, bb.cov, 1e-10)
+        _close(ia.cov, ib.cov, 1e-10)
+
+
+def test_square_root_ckf_stays_definite_where_the_ckf_does_not():
+    # a coordinate known to 1e3 measured to 1e-5, strongly correlated with an unmeasured one:
+    # P- - K S K^T cancels eight orders of magnitude in the CKF; the square-root form's
+    # covariance is a product of factors
+    motion = tk.models.ConstantVelocity(dim=1, q=0.0)
+    sensor = tk.models.Position(dim=1, sigma=1e-5)
+    P0 = np.array([[1e6, 0.999999 * 1e6], [0.999999 * 1e6, 1e6]])
+    b_sr = b_ckf = tk.Gaussian(np.zeros(2), P0)
+    worst = {"CKF": np.inf, "SRCKF": np.inf}
+    for z in (1.0, 1.1, 1.2, 1.3):
+        b_sr = SRCKF().update(SRCKF().predict(b_sr, motion, 1.0), [z], sensor)[0]
+        worst["SRCKF"] = min(worst["SRCKF"], np.linalg.eigvalsh(b_sr.cov)[0])
+        try:
+            b_ckf = CKF().update(CKF().predict(b_ckf, motion, 1.0), [z], sensor)[0]
+            worst["CKF"] = min(worst["CKF"], np.linalg.eigvalsh(b_ckf.cov)[0])
+        except ValueError:  # its covariance is no longer positive definite
+            worst["CKF"] = -np.inf
+    assert worst["SRCKF"] > 0
+    assert worst["CKF"] < 0
 
 
 # --------------------------------------------------------------------------------------------

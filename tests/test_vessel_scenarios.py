@@ -59,7 +59,7 @@ def _tiny(**changes) -> dict:
     ("trial.speed_kn", 60.0, ["trial.speed_kn", "60.0", "less than or equal to 44"]),
     ("trial.side", "left", ["trial.side", "'left'", "'starboard' or 'port'"]),
     ("identification.filters", ["ekf", "pf"],
-     ["identification.filters.1", "'pf'", "'ekf', 'ukf', 'ckf' or 'ls'"]),
+     ["identification.filters.1", "'pf'", "'ekf', 'ukf', 'ckf', 'srckf' or 'ls'"]),
     ("identification.filters", ["ekf", "ekf"], ["identification.filters", "at most once"]),
     ("identification.q_body", [1e-4, 1e-4], ["identification.q_body", "3 finite densities"]),
     ("identification.period_s", 0.0, ["identification.period_s", "0.0", "greater than 0"]),

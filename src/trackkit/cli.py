@@ -11,7 +11,7 @@ recorded data.
                      [--agents inprocess|processes]
     trackkit track FILE [--format ais|opensky|detections] [--as-radar] [radar, tracker and
                    input options] [--on-bad skip|stop] [--out DIR]
-    trackkit identify LOG --inputs INPUTS.csv [--filter ekf|ukf|ckf|ls] [--period 1]
+    trackkit identify LOG --inputs INPUTS.csv [--filter ekf|ukf|ckf|srckf|ls] [--period 1]
                       [--on-bad skip|stop] [--out DIR]
     trackkit identify NAME|FILE [--runs N] [--seed S] [--filter ...] [--out DIR]
 
@@ -1542,6 +1542,7 @@ class VesselFilter(StrEnum):
     ekf = "ekf"
     ukf = "ukf"
     ckf = "ckf"
+    srckf = "srckf"
     ls = "ls"
 
 

@@ -74,6 +74,7 @@ from trackkit.eval.manoeuvres import (
 from trackkit.identify import (
     DEFAULT_NOISE,
     DEFAULT_Q_BODY,
+    METHODS,
     Segment,
     coefficient_nees,
     dead_reckon,
@@ -378,9 +379,9 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
     if R < 1 or seed < 0:
         raise ValueError(f"runs = {R}, seed = {seed}; expected runs >= 1 and seed >= 0")
     names = list(idn.filters if filters is None else filters)
-    bad = [f for f in names if f not in ("ekf", "ukf", "ckf", "ls")]
+    bad = [f for f in names if f not in METHODS]
     if bad or not names:
-        raise ValueError(f"filters = {names!r}; expected one or more of ekf, ukf, ckf, ls")
+        raise ValueError(f"filters = {names!r}; expected one or more of {', '.join(METHODS)}")
     shown = next((f for f in names if f != "ls"), names[0])
     truth = scenario.vessel.truth()
     norm, th = truth.norm, truth.theta
@@ -550,15 +551,15 @@ def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: st
                       length: float | None = None, inputs_name: str = "the inputs"
                       ) -> RecordedIdentification:
     """Identify the 16 coefficients from a pre-processed log ``m`` and its measured
-    ``inputs`` (engine speed in rev/s, converted to rpm here), with ``filter`` (``"ekf"``,
-    ``"ukf"``, ``"ckf"`` or ``"ls"``); the prior is identify's (zero, sd 1), the coefficients
-    in the prime units of ``norm`` (default the reference vessel's). ValueError, naming
+    ``inputs`` (engine speed in rev/s, converted to rpm here), with ``filter`` (one of
+    ``identify.METHODS``); the prior is identify's (zero, sd 1), the coefficients in the prime
+    units of ``norm`` (default the reference vessel's). ValueError, naming
     ``inputs_name``, when the inputs do not cover the log's grid."""
     ref = reference_vessel()
     norm = ref.norm if norm is None else norm
     length = ref.design["length"] if length is None else float(length)
-    if filter not in ("ekf", "ukf", "ckf", "ls"):
-        raise ValueError(f"filter = {filter!r}; expected ekf, ukf, ckf or ls")
+    if filter not in METHODS:
+        raise ValueError(f"filter = {filter!r}; expected one of {', '.join(METHODS)}")
     t, T = m.t, float(m.T)
     pose = np.stack([m.east, m.north, m.psi], -1)
     z = _body(m)

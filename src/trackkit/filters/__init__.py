@@ -18,7 +18,7 @@ from trackkit.filters.jtc import JTC, JTCBelief, MultiFilterBelief, MultiFilterJ
 from trackkit.filters.kalman import EKF, IEKF, KF
 from trackkit.filters.particle import PF
 from trackkit.filters.run import run_filter
-from trackkit.filters.sigma import CKF, UKF, SigmaPoints
+from trackkit.filters.sigma import CKF, SRCKF, UKF, SigmaPoints
 from trackkit.filters.smoothers import smooth
 
 __all__ = [
@@ -27,6 +27,7 @@ __all__ = [
     "IEKF",
     "UKF",
     "CKF",
+    "SRCKF",
     "PF",
     "JTC",
     "JTCBelief",

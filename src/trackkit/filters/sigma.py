@@ -307,3 +307,91 @@ class CKF(_SigmaPointFilter):
     def _rule(self, n: int) -> SigmaPoints:
         return _cached_rule((type(self), n), lambda: SigmaPoints(
             np.sqrt(n), np.full(2 * n, 0.5 / n), np.full(2 * n, 0.5 / n), centre=False))
+
+
+def _tria(A: Array) -> Array:
+    """A lower-triangular ``L (N, p, p)`` with ``L L^T = A A^T`` for ``A (N, p, q)``, q >= p:
+    the transposed R of the QR decomposition of ``A^T``, columns signed for a positive
+    diagonal (a Cholesky factor where ``A A^T`` is definite)."""
+    R = np.linalg.qr(A.mT, mode="r")
+    L = R.mT
+    d = np.diagonal(L, axis1=-2, axis2=-1)
+    return L * np.where(d < 0, -1.0, 1.0)[:, None, :]
+
+
+def _psd_sqrt(Q: Array, batch: tuple[int, ...], n: int) -> Array:
+    """A factor ``F (N, n, n)`` with ``F F^T = Q`` for a positive semi-definite Q, shared
+    ``(n, n)`` or per row: a process noise that is singular (constant parameters in the
+    state) has no Cholesky factor, so the symmetric square root from its eigenvectors."""
+    Q = symmetrize(np.asarray(Q, dtype=float))
+    lam, V = np.linalg.eigh(Q)
+    F = V * np.sqrt(np.clip(lam, 0.0, None))[..., None, :]
+    return np.broadcast_to(F, batch + (n, n)).reshape(-1, n, n)
+
+
+class SRCKF(CKF):
+    """Square-root cubature Kalman filter (Arasaratnam and Haykin, 2009, section VI): the
+    CKF's points and moments, with every covariance formed as the product of a triangular
+    factor from a QR decomposition (``Tria``) instead of by sums and a subtraction::
+
+        S- = Tria([sqrt(w) (Y - y), sqrt(Q)])
+        [[S_zz, 0], [K S_zz, S+]] = Tria([[sqrt(w) (Z - z), sqrt(R)], [sqrt(w) (X - x), 0]])
+        K = (K S_zz) S_zz^-1,   x+ = x- + K r,   P+ = S+ S+^T
+
+    The same filter as the CKF in exact arithmetic; in floating point the covariances stay
+    positive semi-definite where the CKF's ``P- - K S K^T`` can cancel into an indefinite
+    matrix (a measurement far more precise than the prediction, as when a ship's measured
+    u, v, r meet coefficients known only to their order of magnitude). The belief carried is
+    still ``Gaussian(x, S S^T)``."""
+
+    name = "SRCKF"
+
+    def _predict(self, belief: Gaussian, motion, dt: ArrayLike, with_cross: bool):
+        n = getattr(motion, "dim_x", None)
+        x, P = check_belief(belief, n, f"{self.name}.predict belief")
+        check_dt(dt, f"{self.name}.predict")
+        n = x.shape[-1]
+        rule = self._rule(n)
+        X, batch, x2 = _points(rule, x, P, f"{self.name}.predict belief.cov")
+        Y = _through(motion.f, X, batch, dt)
+        ang = getattr(motion, "angular", None)
+        y = _mean(Y, rule.wm, ang)
+        dY = _deviation(Y, y, ang)
+        w = np.sqrt(rule.wc)[:, None, None]
+        SQ = _psd_sqrt(motion.noise(x, dt), batch, n)
+        S = _tria(np.concatenate([np.moveaxis(w * dY, 0, -1), SQ], -1))
+        pred = output(y.reshape(batch + (n,)), (S @ S.mT).reshape(batch + (n, n)))
+        if not with_cross:
+            return pred, None
+        C = _cross(rule.wc, _deviation(X, x2, ang), dY)
+        return pred, C.reshape(batch + (n, n))
+
+    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+        """The joint factor of ``[z; x]`` triangularised (see the class docstring)."""
+        x, P = check_belief(belief, None, f"{self.name}.update belief")
+        z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
+        n = x.shape[-1]
+        rule = self._rule(n)
+        X, batch, x2 = _points(rule, x, P, f"{self.name}.update belief.cov")
+        Z = _through(sensor.h, X, batch)
+        k, N, m = Z.shape
+        zhat = _mean(Z, rule.wm, sensor.angular)
+        w = np.sqrt(rule.wc)[:, None, None]
+        dZ = np.moveaxis(w * _deviation(Z, zhat, sensor.angular), 0, -1)  # (N, m, k)
+        dX = np.moveaxis(w * (X - x2), 0, -1)  # (N, n, k)
+        SR = _psd_sqrt(sensor.noise, batch, m)
+        joint = np.concatenate([np.concatenate([dZ, SR], -1),
+                                np.concatenate([dX, np.zeros((N, n, m))], -1)], -2)
+        T = _tria(joint)  # (N, m + n, m + n)
+        Szz, KSzz, Sp = T[:, :m, :m], T[:, m:, :m], T[:, m:, m:]
+        # K = KSzz Szz^-1: solve Szz^T K^T = KSzz^T
+        K = np.linalg.solve(Szz.mT, KSzz.mT).mT
+        miss = missing_rows(z)
+        r = sensor.residual(z, zhat.reshape(batch + (m,)))
+        if miss is not None:
+            r = np.where(np.isnan(r), 0.0, r)
+        r2 = np.broadcast_to(r, batch + (m,)).reshape(N, m)
+        xn = x2 + (K @ r2[..., None])[..., 0]
+        post = output(xn.reshape(batch + (n,)), (Sp @ Sp.mT).reshape(batch + (n, n)))
+        innov = Innovation(r, (Szz @ Szz.mT).reshape(batch + (m, m)))
+        return keep_prior_where_missing(miss, (x, P), post, innov)

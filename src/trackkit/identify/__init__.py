@@ -3,8 +3,8 @@ coefficients of ``trackkit.models.vessel`` from sea-trial data.
 
 * ``programme``: the trial programme that generates identification data (batched, seeded
   per run), with the discrete (``substeps=1``) or near-continuous truth;
-* ``identify``: EKF, UKF or CKF on the augmented state ``[u, v, r, theta]`` over a record,
-  with the per-sample history of every coefficient and its standard deviation;
+* ``identify``: EKF, UKF, CKF or square-root CKF on the augmented state ``[u, v, r, theta]``
+  over a record, with the per-sample history of every coefficient and its standard deviation;
 * ``least_squares``: the batch equation-error baseline (linear in theta);
 * ``predict``, ``dead_reckon``, ``position_error``: open-loop prediction with an identified
   model and tracks from filtered body states.
@@ -12,6 +12,7 @@ coefficients of ``trackkit.models.vessel`` from sea-trial data.
 
 from trackkit.identify.augmented import (
     DEFAULT_Q_BODY,
+    METHODS,
     Identification,
     SampledVessel,
     coefficient_nees,
@@ -37,6 +38,7 @@ __all__ = [
     "DEFAULT_NOISE",
     "DEFAULT_PROGRAMME",
     "DEFAULT_Q_BODY",
+    "METHODS",
     "EQUATIONS",
     "Identification",
     "LeastSquaresFit",

@@ -78,6 +78,7 @@ from trackkit.models.vessel import (
 )
 
 __all__ = [
+    "METHODS",
     "Identification",
     "SampledVessel",
     "DEFAULT_Q_BODY",
@@ -91,7 +92,10 @@ __all__ = [
 Array = NDArray[np.float64]
 
 DEFAULT_Q_BODY = np.array([3e-4, 3e-4, 3e-6])
-_FILTERS = {"ekf": tk.filters.EKF, "ukf": tk.filters.UKF, "ckf": tk.filters.CKF}
+_FILTERS = {"ekf": tk.filters.EKF, "ukf": tk.filters.UKF, "ckf": tk.filters.CKF,
+            "srckf": tk.filters.SRCKF}
+#: the identifiers by name: the filters on the augmented state and batch least squares
+METHODS = (*_FILTERS, "ls")
 
 
 class Identification(NamedTuple):
@@ -227,13 +231,13 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
 
     ``norm`` is the prime system of the coefficients (default: the reference vessel's,
     L = 19.6 m, U0 = 18 kn, n0 = 2000 rpm); ``starts (K,)`` marks trial joins (see the module
-    docstring; default: sample 0 only); ``filter`` is ``"ekf"`` (the structured kernels),
-    ``"ukf"``, ``"ckf"`` or a filter instance; ``theta0 (..., 16)`` and ``theta_sd0``
-    (scalar or 16) the coefficients' prior mean and standard deviation; ``sigma_z`` (3) the
-    measurement standard deviations, ``R = diag(sigma_z^2)``; ``q_body`` (3) and ``q_theta``
-    (16 or scalar) the random-walk densities, ``Q = T diag(q_body, q_theta)`` per sample;
-    ``substeps`` the Euler steps per sample (1: the paper's eq. 4). ``keep_cov`` keeps every
-    sample's 19 x 19 covariance."""
+    docstring; default: sample 0 only); ``filter`` is ``"ekf"`` (the compiled kernel),
+    ``"ukf"``, ``"ckf"``, ``"srckf"`` (the square-root CKF) or a filter instance; ``theta0
+    (..., 16)`` and ``theta_sd0`` (scalar or 16) the coefficients' prior mean and standard
+    deviation; ``sigma_z`` (3) the measurement standard deviations, ``R = diag(sigma_z^2)``;
+    ``q_body`` (3) and ``q_theta`` (16 or scalar) the random-walk densities, ``Q = T
+    diag(q_body, q_theta)`` per sample; ``substeps`` the Euler steps per sample (1: the paper's
+    eq. 4). ``keep_cov`` keeps every sample's 19 x 19 covariance."""
     f = _filter(filter)
     norm = reference_vessel().norm if norm is None else norm
     if not isinstance(norm, Normalisation):

@@ -36,7 +36,7 @@ The file (units in the field names; angles in degrees, the nozzle positive to st
 
     [identification]
     data = "programme"         # identify.DEFAULT_PROGRAMME, or "trial": the trial itself
-    filters = ["ekf"]          # any of ekf, ukf, ckf, ls (batch least squares); the first
+    filters = ["ekf"]          # any of ekf, ukf, ckf, srckf, ls (batch least squares); the first
                                # that is not ls is the one the figures show
     period_s = 1.0             # the grid T of the pre-processed u, v, r
     substeps = 10              # the identifier's Euler sub-steps per sample
@@ -68,6 +68,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field, ValidationError, field_validator, model_validator
 
+from trackkit.identify import METHODS
 from trackkit.models.vessel import KNOT, CoefficientSet, reference_vessel
 from trackkit.scenario import (
     ScenarioError,
@@ -103,7 +104,7 @@ __all__ = [
 Array = NDArray[np.float64]
 
 #: the identifiers a scenario (and ``trackkit identify --filter``) may name
-FILTERS = ("ekf", "ukf", "ckf", "ls")
+FILTERS = METHODS
 #: Naji 7's maximum speed (seed 003, Table 2)
 MAX_SPEED_KN = 44.0
 
@@ -200,9 +201,10 @@ class IdentificationSpec(_Strict):
     data: Literal["programme", "trial"] = Field(
         "programme", description="the identification data: identify.DEFAULT_PROGRAMME "
         "(seven trials, 657 s at 1 s) or the demonstrated trial itself")
-    filters: list[Literal["ekf", "ukf", "ckf", "ls"]] = Field(
+    filters: list[Literal[METHODS]] = Field(  # type: ignore[valid-type]
         default_factory=lambda: ["ekf"], min_length=1, description="the identifiers "
-        "compared: the augmented EKF, UKF or CKF, or batch least squares (ls); the first "
+        "compared: the augmented EKF, UKF, CKF or square-root CKF, or batch least squares "
+        "(ls); the first "
         "that is not ls is the one the figures show")
     period_s: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] = Field(
         1.0, description="sample period T of the pre-processed u, v, r (the paper's "
