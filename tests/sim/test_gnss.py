@@ -160,6 +160,23 @@ def test_runs_are_independent_and_silencing_one_noise_keeps_the_others():
     assert np.array_equal(one.t, g1.t)
 
 
+def test_one_generator_per_run_gives_each_run_its_own_noise_bit_for_bit():
+    # a batch sensed in one call with one generator per run equals the runs sensed one at a
+    # time: a run's noise depends on its generator alone (the Monte Carlo's guarantee)
+    t, e, n, psi, u, v, r = straight(duration=60, runs=(3,))
+    e = e + np.arange(3)[:, None]  # three different truths
+    batch = simulate_gnss(t, e, n, psi, u, v, r,
+                          rng=[np.random.default_rng(s) for s in (4, 5, 6)])
+    for j, s in enumerate((4, 5, 6)):
+        one = simulate_gnss(t, e[j], n[j], psi[j], u[j], v[j], r[j],
+                            rng=np.random.default_rng(s))
+        for b, o in zip(batch, one, strict=True):
+            for f in b._fields[1:]:
+                np.testing.assert_array_equal(getattr(b, f)[j], getattr(o, f), err_msg=f)
+    with pytest.raises(ValueError, match="2 generators for a truth of shape"):
+        simulate_gps(t, e, n, psi, u, v, r, rng=[np.random.default_rng(0)] * 2)
+
+
 def test_bad_inputs_name_the_field():
     t, e, n, psi, u, v, r = straight(duration=10)
     rng = np.random.default_rng(0)

@@ -240,18 +240,11 @@ def _sensed(t: Array, pose: Array, x: Array, run_ids: list[int], seed: int, key:
     """GPS/INS of the truth ``pose, x (R, K, 3)`` per run, pre-processed to the grid (batched
     over runs)."""
     from trackkit.io.navigation import preprocess_sim
-    from trackkit.sim.gnss import KHOR_MUSA, GpsFixes, InsSamples, simulate_gnss
+    from trackkit.sim.gnss import KHOR_MUSA, simulate_gnss
 
-    gps, ins = [], []
-    for j, r in enumerate(run_ids):  # only the draws: each run from its own generator
-        g, i = simulate_gnss(t, pose[j, :, 0], pose[j, :, 1], pose[j, :, 2], x[j, :, 0],
-                             x[j, :, 1], x[j, :, 2], rng=run_seed(seed, r, key),
-                             gps=sensors.gps(), ins=sensors.ins())
-        gps.append(g)
-        ins.append(i)
-    G = GpsFixes(gps[0].t, *(np.stack([getattr(g, f) for g in gps]) for f in GpsFixes._fields[1:]))
-    Ii = InsSamples(ins[0].t, *(np.stack([getattr(i, f) for i in ins])
-                                for f in InsSamples._fields[1:]))
+    rngs = [run_seed(seed, r, key) for r in run_ids]  # each run's noise from its own stream
+    G, Ii = simulate_gnss(t, pose[..., 0], pose[..., 1], pose[..., 2], x[..., 0], x[..., 1],
+                          x[..., 2], rng=rngs, gps=sensors.gps(), ins=sensors.ins())
     return preprocess_sim(G, Ii, T=T, reference=KHOR_MUSA)
 
 

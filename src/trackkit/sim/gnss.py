@@ -47,6 +47,7 @@ the others' draws unchanged.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -268,52 +269,72 @@ def _gauss_markov(w: Array, sigma: float, dt: float, tau: float) -> Array:
     return e
 
 
+Rng = np.random.Generator | Sequence[np.random.Generator]
+
+
+def _check_rng(rng: Rng) -> None:
+    ok = isinstance(rng, np.random.Generator) or (
+        isinstance(rng, Sequence) and len(rng) > 0
+        and all(isinstance(g, np.random.Generator) for g in rng))
+    if not ok:
+        raise ValueError(f"rng = {rng!r}; expected a numpy.random.Generator "
+                         "(np.random.default_rng(seed)) or one per run")
+
+
+def _normals(rng: Rng, shape: tuple[int, ...]) -> Array:
+    """Standard normals of ``shape``; with one generator per run (a sequence), run i's from
+    its own, so that a run's noise depends on its generator alone, not on the batch."""
+    if isinstance(rng, np.random.Generator):
+        return rng.standard_normal(shape)
+    if not shape or shape[0] != len(rng):
+        raise ValueError(f"{len(rng)} generators for a truth of shape {shape[:-1]}; expected "
+                         "one per run, the truth's leading axis")
+    return np.stack([g.standard_normal(shape[1:]) for g in rng])
+
+
 def simulate_gps(t: ArrayLike, east: ArrayLike, north: ArrayLike, psi: ArrayLike,
-                 u: ArrayLike, v: ArrayLike, r: ArrayLike, *, rng: np.random.Generator,
+                 u: ArrayLike, v: ArrayLike, r: ArrayLike, *, rng: Rng,
                  model: GpsModel | None = None, lat0: float = KHOR_MUSA[0],
                  lon0: float = KHOR_MUSA[1]) -> GpsFixes:
     """GPS fixes of the truth (see the module): positions with noise converted to latitude
     and longitude in the ENU frame at ``(lat0, lon0)`` (sea level), SOG and COG from the noisy
-    velocity vector."""
+    velocity vector. ``rng``: one generator, or one per run (the truth's leading axis)."""
     model = GpsModel() if model is None else model
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng = {rng!r}; expected a numpy.random.Generator "
-                         "(np.random.default_rng(seed))")
+    _check_rng(rng)
     frame = EnuFrame(lat0, lon0)
     ts = sensor_times(t, model.rate, model.offset)
     tr = sample_truth(t, east, north, psi, u, v, r, ts)
     ve = tr.u * np.sin(tr.psi) + tr.v * np.cos(tr.psi)
     vn = tr.u * np.cos(tr.psi) - tr.v * np.sin(tr.psi)
     shape = tr.east.shape + (2,)
-    ep = _gauss_markov(rng.standard_normal(shape), model.sigma_position, 1.0 / model.rate,
+    ep = _gauss_markov(_normals(rng, shape), model.sigma_position, 1.0 / model.rate,
                        model.position_corr_time)
-    ev = model.sigma_velocity * rng.standard_normal(shape)
+    ev = model.sigma_velocity * _normals(rng, shape)
     lat, lon, _ = frame.to_geodetic(tr.east + ep[..., 0], tr.north + ep[..., 1], 0.0)
     sog, cog = course_from_velocity(ve + ev[..., 0], vn + ev[..., 1], "m/s", "rad")
     return GpsFixes(ts, lat, lon, sog, cog)
 
 
 def simulate_ins(t: ArrayLike, east: ArrayLike, north: ArrayLike, psi: ArrayLike,
-                 u: ArrayLike, v: ArrayLike, r: ArrayLike, *, rng: np.random.Generator,
+                 u: ArrayLike, v: ArrayLike, r: ArrayLike, *, rng: Rng,
                  model: InsModel | None = None) -> InsSamples:
-    """INS heading and yaw rate of the truth (see the module); heading in [0, 2 pi)."""
+    """INS heading and yaw rate of the truth (see the module); heading in [0, 2 pi).
+    ``rng``: one generator, or one per run (the truth's leading axis)."""
     model = InsModel() if model is None else model
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng = {rng!r}; expected a numpy.random.Generator "
-                         "(np.random.default_rng(seed))")
+    _check_rng(rng)
     ts = sensor_times(t, model.rate, model.offset)
     tr = sample_truth(t, east, north, psi, u, v, r, ts)
-    heading = tr.psi + model.sigma_heading * rng.standard_normal(tr.psi.shape)
-    rate = tr.r + model.sigma_rate * rng.standard_normal(tr.r.shape)
+    heading = tr.psi + model.sigma_heading * _normals(rng, tr.psi.shape)
+    rate = tr.r + model.sigma_rate * _normals(rng, tr.r.shape)
     return InsSamples(ts, np.mod(heading, 2.0 * np.pi), rate)
 
 
 def simulate_gnss(t: ArrayLike, east: ArrayLike, north: ArrayLike, psi: ArrayLike,
-                  u: ArrayLike, v: ArrayLike, r: ArrayLike, *, rng: np.random.Generator,
+                  u: ArrayLike, v: ArrayLike, r: ArrayLike, *, rng: Rng,
                   gps: GpsModel | None = None, ins: InsModel | None = None,
                   lat0: float = KHOR_MUSA[0], lon0: float = KHOR_MUSA[1]
                   ) -> tuple[GpsFixes, InsSamples]:
-    """GPS then INS of one truth, from one generator (GPS draws first)."""
+    """GPS then INS of a truth, from one generator or one per run (GPS draws first)."""
     fixes = simulate_gps(t, east, north, psi, u, v, r, rng=rng, model=gps, lat0=lat0,
                          lon0=lon0)
     return fixes, simulate_ins(t, east, north, psi, u, v, r, rng=rng, model=ins)
