@@ -190,15 +190,20 @@ class _SigmaPointFilter(Filter):
         ang = getattr(motion, "angular", None)
         y = _mean(Y, rule.wm, ang)
         dY = _deviation(Y, y, ang)
-        # upper triangle of sum Wc dY dY^T + Q, mirrored: exactly symmetric
-        upper = _upper_of(_cross(rule.wc, dY, dY))
-        upper += _noise_upper(np.asarray(motion.noise(x, dt), dtype=float), batch, n)
-        pred = output(y.reshape(batch + (n,)), _mirror(upper, n).reshape(batch + (n, n)),
-                      symmetric=True)
+        cov = self._spread(rule, dY, np.asarray(motion.noise(x, dt), dtype=float), batch)
+        pred = output(y.reshape(batch + (n,)), cov.reshape(batch + (n, n)), symmetric=True)
         if not with_cross:
             return pred, None
         C = _cross(rule.wc, _deviation(X, x2, ang), dY)
         return pred, C.reshape(batch + (n, n))
+
+    def _spread(self, rule: SigmaPoints, dY: Array, Q: Array, batch: tuple[int, ...]) -> Array:
+        """``sum Wc dY dY^T + Q`` ``(N, n, n)``, exactly symmetric: its upper triangle,
+        mirrored."""
+        n = dY.shape[-1]
+        upper = _upper_of(_cross(rule.wc, dY, dY))
+        upper += _noise_upper(Q, batch, n)
+        return _mirror(upper, n)
 
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
         """Sigma points regenerated from the prediction; ``S = sum Wc dZ dZ^T + R``,
@@ -211,11 +216,27 @@ class _SigmaPointFilter(Filter):
         Z = _through(sensor.h, X, batch)
         k, N, m = Z.shape
         zhat = _mean(Z, rule.wm, sensor.angular)  # (N, m)
-        dZ = _deviation(Z, zhat, sensor.angular)
-        dX = X - x2
         R = np.asarray(sensor.noise, dtype=float)
         if R.ndim > 2:  # one R per batch row
             R = np.broadcast_to(R, batch + (m, m)).reshape(N, m, m)
+        P2 = np.broadcast_to(P, batch + (n, n)).reshape(N, n, n)
+        K, S, cov = self._condition(rule, X - x2, _deviation(Z, zhat, sensor.angular), R, P2)
+        miss = missing_rows(z)
+        r = sensor.residual(z, zhat.reshape(batch + (m,)))
+        if miss is not None:
+            r = np.where(np.isnan(r), 0.0, r)
+        r2 = np.broadcast_to(r, batch + (m,)).reshape(N, m)
+        xn = x2 + K[..., 0] * r2 if m == 1 else x2 + (K @ r2[..., None])[..., 0]
+        post = output(xn.reshape(batch + (n,)), cov.reshape(batch + (n, n)), symmetric=True)
+        innov = Innovation(r, S.reshape(batch + (m, m)))
+        return keep_prior_where_missing(miss, (x, P), post, innov)
+
+    def _condition(self, rule: SigmaPoints, dX: Array, dZ: Array, R: Array,
+                   P: Array) -> tuple[Array, Array, Array]:
+        """The gain ``K (N, n, m)``, ``S (N, m, m)`` and ``P+ (N, n, n)``, exactly symmetric
+        (its upper triangle, mirrored), from the deviations ``dX (k, N, n)``, ``dZ (k, N, m)``
+        of the points from their means."""
+        N, n, m = P.shape[0], P.shape[-1], dZ.shape[-1]
         if m == 1:
             wdz = dZ[..., 0] * rule.wc[:, None]  # (k, N)
             S = np.einsum("kn,kn->n", wdz, dZ[..., 0]).reshape(N, 1, 1) + R
@@ -224,25 +245,13 @@ class _SigmaPointFilter(Filter):
             S = symmetrize(_cross(rule.wc, dZ, dZ) + R)
             C = _cross(rule.wc, dX, dZ)
         K = solve_psd(S, C.mT).mT  # (N, n, m)
-        miss = missing_rows(z)
-        r = sensor.residual(z, zhat.reshape(batch + (m,)))
-        if miss is not None:
-            r = np.where(np.isnan(r), 0.0, r)
-        r2 = np.broadcast_to(r, batch + (m,)).reshape(N, m)
-        i, j = _triu(n)[:2]
-        P2 = np.broadcast_to(P, batch + (n, n)).reshape(N, n, n)
         if m == 1:
-            xn = x2 + K[..., 0] * r2
+            i, j = _triu(n)[:2]
             k0 = K[..., 0]
-            upper = _upper_of(P2) - S[:, 0] * (k0[:, i] * k0[:, j])
-        else:
-            xn = x2 + (K @ r2[..., None])[..., 0]
-            KS = K @ S
-            upper = _upper_of(P2) - (KS[:, i, :] * K[:, j, :]).sum(-1)
-        post = output(xn.reshape(batch + (n,)), _mirror(upper, n).reshape(batch + (n, n)),
-                      symmetric=True)
-        innov = Innovation(r, S.reshape(batch + (m, m)))
-        return keep_prior_where_missing(miss, (x, P), post, innov)
+            upper = _upper_of(P) - S[:, 0] * (k0[:, i] * k0[:, j])
+        else:  # whole batched products, then the triangle (gathering it first is slower)
+            upper = _upper_of(P) - _upper_of(np.matmul(K @ S, K.mT))
+        return K, S, _mirror(upper, n)
 
 
 _RULES: dict[tuple, SigmaPoints] = {}
@@ -346,52 +355,23 @@ class SRCKF(CKF):
 
     name = "SRCKF"
 
-    def _predict(self, belief: Gaussian, motion, dt: ArrayLike, with_cross: bool):
-        n = getattr(motion, "dim_x", None)
-        x, P = check_belief(belief, n, f"{self.name}.predict belief")
-        check_dt(dt, f"{self.name}.predict")
-        n = x.shape[-1]
-        rule = self._rule(n)
-        X, batch, x2 = _points(rule, x, P, f"{self.name}.predict belief.cov")
-        Y = _through(motion.f, X, batch, dt)
-        ang = getattr(motion, "angular", None)
-        y = _mean(Y, rule.wm, ang)
-        dY = _deviation(Y, y, ang)
+    def _spread(self, rule: SigmaPoints, dY: Array, Q: Array, batch: tuple[int, ...]) -> Array:
+        """``S S^T`` with ``S = Tria([sqrt(w) dY, sqrt(Q)])``, symmetrised."""
+        n = dY.shape[-1]
         w = np.sqrt(rule.wc)[:, None, None]
-        SQ = _psd_sqrt(motion.noise(x, dt), batch, n)
-        S = _tria(np.concatenate([np.moveaxis(w * dY, 0, -1), SQ], -1))
-        pred = output(y.reshape(batch + (n,)), (S @ S.mT).reshape(batch + (n, n)))
-        if not with_cross:
-            return pred, None
-        C = _cross(rule.wc, _deviation(X, x2, ang), dY)
-        return pred, C.reshape(batch + (n, n))
+        S = _tria(np.concatenate([np.moveaxis(w * dY, 0, -1), _psd_sqrt(Q, batch, n)], -1))
+        return symmetrize(S @ S.mT)
 
-    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+    def _condition(self, rule: SigmaPoints, dX: Array, dZ: Array, R: Array,
+                   P: Array) -> tuple[Array, Array, Array]:
         """The joint factor of ``[z; x]`` triangularised (see the class docstring)."""
-        x, P = check_belief(belief, None, f"{self.name}.update belief")
-        z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
-        n = x.shape[-1]
-        rule = self._rule(n)
-        X, batch, x2 = _points(rule, x, P, f"{self.name}.update belief.cov")
-        Z = _through(sensor.h, X, batch)
-        k, N, m = Z.shape
-        zhat = _mean(Z, rule.wm, sensor.angular)
+        N, n, m = P.shape[0], P.shape[-1], dZ.shape[-1]
         w = np.sqrt(rule.wc)[:, None, None]
-        dZ = np.moveaxis(w * _deviation(Z, zhat, sensor.angular), 0, -1)  # (N, m, k)
-        dX = np.moveaxis(w * (X - x2), 0, -1)  # (N, n, k)
-        SR = _psd_sqrt(sensor.noise, batch, m)
-        joint = np.concatenate([np.concatenate([dZ, SR], -1),
-                                np.concatenate([dX, np.zeros((N, n, m))], -1)], -2)
-        T = _tria(joint)  # (N, m + n, m + n)
+        dZ = np.moveaxis(w * dZ, 0, -1)  # (N, m, k)
+        dX = np.moveaxis(w * dX, 0, -1)  # (N, n, k)
+        SR = _psd_sqrt(R, (N,), m)
+        T = _tria(np.concatenate([np.concatenate([dZ, SR], -1),
+                                  np.concatenate([dX, np.zeros((N, n, m))], -1)], -2))
         Szz, KSzz, Sp = T[:, :m, :m], T[:, m:, :m], T[:, m:, m:]
-        # K = KSzz Szz^-1: solve Szz^T K^T = KSzz^T
-        K = np.linalg.solve(Szz.mT, KSzz.mT).mT
-        miss = missing_rows(z)
-        r = sensor.residual(z, zhat.reshape(batch + (m,)))
-        if miss is not None:
-            r = np.where(np.isnan(r), 0.0, r)
-        r2 = np.broadcast_to(r, batch + (m,)).reshape(N, m)
-        xn = x2 + (K @ r2[..., None])[..., 0]
-        post = output(xn.reshape(batch + (n,)), (Sp @ Sp.mT).reshape(batch + (n, n)))
-        innov = Innovation(r, (Szz @ Szz.mT).reshape(batch + (m, m)))
-        return keep_prior_where_missing(miss, (x, P), post, innov)
+        K = np.linalg.solve(Szz.mT, KSzz.mT).mT  # K Szz = KSzz
+        return K, symmetrize(Szz @ Szz.mT), symmetrize(Sp @ Sp.mT)
