@@ -20,7 +20,16 @@ from trackkit import cli
 from trackkit.eval import sweep as sweep_module
 
 from .cli_helpers import LEAKS, assert_user_error, trackkit
-from .eval.test_sweep import BLOCK, PARAMS, RUNS, SEED, short_bo_cv, short_bo_cv_toml
+from .eval.test_sweep import (
+    BLOCK,
+    BLOCKS,
+    PARAMS,
+    RUNS,
+    SEED,
+    full_bo_cv_toml,
+    short_bo_cv,
+    short_bo_cv_toml,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -43,7 +52,7 @@ def deterministic_files(out: Path) -> dict[str, bytes]:
 
 @pytest.fixture(scope="module")
 def scenario_file(tmp_path_factory):
-    return short_bo_cv_toml(tmp_path_factory.mktemp("scenario") / "bo.toml")
+    return full_bo_cv_toml(tmp_path_factory.mktemp("scenario") / "bo.toml")
 
 
 @pytest.fixture(scope="module")
@@ -62,19 +71,19 @@ def test_a_campaign_writes_its_table_figures_and_report(reference):
             "sweep.json", "report.html", "timings.json", "lines-sensor.sigma_deg.png",
             "lines-filters.EKF.motion.q.png", "heatmap-rmse_position.png",
             "heatmap-rmse_pcrlb_position.png", "heatmap-anees.png",
-            "heatmap-diverged_share.png"} <= names
+            "heatmap-diverged_share.png", "heatmap-ratio_rmse_position.png"} <= names
     assert not any(n.startswith(".trackkit") or "tmp" in n for n in names)
     assert len([k for k in files if k.startswith("points/")]) == 9
     page = (out / "report.html").read_text(encoding="utf-8")
-    assert page.count("data:image/png;base64,") == 6 and "<script" not in page
+    assert page.count("data:image/png;base64,") == 7 and "<script" not in page
     assert "http://" not in page and "https://" not in page  # self-contained
 
     import pyarrow.parquet as pq
 
     table = pq.read_table(out / "sweep.parquet")
-    assert table.num_rows == 18
+    assert table.num_rows == 9 * 7  # points x filters
     assert table.schema.field("rmse_position").metadata[b"unit"] == b"m"
-    assert table.column("filters.EKF.motion.q").to_pylist()[::6] == [1e-5, 1e-4, 1e-3]
+    assert table.column("filters.EKF.motion.q").to_pylist()[::21] == [1e-5, 1e-4, 1e-3]
 
 
 def test_ctrl_c_then_the_same_command_resumes_bit_for_bit(scenario_file, reference, tmp_path):
@@ -102,11 +111,12 @@ def test_ctrl_c_then_the_same_command_resumes_bit_for_bit(scenario_file, referen
     for leak in LEAKS:
         assert leak not in stdout + stderr
     stored = len(list(out.glob("points/*/block-*.tkb")))
-    assert 4 <= stored < 36, f"{stored} blocks stored: the interrupt came too late to test"
+    assert BLOCKS // 9 <= stored < BLOCKS, (
+        f"{stored} blocks stored: the interrupt came too late to test")
     assert not (out / "sweep.csv").exists() and not list(out.rglob(".*tmp-*"))
     again = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stderr
-    assert re.search(rf"resuming: {stored} of 36 blocks already stored", again.stderr)
+    assert re.search(rf"resuming: {stored} of {BLOCKS} blocks already stored", again.stderr)
     assert deterministic_files(out) == reference[1]
 
 

@@ -669,8 +669,9 @@ def sweep(
     param: Annotated[list[str] | None, typer.Option(
         "--param", "-p", help="A swept field by its dotted path (as trackkit show prints it: "
         "observers.0.sensor.sigma_deg, sensor.sigma_deg for every observer, "
-        "filters.EKF.motion.q for a filter's own assumption): PATH=V1,V2,... or, for "
-        "--points, PATH=LOW:HIGH or PATH=log:LOW:HIGH. Repeat for each parameter.",
+        "filters.EKF.motion.q for a filter's own assumption, filters.*.motion.q for every "
+        "filter's): PATH=V1,V2,... (xF: the scenario's value times F) or, for --points, "
+        "PATH=LOW:HIGH or PATH=log:LOW:HIGH. Repeat for each parameter.",
         show_default="the scenario's [sweep] table")] = None,
     design: Annotated[DesignName | None, typer.Option(
         "--design", help="The full grid of the values, or --points points drawn at random "
@@ -1036,7 +1037,8 @@ def _print_summary(result: Any, paths: dict[str, Path]) -> None:
 
     console = Console()
     console.print(rich_table(result, width=console.width))
-    for table in matching_rich_tables(result):  # seed 000's tables, the gap table: if present
+    # the error windows, seed 000's tables, the gap table: if present
+    for table in matching_rich_tables(result, width=console.width):
         console.print(table)
     for note in getattr(result, "notes", []) or []:
         console.print(Text(f"note: {note}", style="yellow"))

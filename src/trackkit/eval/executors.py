@@ -10,10 +10,11 @@ fails rather than reporting a partial result.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["execute", "PROGRESS_TOPIC"]
+__all__ = ["execute", "dask_client", "PROGRESS_TOPIC"]
 
 PROGRESS_TOPIC = "trackkit-progress"
 
@@ -47,6 +48,29 @@ def execute(
     return _dask(fn, scenario, list(tasks), size_of, total, workers, scheduler, progress)
 
 
+@contextmanager
+def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+    """A Dask client to the scheduler at ``scheduler``, or to a local cluster of ``workers``
+    single-threaded worker processes; closed on exit, and a local cluster stopped."""
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError as err:  # pragma: no cover - dask is a dependency
+        raise RuntimeError("--workers/--scheduler need dask.distributed installed") from err
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def _report_from_worker(key: str) -> Callable[[float], None]:
     def report(done: float) -> None:
         from dask.distributed import get_worker
@@ -60,17 +84,8 @@ def _on_worker(fn: TaskFn, scenario: Any, task: Task, key: str) -> list:
 
 
 def _dask(fn, scenario, tasks, size_of, total, workers, scheduler, progress) -> list[list]:
-    try:
-        from dask.distributed import Client, LocalCluster, as_completed
-    except ImportError as err:  # pragma: no cover - dask is a dependency
-        raise RuntimeError("--workers/--scheduler need dask.distributed installed") from err
-    cluster = None
-    if scheduler:
-        client = Client(scheduler)
-    else:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
+    from dask.distributed import as_completed
+
     keys = [f"trackkit-{i}-{task[0]}" for i, task in enumerate(tasks)]
     partial: dict[str, float] = {}
     finished: dict[str, float] = {}
@@ -93,25 +108,23 @@ def _dask(fn, scenario, tasks, size_of, total, workers, scheduler, progress) -> 
                 partial[key] = max(partial.get(key, 0.0), done)
                 tell()
 
-    try:
-        if progress:
-            client.subscribe_topic(PROGRESS_TOPIC, on_event)
-        s_future = client.scatter(scenario, broadcast=True)
-        futures = [client.submit(_on_worker, fn, s_future, task, key, key=key, retries=3,
-                                 pure=False)
-                   for key, task in zip(keys, tasks, strict=True)]
-        index = {f.key: i for i, f in enumerate(futures)}
-        results: list = [None] * len(futures)
-        for fut in as_completed(futures):
-            i = index[fut.key]
-            results[i] = fut.result()
-            with lock:
-                finished[fut.key] = size_of(tasks[i])
-                tell()
-        return results
-    finally:
-        if progress:
-            client.unsubscribe_topic(PROGRESS_TOPIC)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    with dask_client(workers, scheduler) as client:
+        try:
+            if progress:
+                client.subscribe_topic(PROGRESS_TOPIC, on_event)
+            s_future = client.scatter(scenario, broadcast=True)
+            futures = [client.submit(_on_worker, fn, s_future, task, key, key=key, retries=3,
+                                     pure=False)
+                       for key, task in zip(keys, tasks, strict=True)]
+            index = {f.key: i for i, f in enumerate(futures)}
+            results: list = [None] * len(futures)
+            for fut in as_completed(futures):
+                i = index[fut.key]
+                results[i] = fut.result()
+                with lock:
+                    finished[fut.key] = size_of(tasks[i])
+                    tell()
+            return results
+        finally:
+            if progress:
+                client.unsubscribe_topic(PROGRESS_TOPIC)

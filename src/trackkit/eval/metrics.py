@@ -785,11 +785,12 @@ class MonteCarloMetrics:
         """Per-step RMSE ``sqrt(MSE_k)`` of an error group."""
         return np.sqrt(self.mse(group))
 
-    def rmse_time_average(self, group: str, start: int = 0) -> float:
-        """Time-averaged RMSE from step ``start`` on: ``sqrt(mean_{k >= start} MSE_k)``, the
-        root mean squared error over all runs and steps of the window (steps without data
-        skipped)."""
-        mse = self.mse(group)[start:]
+    def rmse_time_average(self, group: str, start: int = 0, stop: int | None = None) -> float:
+        """Time-averaged RMSE over steps ``start <= k < stop`` (default: to the end):
+        ``sqrt(mean_k MSE_k)``, the root mean squared error over all runs and steps of the
+        window (steps without data skipped). From the per-step sums alone, so a window costs
+        nothing to accumulate and keeps their bits."""
+        mse = self.mse(group)[start:stop]
         mse = mse[np.isfinite(mse)]
         return float(np.sqrt(mse.mean())) if mse.size else float("nan")
 
@@ -809,11 +810,13 @@ class MonteCarloMetrics:
         return chi2_bounds(self.counts[r, : self.n_steps], self.dof[r, : self.n_steps],
                            confidence)
 
-    def fraction_inside(self, name: str, start: int = 0, confidence: float = 0.95) -> float:
-        """Fraction of the steps ``k >= start`` with data whose average NEES/NIS lies inside
-        the two-sided ``confidence`` bounds (about ``confidence`` for a consistent filter)."""
-        avg = self._mean(name)[start:]
-        lo, hi = (b[start:] for b in self.bounds(name, confidence))
+    def fraction_inside(self, name: str, start: int = 0, confidence: float = 0.95,
+                        stop: int | None = None) -> float:
+        """Fraction of the steps ``start <= k < stop`` with data whose average NEES/NIS lies
+        inside the two-sided ``confidence`` bounds (about ``confidence`` for a consistent
+        filter)."""
+        avg = self._mean(name)[start:stop]
+        lo, hi = (b[start:stop] for b in self.bounds(name, confidence))
         has = np.isfinite(avg)
         if not has.any():
             return float("nan")
@@ -825,18 +828,20 @@ class MonteCarloMetrics:
         frac = self._run_bad / np.maximum(self._run_steps, 1)
         return self._run_last_bad | (frac > self.max_bad_fraction)
 
-    def summary(self, start: int = 0, confidence: float = 0.95) -> dict[str, float]:
-        """Plain-float summary: runs, steps, time-averaged RMSE per group from ``start``, mean
-        NEES/NIS over the steps from ``start`` and the fraction of those steps inside the
-        ``confidence`` bounds, and the number and fraction of diverged runs."""
+    def summary(self, start: int = 0, confidence: float = 0.95,
+                stop: int | None = None) -> dict[str, float]:
+        """Plain-float summary: runs, steps, time-averaged RMSE per group over the steps
+        ``start <= k < stop`` (default: to the end), mean NEES/NIS over those steps and the
+        fraction of them inside the ``confidence`` bounds, and the number and fraction of
+        diverged runs (over whole runs: the divergence rule does not look at windows)."""
         out: dict[str, float] = {"runs": float(self.runs), "steps": float(self.n_steps)}
         for g in self.groups:
-            out[f"rmse_{g}"] = self.rmse_time_average(g, start)
+            out[f"rmse_{g}"] = self.rmse_time_average(g, start, stop)
         for name in ("nees", "nis"):
-            avg = self._mean(name)[start:]
+            avg = self._mean(name)[start:stop]
             avg = avg[np.isfinite(avg)]
             out[f"{name}_mean"] = float(avg.mean()) if avg.size else float("nan")
-            out[f"{name}_inside"] = self.fraction_inside(name, start, confidence)
+            out[f"{name}_inside"] = self.fraction_inside(name, start, confidence, stop)
         d = self.diverged()
         out["diverged"] = float(d.sum())
         out["diverged_fraction"] = float(d.mean()) if d.size else float("nan")

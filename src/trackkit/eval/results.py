@@ -46,6 +46,10 @@ class FilterResult:
     #: probabilities, "true_class" (a name or None) and "true" (runs, steps) each run's
     #: probability of the true class per step (None without a true class); empty otherwise
     classes: dict = field(default_factory=dict)
+    #: the scenario's error windows (report.windows): window -> {"rmse": {group: RMSE over
+    #: the window's steps}, "anees", "anis", "nees_in_bounds"}, each from the per-step sums
+    #: as ``rmse_mean`` and ``anees`` are; empty without windows
+    windows: dict[str, dict] = field(default_factory=dict)
 
 
 #: a run counts as classified when its last probability of the true class exceeds this
@@ -97,6 +101,12 @@ class MonteCarloResult:
     after_gap_s: float = 0.0
     #: the state is [positions, velocities, ...] (an X-Y picture means something)
     kinematic: bool = True
+    #: the error windows (report.windows): name -> (start_s, end_s) as the scenario gives
+    #: them, their steps name -> (k0, k1) (steps k0 .. k1 - 1), and the PCRLB over each:
+    #: name -> {group: sqrt(mean_k bound_k^2)}, as ``pcrlb_mean``
+    windows: dict[str, tuple[float, float]] = field(default_factory=dict)
+    window_steps: dict[str, tuple[int, int]] = field(default_factory=dict)
+    pcrlb_windows: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def gap_rmse(self, name: str, group: str, window: str = "gap") -> float:
         """RMSE over all runs and the steps of ``window`` ("gap", "after" or "both")."""
@@ -174,10 +184,19 @@ class MonteCarloResult:
                    decided_s=median if np.isfinite(median) else float("nan"))
         return out
 
-    def efficiency(self, name: str, group: str) -> float:
-        """RMSE / PCRLB (time averaged): 1 is efficient, larger is further from the bound."""
-        bound = self.pcrlb_mean.get(group, float("nan"))
-        return self.filters[name].rmse_mean[group] / bound if bound > 0 else float("nan")
+    def efficiency(self, name: str, group: str, window: str | None = None) -> float:
+        """RMSE / PCRLB (time averaged from ``start``, or over the error window ``window``):
+        1 is efficient, larger is further from the bound."""
+        if window is None:
+            bound = self.pcrlb_mean.get(group, float("nan"))
+            rmse = self.filters[name].rmse_mean[group]
+        else:
+            if window not in self.windows:
+                raise KeyError(f"window = {window!r}; the result has windows "
+                               f"{list(self.windows)}")
+            bound = self.pcrlb_windows[window].get(group, float("nan"))
+            rmse = self.filters[name].windows[window]["rmse"][group]
+        return rmse / bound if bound > 0 else float("nan")
 
     def to_json_dict(self) -> dict:
         """The ``results.json`` document."""
@@ -199,10 +218,33 @@ class MonteCarloResult:
                 for name, f in self.filters.items()
             },
             "pcrlb": {g: float(v) for g, v in self.pcrlb_mean.items()},
+            **self._windows_json(),
             **self._matching_json(),
             **self._gaps_json(),
             **self._classification_json(),
         }
+
+    def _windows_json(self) -> dict:
+        """The error windows block, when the scenario names windows."""
+        if not self.windows:
+            return {}
+        out = {}
+        for w, (a, b) in self.windows.items():
+            k0, k1 = self.window_steps[w]
+            out[w] = {
+                "start_s": float(a), "end_s": float(b), "steps": int(k1 - k0),
+                "pcrlb": {g: float(v) for g, v in self.pcrlb_windows[w].items()},
+                "filters": {name: {
+                    "rmse": {g: float(v) for g, v in f.windows[w]["rmse"].items()},
+                    "rmse_over_pcrlb": {g: float(self.efficiency(name, g, w))
+                                        for g in f.windows[w]["rmse"]
+                                        if g in self.pcrlb_windows[w]},
+                    "anees": float(f.windows[w]["anees"]),
+                    "anis": float(f.windows[w]["anis"]),
+                    "nees_in_bounds": float(f.windows[w]["nees_in_bounds"]),
+                } for name, f in self.filters.items()},
+            }
+        return {"windows": out}
 
     def _classification_json(self) -> dict:
         """The classification block, when a filter classifies."""

@@ -20,12 +20,30 @@ validated by the scenario schema at every point; ``LOW:HIGH`` and ``log:LOW:HIGH
 for the seeded random and Latin-hypercube designs (a grid takes ``points`` evenly spaced
 values of a range). ``run.*`` is not swept: runs, seed and block belong to the campaign.
 
+**Every item, and factors.** ``*`` in a path stands for every item of a list:
+``filters.*.motion.q`` is every filter's q, swept together (one column, one value per point).
+A value ``xF`` (or ``*F``), F a finite number > 0, is a factor: the field's value in the
+scenario times F, a number multiplied, a list elementwise. So
+
+    --param 'filters.*.motion.q=x0.1,x1,x10,x100' --param 'filters.*.r0_diag_si=x0.1,x1,x10'
+
+mis-specifies every filter's Q0 and R0 together, each relative to its own well-specified
+value. Where a filter has no ``r0_diag_si`` (it believes the true R), the base of a factor is
+the true R: the diagonal of the point's sensor noise (every observer's channels, in order).
+Where it has no ``motion`` or ``prior``, the base is the target's or the scenario's, as
+above. The factors of a point apply after its plain values, and the truth's before the
+filters', so ``filters.*.r0_diag_si=x0.5`` beside ``sensor.sigma_deg=1,2`` is half of each
+point's own true variances. A parameter's values are all factors or all plain values; a
+factor is listed, never a range. The point records the factor (``"x10"``, the text of the
+table's column), its scenario the values it makes.
+
 **Seeds.** A point's seed is a hash of the campaign seed and the canonical JSON of its
 values (``point_seed``), never its position in the design, so adding points leaves the others'
 runs unchanged; run ``r`` of a point draws from ``run_rng(point seed, r)`` as in ``trackkit
 run``, and all filters at a point see the same truths and measurements. Only the values that
-change the simulation enter the hash (not ``filters.*``): points that differ only in the
-filters' assumptions share their truths and measurements (common random numbers).
+change the simulation enter the hash (not ``filters.*``, factors included): points that
+differ only in the filters' assumptions share their truths and measurements (common random
+numbers).
 
 **Execution.** Every (point, block) is one task, in this process or on Dask (a local cluster
 with ``workers``, or the scheduler at ``scheduler``), with one client for the whole campaign.
@@ -54,13 +72,15 @@ from typing import Any
 import numpy as np
 
 from trackkit.eval.checkpoint import CampaignStore, code_version
+from trackkit.eval.executors import dask_client
 from trackkit.eval.montecarlo import check_memory, combine, plan_of, run_blocks, with_run
 from trackkit.eval.results import MonteCarloResult
 from trackkit.scenario.schema import Scenario, parse_range
 
 __all__ = ["Param", "Point", "Campaign", "BlockFailed", "Listener", "parse_param",
            "params_from_table", "plan_campaign", "point_seed", "point_id", "canonical",
-           "run_campaign", "point_document", "truth_values", "DESIGNS", "ATTEMPTS"]
+           "run_campaign", "point_document", "truth_values", "factor_of", "DESIGNS",
+           "ATTEMPTS"]
 
 DESIGNS = ("grid", "random", "lhs")
 #: times a block is tried before the campaign stops
@@ -90,6 +110,11 @@ class Param:
     @property
     def is_range(self) -> bool:
         return self.values is None
+
+    @property
+    def relative(self) -> bool:
+        """Its values are factors of the scenario's value (``x0.1``), not values."""
+        return not self.is_range and factor_of(self.values[0]) is not None
 
     def describe(self) -> str:
         if self.is_range:
@@ -139,6 +164,58 @@ def _value(token: str) -> Any:
         return token
 
 
+#: a factor of the scenario's value: ``x0.1``, ``*10``, ``x1e-3``
+_FACTOR = re.compile(r"\s*[x*]\s*([-+0-9.eEinfINFaN]+)\s*")
+
+
+def factor_of(value: Any) -> float | None:
+    """The factor F of a value ``"xF"`` (as a point records it), else None."""
+    if not isinstance(value, str):
+        return None
+    m = _FACTOR.fullmatch(value)
+    if m is None:
+        return None
+    try:
+        return float(m.group(1))
+    except ValueError:
+        return None
+
+
+def _factor_text(f: float) -> str:
+    """The one spelling of a factor: ``x`` and the shortest float text, ``x10`` not
+    ``x10.0`` (a point's id hashes it)."""
+    text = repr(float(f))
+    return "x" + (text[:-2] if text.endswith(".0") else text)
+
+
+def _factors(path: str, values: Sequence[Any], source: str) -> tuple[Any, ...]:
+    """``values`` as given, or, when they are factors, in their one spelling; an error names
+    a bad factor and a mix of factors and plain values."""
+    out, plain = [], []
+    for v in values:
+        text = v.strip() if isinstance(v, str) else None
+        if text is None or not text or text[0] not in "x*":
+            plain.append(v)
+            out.append(v)
+            continue
+        f = factor_of(text)
+        if f is None or not (math.isfinite(f) and f > 0):
+            if text[0] == "x" and f is None and ":" not in text:
+                plain.append(v)  # a text value that happens to begin with x
+                out.append(v)
+                continue
+            raise ValueError(f"{source}: value {text!r} of {path}: expected a factor xF or *F "
+                             "with F a finite number > 0, listed (e.g. x0.1,x1,x10; a factor "
+                             "is never a range)")
+        out.append(_factor_text(f))
+    factors = [x for x in out if factor_of(x) is not None]
+    if factors and plain:
+        raise ValueError(f"{source}: {path} mixes factors ({', '.join(factors)}) and plain "
+                         f"values ({', '.join(_show(x) for x in plain)}); expected all "
+                         "factors (x0.1,x1,x10) or all values")
+    return tuple(out)
+
+
 def _normal_path(path: str) -> str:
     path = re.sub(r"\[(\w+)\]", r".\1", path.strip())
     return path.strip(".")
@@ -162,7 +239,7 @@ def parse_param(text: str, source: str | None = None) -> Param:
     if any(not t for t in tokens):
         raise ValueError(f"{source}: an empty value in {rhs!r}; expected values separated "
                          "by commas")
-    return Param(path, tuple(_value(t) for t in tokens), source=source)
+    return Param(path, _factors(path, [_value(t) for t in tokens], source), source=source)
 
 
 def params_from_table(table: Any) -> list[Param]:
@@ -174,7 +251,8 @@ def params_from_table(table: Any) -> list[Param]:
             low, high, log = parse_range(values)
             out.append(Param(_normal_path(path), None, low, high, log, source))
         else:
-            out.append(Param(_normal_path(path), tuple(values), source=source))
+            out.append(Param(_normal_path(path), _factors(path, values, source),
+                             source=source))
     return out
 
 
@@ -187,6 +265,19 @@ def _locate(data: dict, path: str, source: str) -> list[tuple[Any, ...]]:
     parts = path.split(".")
     if parts[0] in _NOT_SWEPT:
         raise ValueError(f"{source}: {parts[0]} is not swept ({_NOT_SWEPT[parts[0]]})")
+    if "*" in parts:  # every item of the list before it
+        j = parts.index("*")
+        head = ".".join(parts[:j])
+        if not head:
+            raise ValueError(f"{source}: {path} begins with *; expected * after a list, "
+                             "e.g. filters.*.motion.q")
+        (where,) = _locate(data, head, source)
+        items = _get(data, where)
+        if not isinstance(items, list):
+            raise ValueError(f"{source}: {head} is not a list, so * (every item) cannot "
+                             f"follow it; expected a list such as filters or observers")
+        return [loc for i in range(len(items))
+                for loc in _locate(data, ".".join([head, str(i), *parts[j + 1:]]), source)]
     if parts[0] == "sensor" and "sensor" not in data:
         return [loc for i in range(len(data["observers"]))
                 for loc in _locate(data, ".".join(["observers", str(i), *parts]), source)]
@@ -224,7 +315,7 @@ def _locate(data: dict, path: str, source: str) -> list[tuple[Any, ...]]:
 def _canonical_path(data: dict, p: Param, locs: list[tuple[Any, ...]]) -> str:
     """One spelling per field: a filter by its name, a list item by its index (the
     ``sensor.`` shorthand, naming several fields, stays as it is)."""
-    if len(locs) != 1 or p.path.split(".")[0] == "sensor":
+    if len(locs) != 1 or p.path.split(".")[0] == "sensor" or "*" in p.path.split("."):
         return p.path
     loc = locs[0]
     parts = [str(k) for k in loc]
@@ -239,8 +330,24 @@ def _default_table(data: dict, loc: list[Any]) -> dict:
     if len(loc) == 3 and loc[0] == "filters" and loc[2] == "motion":
         return deepcopy(data["target"]["motion"])
     if len(loc) == 3 and loc[0] == "filters" and loc[2] == "prior":
-        return deepcopy(data["prior"])
+        # only what a filter's prior holds (the scenario's may say how runs start, too)
+        from trackkit.scenario.schema import FilterSpec
+
+        allowed = _model_fields(FilterSpec.model_fields["prior"].annotation)
+        return {k: deepcopy(v) for k, v in data["prior"].items()
+                if allowed is None or k in allowed}
     return {}
+
+
+def _model_fields(annotation: Any) -> set[str] | None:
+    """The field names of the pydantic model in ``annotation`` (``Model | None``)."""
+    import typing
+
+    for tp in (annotation, *typing.get_args(annotation)):
+        fields = getattr(tp, "model_fields", None)
+        if isinstance(fields, dict):
+            return set(fields)
+    return None
 
 
 def _assign(data: dict, loc: tuple[Any, ...], value: Any) -> None:
@@ -260,6 +367,85 @@ def _get(data: Any, loc: tuple[Any, ...]) -> Any:
             return None
         data = data[k] if isinstance(data, list) else data.get(k)
     return data
+
+
+def _named(data: dict, loc: tuple[Any, ...]) -> str:
+    """A location as the user calls it: a filter by its name."""
+    parts = [str(k) for k in loc]
+    if len(loc) > 1 and loc[0] == "filters":
+        parts[1] = str(data["filters"][loc[1]]["name"])
+    return ".".join(parts)
+
+
+def _current(data: dict, loc: tuple[Any, ...]) -> Any:
+    """The value at ``loc`` as a run would use it: inside an absent table, the value of the
+    table it starts from (``_default_table``)."""
+    node: Any = data
+    for j, k in enumerate(loc):
+        if node is None:
+            return None
+        nxt = node[k] if isinstance(node, list) else node.get(k)
+        if nxt is None and j < len(loc) - 1:
+            nxt = _default_table(data, list(loc[:j + 1]))
+        node = nxt
+    return node
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _times(now: Any, f: float, where: str, source: str) -> Any:
+    """``now`` times the factor ``f``: a number, or a list of numbers elementwise."""
+    if _is_number(now):
+        return float(now) * f
+    if isinstance(now, list) and now and all(_is_number(x) for x in now):
+        return [float(x) * f for x in now]
+    shown = "is not set" if now is None else f"= {_show(now)}"
+    raise ValueError(f"{source}: {where} {shown}; a factor (x{f:g}) multiplies a number "
+                     "or a list of numbers, so give plain values for it")
+
+
+def _true_r(data: dict, source: str) -> list[float]:
+    """The true R's diagonal at the scenario ``data``: the noise variance of every
+    observer's channels, in the order of the stacked measurement, as a filter that
+    believes the true R uses it."""
+    plan = plan_of(_validated(data, source))
+    return np.diagonal(np.asarray(plan.sensors[0].noise, dtype=float)).tolist()
+
+
+def _apply(data: dict, values: dict[str, Any], locations: dict[str, list[tuple[Any, ...]]],
+           sources: dict[str, str], true_rs: dict[str, list[float]]) -> None:
+    """Set a point's ``values`` in ``data``: plain values first, then the factors of the
+    truth, then the filters' factors, each relative to the point as set so far (a filter's
+    ``r0_diag_si`` absent: relative to the point's true R, kept in ``true_rs`` by the
+    truth's JSON)."""
+    def is_factor(item: tuple[str, Any]) -> bool:
+        return factor_of(item[1]) is not None
+
+    plain = [kv for kv in values.items() if not is_factor(kv)]
+    truth = [kv for kv in values.items() if is_factor(kv) and not kv[0].startswith("filters.")]
+    own = [kv for kv in values.items() if is_factor(kv) and kv[0].startswith("filters.")]
+    for path, v in plain:
+        for loc in locations[path]:
+            _assign(data, loc, v)
+    true_r: list[float] | None = None
+    for k, (path, v) in enumerate([*truth, *own]):
+        f = factor_of(v)
+        if k == len(truth) and any(loc[-1] == "r0_diag_si" for p, _ in own
+                                   for loc in locations[p]):
+            # the truth is final and no filter factor is in yet: the point's true R
+            key = json.dumps({x: y for x, y in data.items() if x not in ("filters", "run")},
+                             sort_keys=True, default=str)
+            if key not in true_rs:
+                true_rs[key] = _true_r(data, f"{sources[path]}: the point's true R")
+            true_r = true_rs[key]
+        for loc in locations[path]:
+            now = _current(data, loc)
+            where = _named(data, loc)
+            if now is None and loc[0] == "filters" and loc[2:] == ("r0_diag_si",):
+                now = true_r
+            _assign(data, loc, _times(now, f, where, sources[path]))
 
 
 # --- designs ------------------------------------------------------------------------------
@@ -402,6 +588,15 @@ class Campaign:
                 "seed": self.seed, "runs": self.runs, "block": self.block,
                 "code": code_version()}
 
+    def own_value(self, param: Param) -> Any:
+        """The value of ``param`` at the base scenario's own setting, as a point records it:
+        ``x1`` for factors, else the scenario's value (None where it has none)."""
+        if param.relative:
+            return _factor_text(1.0)
+        data = self.base.model_dump(mode="json")
+        data["sweep"] = None
+        return _current(data, _locate(data, param.path, param.source)[0])
+
     def document(self) -> dict:
         """The campaign's design, as ``sweep.json`` records it."""
         return {"scenario": self.base.name, "design": self.design,
@@ -474,18 +669,28 @@ def plan_campaign(scenario: Scenario, params: Sequence[Param] | None = None,
                              "give each parameter once")
         seen[p.path] = p.source
     locations = {p.path: _locate(base, p.path, p.source) for p in params}
+    owner: dict[tuple[Any, ...], Param] = {}
+    for p in params:  # filters.*.motion.q and filters.EKF.motion.q name one field twice
+        for loc in locations[p.path]:
+            if loc in owner:
+                raise ValueError(f"{p.source}: {p.path} sets {_named(base, loc)}, which "
+                                 f"{owner[loc].path} ({owner[loc].source}) sets too; expected "
+                                 "each field swept by one parameter")
+            owner[loc] = p
+    sources = {p.path: p.source for p in params}
+    true_rs: dict[str, list[float]] = {}
     integer = {}
     for p in params:
         now = _get(base, locations[p.path][0])
-        integer[p.path] = isinstance(now, int) and not isinstance(now, bool)
+        integer[p.path] = isinstance(now, int) and not isinstance(now, bool) and (
+            not p.relative)
     # each parameter's values alone first, so that a bad one is named by itself
     for p in params:
         for v in (p.values if not p.is_range else (p.low, p.high)):
             if integer[p.path] and p.is_range:
                 v = int(round(v))
             data = deepcopy(base)
-            for loc in locations[p.path]:
-                _assign(data, loc, v)
+            _apply(data, {p.path: v}, locations, sources, true_rs)
             _validated(data, f"{p.source}: value {_show(v)} of {p.path}")
     raw_points = _design(list(params), design, points, s.run.seed, integer)
     campaign = Campaign(base=s, params=list(params), design=design, n_points=points,
@@ -494,13 +699,13 @@ def plan_campaign(scenario: Scenario, params: Sequence[Param] | None = None,
     ids: set[str] = set()
     for raw in raw_points:
         data = deepcopy(base)
-        for path, v in raw.items():
-            for loc in locations[path]:
-                _assign(data, loc, v)
         where = ", ".join(f"{k}={_show(v)}" for k, v in raw.items())
+        _apply(data, raw, locations, {k: f"the point {where}" for k in raw}, true_rs)
         sc = _validated(data, f"the point {where}")
         dumped = sc.model_dump(mode="json")
-        values = {path: _get(dumped, locations[path][0]) for path in raw}
+        # a factor is recorded as given (its column); a plain value as the scenario holds it
+        values = {path: v if factor_of(v) is not None else _get(dumped, locations[path][0])
+                  for path, v in raw.items()}
         pid = point_id(values)
         if pid in ids:
             campaign.notes.append(f"the point {where} appears more than once in the "
@@ -661,17 +866,15 @@ def _on_worker(scenario: Scenario, block: int, topic: str, key: str) -> Any:
 def _run_dask(campaign: Campaign, tasks: list[tuple[int, int]], workers: int | None,
               scheduler: str | None, attempts: int, on_block: Callable, listener: Listener,
               stored_runs: list[int], lock: threading.Lock) -> None:
-    try:
-        from dask.distributed import Client, LocalCluster, as_completed
-    except ImportError as err:  # pragma: no cover - dask is a dependency
-        raise RuntimeError("--workers/--scheduler need dask.distributed installed") from err
-    cluster = None
-    if scheduler:
-        client = Client(scheduler)
-    else:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
+    with dask_client(workers, scheduler) as client:
+        _run_on(client, campaign, tasks, attempts, on_block, listener, stored_runs, lock)
+
+
+def _run_on(client: Any, campaign: Campaign, tasks: list[tuple[int, int]], attempts: int,
+            on_block: Callable, listener: Listener, stored_runs: list[int],
+            lock: threading.Lock) -> None:
+    from dask.distributed import as_completed
+
     token = uuid.uuid4().hex[:10]  # keys and events of this campaign alone on a shared cluster
     topic = f"trackkit-sweep-{token}"
     where: dict[str, tuple[int, int]] = {}
@@ -719,9 +922,6 @@ def _run_dask(campaign: Campaign, tasks: list[tuple[int, int]], workers: int | N
             client.unsubscribe_topic(topic)
         except Exception:  # noqa: BLE001 - the client may be gone already
             pass
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 def _store_finished(pending: set, where: dict, on_block: Callable, partial: dict,

@@ -3,20 +3,30 @@
 Files, written into the campaign directory all or nothing (``files.write_atomically``):
 
 - ``sweep.parquet`` and ``sweep.csv``: one row per point and filter: ``point`` (its id),
-  ``seed`` (its master seed), one column per swept parameter (named by its path), ``filter``,
-  ``runs``, then per error group ``g`` of the scenario's report: ``rmse_g``, ``pcrlb_g`` and
-  ``rmse_pcrlb_g`` (RMSE over the PCRLB, time averaged from ``report.average_from_s``), then
-  ``anees``, ``anis``, ``nees_in_bounds``, ``diverged`` (runs) and ``diverged_share``. SI
-  units (radians for angles; the Parquet fields carry them as ``unit`` metadata); a missing
-  value is null (Parquet) or empty (CSV); CSV floats are written as the shortest text that
+  ``seed`` (its master seed), one column per swept parameter (named by its path; a
+  parameter given as factors holds their text, ``x0.1``), ``filter``, ``runs``, then per
+  error group ``g`` of the scenario's report: ``rmse_g``, ``pcrlb_g`` and ``rmse_pcrlb_g``
+  (RMSE over the PCRLB, time averaged from ``report.average_from_s``), then ``anees``,
+  ``anis``, ``nees_in_bounds``, ``diverged`` (runs) and ``diverged_share``. SI units
+  (radians for angles; the Parquet fields carry them as ``unit`` metadata); a missing value
+  is null (Parquet) or empty (CSV); CSV floats are written as the shortest text that
   reads back to the same double.
 - ``sweep.json``: the design: parameters, every point's id, values and seed.
 - ``lines-PARAM.png``: each headline metric against each swept parameter, one colour per
   filter (the other parameters fixed at each of their levels, up to three line styles, else
   at their middle level); a random or Latin-hypercube design is shown as points.
 - ``heatmap-METRIC.png``: for a grid over two parameters, each metric over the grid, one
-  panel per filter.
-- ``report.html``: the settings, the table of headline metrics and the figures inlined.
+  panel per filter (log colours where it spans more than 30x; the scenario's own setting,
+  ``x1`` for factors, framed).
+- ``heatmap-ratio_rmse_GROUP.png``: for a grid over two parameters, each filter's RMSE over
+  the reference filter's at the same point (same truths and measurements): the reference is
+  the scenario's published table's (``[report] published``, e.g. the EKF of seed 002 paper b),
+  else the scenario's first filter. Where the paper gives that filter's ratio, the panel's
+  title gives it beside ours at the scenario's own setting, and a dashed contour runs where
+  ours crosses it.
+- ``report.html``: the settings, the table of headline metrics, each published ratio beside
+  ours (at the scenario's own setting, the point nearest the paper's value, our lowest and
+  highest, and how many points are at or below it) and the figures inlined.
 - ``timings.json``: each point's filters' wall-clock time per run-step (not deterministic).
 
 The table, ``sweep.json`` and the points' results are the same bytes for the same command,
@@ -39,12 +49,15 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from trackkit.eval.sweep import factor_of
 from trackkit.report.files import write_atomically
 from trackkit.report.html import data_uri
 from trackkit.report.tables import display_unit
+from trackkit.scenario.schema import PublishedSpec
 
 __all__ = ["sweep_table", "write_sweep_csv", "write_sweep_report", "render_sweep_html",
-           "line_figures", "heatmap_figures", "sweep_outputs", "headline_metrics",
+           "line_figures", "heatmap_figures", "ratio_figures", "ratio_grids",
+           "published_rows", "reference_filter", "sweep_outputs", "headline_metrics",
            "SWEEP_PARQUET", "SWEEP_CSV", "SWEEP_JSON", "SWEEP_HTML", "SWEEP_TIMINGS"]
 
 SWEEP_PARQUET = "sweep.parquet"
@@ -193,8 +206,14 @@ def _numeric(values: Sequence[Any]) -> bool:
 
 
 def _levels(values: Sequence[Any]) -> list[Any]:
+    """The distinct values in order: numbers and factors (``x0.1``) sorted, others as they
+    come."""
     uniq = list(dict.fromkeys(values))
-    return sorted(uniq) if _numeric(uniq) else uniq
+    if _numeric(uniq):
+        return sorted(uniq)
+    if uniq and all(factor_of(v) is not None for v in uniq):
+        return sorted(uniq, key=factor_of)
+    return uniq
 
 
 def _figure(w: float, h: float):
@@ -232,7 +251,8 @@ def line_figures(campaign: Any, table: pa.Table) -> dict[str, Any]:
     n = campaign.base.state_dim
     out = {}
     for param in campaign.params:
-        x_all = values[param.path]
+        # factors (x0.1) are plotted at their number, on a log axis when they span decades
+        x_all = [factor_of(v) if param.relative else v for v in values[param.path]]
         levels = _levels(x_all)
         numeric = _numeric(levels)
         others = [p for p in paths if p != param.path]
@@ -277,7 +297,8 @@ def line_figures(campaign: Any, table: pa.Table) -> dict[str, Any]:
                 ax.set_xscale("log")
             if not numeric:
                 ax.set_xticks(range(len(levels)), [_fmt(v) for v in levels])
-            ax.set_xlabel(param.path)
+            ax.set_xlabel(param.path + (" (factor of the scenario's value)"
+                                        if param.relative else ""))
             ax.set_ylabel(label)
             ax.grid(True, alpha=0.3)
         handles, labels = axes[0].get_legend_handles_labels()
@@ -301,54 +322,250 @@ def _fmt(v: Any) -> str:
     return v if isinstance(v, str) else json.dumps(v)
 
 
-def heatmap_figures(campaign: Any, table: pa.Table) -> dict[str, Any]:
-    """For a grid over two parameters: ``heatmap-METRIC`` -> each metric over the grid, one
-    panel per filter (a shared colour scale)."""
+def _grid_of(campaign: Any, table: pa.Table) -> tuple[str, str, list, list, list, list] | None:
+    """For a grid over two parameters: their paths, each row's values and the levels of
+    each (x across, y up); else None."""
     if campaign.design != "grid" or len(campaign.params) != 2:
-        return {}
+        return None
     px, py = (p.path for p in campaign.params)
     xs, ys = table.column(px).to_pylist(), table.column(py).to_pylist()
-    lx, ly = _levels(xs), _levels(ys)
+    return px, py, xs, ys, _levels(xs), _levels(ys)
+
+
+def _matrix(rows_filter: list[str], f: str, xs: list, ys: list, lx: list, ly: list,
+            v: np.ndarray) -> np.ndarray:
+    m = np.full((len(ly), len(lx)), np.nan)
+    for r in range(len(xs)):
+        if rows_filter[r] == f:
+            m[ly.index(ys[r]), lx.index(xs[r])] = v[r]
+    return m
+
+
+def _own_cell(campaign: Any, lx: list, ly: list) -> tuple[int, int] | None:
+    """(row, column) of the base scenario's own setting in the grid, if it is a point."""
+    own = [campaign.own_value(p) for p in campaign.params]
+    if own[0] in lx and own[1] in ly:
+        return ly.index(own[1]), lx.index(own[0])
+    return None
+
+
+def _frame(ax: Any, cell: tuple[int, int] | None) -> None:
+    """Outline the scenario's own setting."""
+    if cell is not None:
+        from matplotlib.patches import Rectangle
+
+        i, j = cell
+        ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="k", lw=1.6))
+
+
+def _label_axes(ax: Any, px: str, py: str, lx: list, ly: list) -> None:
+    ax.set_xticks(range(len(lx)), [_fmt(x) for x in lx], fontsize=7)
+    ax.set_yticks(range(len(ly)), [_fmt(y) for y in ly], fontsize=7)
+    ax.set_xlabel(px, fontsize=8)
+    ax.set_ylabel(py, fontsize=8)
+
+
+def _annotate(ax: Any, m: np.ndarray, norm: Any) -> None:
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            val = m[i, j]
+            if math.isfinite(val):
+                dark = abs(float(norm(val)) - 0.5) > 0.3  # text on the darker ends
+                ax.text(j, i, f"{val:.3g}", ha="center", va="center", fontsize=7,
+                        color="w" if dark else "k")
+
+
+def _plain_ticks(bar: Any) -> None:
+    """A colour bar's ticks as numbers (0.5, 2), not powers of ten, on a log scale too."""
+    from matplotlib.colors import LogNorm
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    if isinstance(bar.norm, LogNorm):  # 1-2-5 in every decade the bar spans
+        lo, hi = float(bar.norm.vmin), float(bar.norm.vmax)
+        decades = range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1)
+        ticks = [m * 10.0**e for e in decades for m in (1, 2, 5) if lo <= m * 10.0**e <= hi]
+        if len(ticks) >= 2:
+            bar.set_ticks(ticks)
+        bar.ax.yaxis.set_minor_formatter(NullFormatter())
+    bar.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
+
+
+def heatmap_figures(campaign: Any, table: pa.Table) -> dict[str, Any]:
+    """For a grid over two parameters: ``heatmap-METRIC`` -> each metric over the grid, one
+    panel per filter (a shared colour scale, logarithmic where the metric spans more than a
+    factor 30; the scenario's own setting outlined)."""
+    from matplotlib.colors import LogNorm, Normalize
+
+    grid = _grid_of(campaign, table)
+    if grid is None:
+        return {}
+    px, py, xs, ys, lx, ly = grid
     filters = list(dict.fromkeys(table.column("filter").to_pylist()))
     rows_filter = table.column("filter").to_pylist()
+    own = _own_cell(campaign, lx, ly)
     ncol = min(len(filters), 4)
     nrow = -(-len(filters) // ncol)
     out = {}
     for column, label in headline_metrics(campaign, table):
         v = _scaled(table, column)
-        grids = {}
-        for f in filters:
-            m = np.full((len(ly), len(lx)), np.nan)
-            for r in range(len(xs)):
-                if rows_filter[r] == f:
-                    m[ly.index(ys[r]), lx.index(xs[r])] = v[r]
-            grids[f] = m
+        grids = {f: _matrix(rows_filter, f, xs, ys, lx, ly, v) for f in filters}
         finite = v[np.isfinite(v)]
         lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+        hi = hi if hi > lo else lo + 1.0
+        norm = LogNorm(lo, hi) if lo > 0 and hi / lo > 30 else Normalize(lo, hi)
         fig = _figure(3.2 * ncol + 1.0, 2.8 * nrow + 0.6)
         axes = np.atleast_1d(fig.subplots(nrow, ncol)).ravel()
         image = None
         for ax, f in zip(axes, filters, strict=False):
             image = ax.imshow(grids[f], origin="lower", aspect="auto", cmap="viridis",
-                              vmin=lo, vmax=hi if hi > lo else lo + 1.0)
-            for i in range(len(ly)):
-                for j in range(len(lx)):
-                    val = grids[f][i, j]
-                    if math.isfinite(val):
-                        ax.text(j, i, f"{val:.3g}", ha="center", va="center", fontsize=7,
-                                color="w" if val < 0.5 * (lo + hi) else "k")
-            ax.set_xticks(range(len(lx)), [_fmt(x) for x in lx], fontsize=7)
-            ax.set_yticks(range(len(ly)), [_fmt(y) for y in ly], fontsize=7)
-            ax.set_xlabel(px, fontsize=8)
-            ax.set_ylabel(py, fontsize=8)
+                              norm=norm)
+            _annotate(ax, grids[f], norm)
+            _frame(ax, own)
+            _label_axes(ax, px, py, lx, ly)
             ax.set_title(f, fontsize=9)
         for ax in axes[len(filters):]:
             ax.set_visible(False)
         if image is not None:
-            fig.colorbar(image, ax=list(axes[:len(filters)]), label=label, shrink=0.9)
-        fig.suptitle(f"{campaign.base.name}: {label}", fontsize=10)
+            _plain_ticks(fig.colorbar(image, ax=list(axes[:len(filters)]), label=label,
+                                      shrink=0.9))
+        fig.suptitle(f"{campaign.base.name}: {label}"
+                     + (" (framed: the scenario's own setting)" if own else ""), fontsize=10)
         out[f"heatmap-{_slug(column)}"] = fig
     return out
+
+
+def reference_filter(campaign: Any, published: Sequence[PublishedSpec] = ()) -> str:
+    """The filter the others are divided by: the published tables' reference filter when the
+    campaign has it, else the scenario's first filter."""
+    names = [f.name for f in campaign.base.filters]
+    for pub in published:
+        if pub.versus in names:
+            return pub.versus
+    return names[0]
+
+
+def ratio_grids(campaign: Any, table: pa.Table, group: str, versus: str
+                ) -> dict[str, np.ndarray]:
+    """For a grid over two parameters: each filter's RMSE of ``group`` over the RMSE of
+    ``versus`` at the same point (the same truths and measurements), rows along the second
+    parameter's levels, columns along the first's; {} for another design."""
+    grid = _grid_of(campaign, table)
+    if grid is None or f"rmse_{group}" not in table.column_names:
+        return {}
+    _, _, xs, ys, lx, ly = grid
+    rows_filter = table.column("filter").to_pylist()
+    v = _column_values(table, f"rmse_{group}")
+    ref = _matrix(rows_filter, versus, xs, ys, lx, ly, v)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return {f: _matrix(rows_filter, f, xs, ys, lx, ly, v) / ref
+                for f in dict.fromkeys(rows_filter) if f != versus}
+
+
+def _ratio_groups(campaign: Any, published: Sequence[PublishedSpec]) -> list[str]:
+    groups = campaign.base.report.groups
+    return list(dict.fromkeys([groups[0], *(p.group for p in published if p.group in groups)]))
+
+
+def ratio_figures(campaign: Any, table: pa.Table, published: Sequence[PublishedSpec] = ()
+                  ) -> dict[str, Any]:
+    """For a grid over two parameters: ``heatmap-ratio_rmse_GROUP`` -> each filter's RMSE
+    over the reference filter's, one panel per filter, on a log colour scale centred at 1
+    (blue: better than the reference). Where a published table gives the filter's ratio, a
+    dashed contour marks the cells' boundary at the paper's value and the panel's title
+    gives it beside ours at the scenario's own setting (framed)."""
+    from matplotlib.colors import LogNorm
+
+    grid = _grid_of(campaign, table)
+    if grid is None:
+        return {}
+    px, py, _, _, lx, ly = grid
+    versus = reference_filter(campaign, published)
+    own = _own_cell(campaign, lx, ly)
+    out = {}
+    for g in _ratio_groups(campaign, published):
+        ratios = ratio_grids(campaign, table, g, versus)
+        if not ratios:
+            continue
+        finite = np.concatenate([m[np.isfinite(m) & (m > 0)] for m in ratios.values()])
+        span = max(float(np.max(np.abs(np.log(finite)))), math.log(1.25)) if finite.size else (
+            math.log(2.0))
+        norm = LogNorm(math.exp(-span), math.exp(span))
+        names = list(ratios)
+        ncol = min(len(names), 3)
+        nrow = -(-len(names) // ncol)
+        fig = _figure(3.6 * ncol + 1.0, 3.0 * nrow + 0.7)
+        axes = np.atleast_1d(fig.subplots(nrow, ncol)).ravel()
+        image = None
+        for ax, f in zip(axes, names, strict=False):
+            m = ratios[f]
+            image = ax.imshow(m, origin="lower", aspect="auto", cmap="RdBu_r", norm=norm)
+            _annotate(ax, m, norm)
+            _frame(ax, own)
+            _label_axes(ax, px, py, lx, ly)
+            title = f"{f} / {versus}"
+            for pub in published:
+                if pub.group != g or pub.versus != versus or f not in pub.rmse:
+                    continue
+                paper = pub.ratio(f)
+                title += f"; paper {paper:.2f}"
+                if own is not None and math.isfinite(m[own]):
+                    title += f", ours {m[own]:.2f} (framed)"
+                ok = np.isfinite(m)
+                if m.shape[0] > 1 and m.shape[1] > 1 and ok.all() and (
+                        m.min() < paper < m.max()):
+                    cs = ax.contour(np.arange(len(lx)), np.arange(len(ly)), m,
+                                    levels=[paper], colors="k", linestyles="--",
+                                    linewidths=1.2)
+                    ax.clabel(cs, fmt={paper: f"paper {paper:.2f}"}, fontsize=7)
+            ax.set_title(title, fontsize=8)
+        for ax in axes[len(names):]:
+            ax.set_visible(False)
+        if image is not None:
+            _plain_ticks(fig.colorbar(image, ax=list(axes[:len(names)]),
+                                      label=f"{g} RMSE / {versus}'s", shrink=0.9))
+        fig.suptitle(f"{campaign.base.name}: {g} RMSE over the {versus}'s at each point"
+                     + (" (dashed: the paper's ratio)" if published else ""), fontsize=10)
+        out[f"heatmap-ratio_rmse_{_slug(g)}"] = fig
+    return out
+
+
+def published_rows(campaign: Any, table: pa.Table, published: Sequence[PublishedSpec]
+                   ) -> list[dict[str, Any]]:
+    """Each published ratio beside ours over a two-parameter grid: ours at the scenario's
+    own setting, the point whose ratio is nearest the paper's, our range over the grid, and
+    the points at or below the paper's ratio."""
+    grid = _grid_of(campaign, table)
+    if grid is None:
+        return []
+    px, py, _, _, lx, ly = grid
+    own = _own_cell(campaign, lx, ly)
+    rows = []
+    for pub in published:
+        ratios = ratio_grids(campaign, table, pub.group, pub.versus)
+        for f in pub.filters():
+            if f not in ratios:
+                continue
+            m, paper = ratios[f], pub.ratio(f)
+            ok = np.isfinite(m)
+            if not ok.any():
+                continue
+
+            def at(i: int, j: int) -> str:
+                return f"{px}={_fmt(lx[j])}, {py}={_fmt(ly[i])}"
+
+            near = np.unravel_index(np.nanargmin(np.where(ok, np.abs(m - paper), np.nan)),
+                                    m.shape)
+            lo = np.unravel_index(np.nanargmin(np.where(ok, m, np.nan)), m.shape)
+            hi = np.unravel_index(np.nanargmax(np.where(ok, m, np.nan)), m.shape)
+            rows.append({
+                "ratio": f"{f} / {pub.versus} {pub.group} RMSE", "paper": paper,
+                "source": pub.source,
+                "own": float(m[own]) if own is not None and ok[own] else None,
+                "own_at": at(*own) if own is not None else None,
+                "nearest": float(m[near]), "nearest_at": at(*near),
+                "min": float(m[lo]), "min_at": at(*lo), "max": float(m[hi]), "max_at": at(*hi),
+                "at_or_below": int(np.sum(m[ok] <= paper)), "points": int(ok.sum())})
+    return rows
 
 
 # --- the page -----------------------------------------------------------------------------
@@ -377,9 +594,39 @@ def _cell(v: Any) -> str:
     return html.escape(str(v))
 
 
+def _published_html(rows: Sequence[dict[str, Any]]) -> list[str]:
+    esc = html.escape
+    parts = ["<h2>Beside the published values</h2>",
+             '<table class="sweep"><thead><tr><th>ratio</th><th>paper</th>'
+             "<th>ours at the scenario's own setting</th><th>ours nearest the paper</th>"
+             "<th>ours, lowest</th><th>ours, highest</th><th>points at or below the paper's"
+             "</th></tr></thead><tbody>"]
+    for r in rows:
+        own = "not a point of the grid" if r["own"] is None else (
+            f"{r['own']:.3f} ({esc(r['own_at'])})")
+        parts.append(
+            f'<tr><td class="text">{esc(r["ratio"])}</td><td>{r["paper"]:.3f}</td>'
+            f"<td>{own}</td><td>{r['nearest']:.3f} ({esc(r['nearest_at'])})</td>"
+            f"<td>{r['min']:.3f} ({esc(r['min_at'])})</td>"
+            f"<td>{r['max']:.3f} ({esc(r['max_at'])})</td>"
+            f"<td>{r['at_or_below']} of {r['points']}</td></tr>")
+    parts.append("</tbody></table>")
+    sources = list(dict.fromkeys(r["source"] for r in rows))
+    parts.append('<p class="meta">Paper: ' + "; ".join(esc(x) for x in sources) + ". Its "
+                 "ratio is its filter's RMSE over its reference filter's; ours is the same at "
+                 "each point, over the same runs for every filter. The paper does not give its "
+                 "filters' initial Q and R, so no one point is its setting: the table gives "
+                 "ours at the scenario's own setting, the point nearest the paper's value and "
+                 "the range over the grid.</p>")
+    return parts
+
+
 def render_sweep_html(campaign: Any, table: pa.Table, images: dict[str, Path | bytes],
-                      notes: Sequence[str] = ()) -> str:
-    """The campaign's page: settings, parameters, the headline table and the figures."""
+                      notes: Sequence[str] = (),
+                      beside: Sequence[dict[str, Any]] = (),
+                      published: Sequence[PublishedSpec] = ()) -> str:
+    """The campaign's page: settings, parameters, the headline table, our ratios beside the
+    published ones (``beside``, from ``published_rows``) and the figures."""
     from trackkit import __version__
     from trackkit.eval.checkpoint import code_version
 
@@ -423,6 +670,8 @@ def render_sweep_html(campaign: Any, table: pa.Table, images: dict[str, Path | b
     parts.append('<p class="meta">Every column of every metric group is in sweep.csv and '
                  "sweep.parquet (SI units); each point's full result in "
                  "points/ID/result.json.</p>")
+    if beside:
+        parts += _published_html(beside)
     all_notes = [
         "Each point's seed is a hash of the campaign seed and the point's values, so adding "
         "points leaves the others' runs unchanged; all filters at a point see the same truths "
@@ -435,8 +684,16 @@ def render_sweep_html(campaign: Any, table: pa.Table, images: dict[str, Path | b
     if images:
         parts.append("<h2>Figures</h2>")
     for name, png in images.items():
-        caption = ("Headline metrics against " + name[len("lines-"):] if name.startswith(
-            "lines-") else "Heat map over the grid: " + name[len("heatmap-"):])
+        if name.startswith("lines-"):
+            caption = "Headline metrics against " + name[len("lines-"):]
+        elif name.startswith("heatmap-ratio_rmse_"):
+            caption = (f"{name[len('heatmap-ratio_rmse_'):]} RMSE of each filter over the "
+                       f"{reference_filter(campaign, published)}'s at each point (below 1, "
+                       "blue: better)" + (
+                           "; dashed: the paper's ratio, where ours crosses it" if published
+                           else "") + "; framed: the scenario's own setting")
+        else:
+            caption = "Heat map over the grid: " + name[len("heatmap-"):]
         parts.append(f'<figure><img src="{data_uri(png)}" alt="{esc(name)}">'
                      f"<figcaption>{esc(caption)}</figcaption></figure>")
     parts += ["</body>", "</html>", ""]
@@ -454,10 +711,15 @@ def _timings(campaign: Any, timings: Sequence[dict | None]) -> dict:
 
 def write_sweep_report(campaign: Any, docs: Sequence[dict], out_dir: str | Path,
                        timings: Sequence[dict | None] | None = None,
-                       notes: Sequence[str] = ()) -> dict[str, Path]:
+                       notes: Sequence[str] = (),
+                       published: Sequence[PublishedSpec] | None = None) -> dict[str, Path]:
     """Write the campaign's report files into ``out_dir`` (see the module doc), all or
-    nothing; figures of an earlier design that this one does not draw are removed."""
+    nothing; figures of an earlier design that this one does not draw are removed.
+    ``published``: the published tables to mark (default: the scenario's,
+    ``trackkit.report.published``)."""
     table = sweep_table(campaign, docs)
+    published = list(campaign.base.report.published if published is None else published)
+    rows = published_rows(campaign, table, published)
 
     def write_all(folder: Path) -> dict[str, Path]:
         written = {"parquet": folder / SWEEP_PARQUET}
@@ -466,14 +728,15 @@ def write_sweep_report(campaign: Any, docs: Sequence[dict], out_dir: str | Path,
         written["json"] = folder / SWEEP_JSON
         written["json"].write_text(json.dumps(campaign.document(), indent=2) + "\n",
                                    encoding="utf-8")
-        figures = {**line_figures(campaign, table), **heatmap_figures(campaign, table)}
+        figures = {**line_figures(campaign, table), **heatmap_figures(campaign, table),
+                   **ratio_figures(campaign, table, published)}
         images = {}
         for name, fig in figures.items():
             images[name] = _save(fig, folder / f"{name}.png")
             written[name] = images[name]
         written["html"] = folder / SWEEP_HTML
-        written["html"].write_text(render_sweep_html(campaign, table, images, notes),
-                                   encoding="utf-8")
+        written["html"].write_text(render_sweep_html(campaign, table, images, notes, rows,
+                                                     published), encoding="utf-8")
         written["timings"] = folder / SWEEP_TIMINGS
         written["timings"].write_text(json.dumps(
             _timings(campaign, timings or [None] * len(campaign.points)), indent=2,

@@ -29,7 +29,7 @@ __all__ = [
     "averaging_window", "display_unit", "Summary", "summary", "rich_table", "html_table", "short",
     "channel_labels", "state_labels", "matching_values", "matching_summary", "tuning_summary",
     "matching_summaries", "summary_rich_table", "summary_html_table", "matching_rich_tables",
-    "matching_html_tables", "classification_summary",
+    "matching_html_tables", "classification_summary", "window_summaries", "fit_rich_table",
 ]
 
 _DEG = 180.0 / math.pi
@@ -109,6 +109,75 @@ def summary(result: MonteCarloResult) -> Summary:
     caption = (f"{result.scenario}: {result.runs} runs, seed {result.seed}, {result.steps} steps "
                f"of {result.dt:g} s; averages over {span}")
     return Summary(headers, rows, caption)
+
+
+def window_summaries(result: MonteCarloResult) -> list[Summary]:
+    """One table per error window (``report.windows``), shaped like :func:`summary`: per
+    filter the RMSE over the window's steps per group, RMSE/PCRLB, ANEES, ANIS and the share
+    of the window's steps with the average NEES inside its 95% bounds, and the PCRLB row
+    (diverged runs and timings are whole-run numbers: see the summary). Empty without
+    windows."""
+    out = []
+    for w, (a, b) in result.windows.items():
+        k0, k1 = result.window_steps[w]
+        groups = [g for g in result.groups
+                  if any(g in f.windows[w]["rmse"] for f in result.filters.values())]
+        bounds = result.pcrlb_windows[w]
+        bounded = [g for g in groups if math.isfinite(bounds.get(g, math.nan))]
+        headers = ["filter"]
+        for g in groups:
+            label, _ = display_unit(result.groups[g])
+            headers.append(f"RMSE {g}\n[{label}]")
+        headers += [f"RMSE/PCRLB\n{g}" for g in bounded]
+        headers += ["ANEES", "ANIS", "NEES in\n95% bounds"]
+        rows = []
+        for name, f in result.filters.items():
+            fw = f.windows[w]
+            row = [name]
+            for g in groups:
+                row.append(_num(fw["rmse"].get(g, math.nan) * display_unit(result.groups[g])[1]))
+            row += [_fixed(result.efficiency(name, g, w)) for g in bounded]
+            inside = fw["nees_in_bounds"]
+            row += [_num(fw["anees"], 3), _num(fw["anis"], 3),
+                    f"{100 * inside:.0f}%" if math.isfinite(inside) else "n/a"]
+            rows.append(row)
+        if bounded:
+            row = ["PCRLB"]
+            for g in groups:
+                row.append(_num(bounds.get(g, math.nan) * display_unit(result.groups[g])[1]))
+            rows.append(row + ["1.00"] * len(bounded) + ["", "", ""])
+        t = np.asarray(result.times, dtype=float)
+        span = (f"t = {t[k0]:g} to {t[k1 - 1]:g} s ({k1 - k0} steps)" if k1 > k0
+                else "no steps")
+        caption = (f"{result.scenario}: error window {w!r} = [{a:g}, {b:g}] s, {span}; "
+                   f"{result.runs} runs. RMSE = sqrt(mean over the window's steps of the "
+                   "per-step mean squared error over runs); the PCRLB likewise.")
+        out.append(Summary(headers, rows, caption, title=f"Error window {w}: {a:g}-{b:g} s",
+                           sections=[len(result.filters) - 1] if bounded else []))
+    return out
+
+
+def fit_rich_table(s: Summary, width: int | None = None, plain_rows: int | None = None
+                   ) -> Table:
+    """A :class:`Summary` as a ``rich`` table; when ``width`` (the console width) is given and
+    the table would not fit, transposed (one column per row of the summary, one row per
+    metric), as :func:`rich_table` does. Rows from ``plain_rows`` on (the bound) are
+    italic."""
+    n = len(s.rows) if plain_rows is None else plain_rows
+    if width is None or _natural_width(s) <= width:
+        table = summary_rich_table(s)
+        if plain_rows is not None:
+            for i in range(n, len(s.rows)):
+                table.rows[i].style = "italic"
+        return table
+    table = Table(title=s.title or None, caption=s.caption, header_style="bold",
+                  box=box.SIMPLE_HEAD)
+    table.add_column("metric", justify="left")
+    for i, row in enumerate(s.rows):
+        table.add_column(Text(row[0]), justify="right", style="italic" if i >= n else None)
+    for j, h in enumerate(s.headers[1:], start=1):
+        table.add_row(Text(h.replace("\n", " ")), *(Text(row[j]) for row in s.rows))
+    return table
 
 
 def ranks(result: MonteCarloResult) -> dict[str, int]:
@@ -367,12 +436,15 @@ def summary_html_table(s: Summary) -> str:
             f"<thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody>\n</table>")
 
 
-def matching_rich_tables(result: MonteCarloResult) -> list[Table]:
-    """:func:`matching_summaries`, the missing-measurement table (:func:`gap_summary`) and
-    the classification table (:func:`classification_summary`), when present, as ``rich``
-    tables (printed after :func:`rich_table`)."""
+def matching_rich_tables(result: MonteCarloResult, width: int | None = None) -> list[Table]:
+    """The error-window tables (:func:`window_summaries`, transposed when wider than
+    ``width``), :func:`matching_summaries`, the missing-measurement table
+    (:func:`gap_summary`) and the classification table (:func:`classification_summary`),
+    when present, as ``rich`` tables (printed after :func:`rich_table`)."""
+    n = len(result.filters)
+    windows = [fit_rich_table(s, width, n) for s in window_summaries(result)]
     extra = [t for t in (gap_summary(result), classification_summary(result)) if t is not None]
-    return [summary_rich_table(s) for s in matching_summaries(result) + extra]
+    return windows + [summary_rich_table(s) for s in matching_summaries(result) + extra]
 
 
 def classification_summary(result: MonteCarloResult) -> Summary | None:

@@ -44,6 +44,8 @@ Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 #: a scenario name is the report's folder name under trackkit-out/: one plain file name
 PLAIN_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]*")
+#: an error window's name (report.windows): a label for tables and results.json
+WINDOW_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 
 
 def check_plain_name(name: str) -> str:
@@ -52,6 +54,19 @@ def check_plain_name(name: str) -> str:
         raise ValueError("expected a plain file name (letters, digits, '.', '_', '-', not "
                          "starting with '.'): the report is written to trackkit-out/NAME")
     return name
+
+
+def window_steps(start_s: float, end_s: float, steps: int, step_s: float) -> tuple[int, int]:
+    """The step indices ``k0 .. k1 - 1`` of an error window: the measurement times
+    ``t_k = (k + 1) step_s`` with ``start_s <= t_k < end_s`` (times compared within 1e-9
+    relative), and the last measurement too when ``end_s`` is the scenario's end."""
+    eps = 1e-9 * step_s
+    k0 = max(0, math.ceil((start_s - eps) / step_s) - 1)
+    if end_s >= steps * step_s - eps:
+        k1 = steps
+    else:
+        k1 = max(0, math.ceil((end_s - eps) / step_s) - 1)
+    return min(k0, steps), min(k1, steps)
 
 
 def raise_at(loc: tuple[str | int, ...], value: Any, message: str) -> None:
@@ -350,6 +365,75 @@ class Observer(_Strict):
     sensor: SensorSpec = Field(description="what it measures and how noisily")
 
 
+class GAInitSpec(_Strict):
+    """The GA initialiser of seed 002 paper (b) (``trackkit.filters.initialise``): per run, a
+    genetic algorithm searches the initial target position that minimises an auxiliary EKF's
+    normalised residuals over the first ``measurements`` measurements; every filter then
+    starts from ``N([p_GA, velocity_guess_mps, f0_guess], diag(std^2))`` at the prior time,
+    with f0_guess the run's first measured frequency. Doppler-bearing scenarios only (state
+    [x, y, vx, vy, f0], one observer with a BearingFrequency sensor). The auxiliary filter
+    predicts with the first filter's motion model."""
+
+    measurements: Annotated[int, Field(ge=1)] = Field(
+        800, description="K, the first measurements the GA's auxiliary filter sees (range is "
+        "not observable from a few tens: about 600 to 800 are needed for the paper's "
+        "< 1000 m, see trackkit.filters.initialise)", json_schema_extra=_unit("measurements"))
+    block: Annotated[int, Field(ge=1)] = Field(
+        25, description="average blocks of this many measurements (odd, dividing K) before "
+        "the auxiliary filter runs: the same information at a 25th of the cost",
+        json_schema_extra=_unit("measurements"))
+    population: Annotated[int, Field(ge=2)] = Field(50, description="GA population (the "
+                                                    "paper's 50)",
+                                                    json_schema_extra=_unit("candidates"))
+    generations: Annotated[int, Field(ge=0)] = Field(200, description="GA generations (the "
+                                                     "paper's 200)",
+                                                     json_schema_extra=_unit("generations"))
+    crossover: float = Field(0.8, ge=0, le=1, description="GA crossover rate (the paper's "
+                             "0.8)", json_schema_extra=_unit("probability"))
+    mutation: float = Field(0.05, ge=0, le=1, description="GA per-gene mutation rate (the "
+                            "paper's 0.05)", json_schema_extra=_unit("probability"))
+    cost: Literal["nis", "nll"] = Field(
+        "nis", description="the auxiliary filter's cost: the sum of the NIS (the paper's "
+        "residual, normalised) or twice the negative log likelihood (NIS + log det S)")
+    max_range_m: PositiveFloat = Field(20_000.0, description="half-width of the square "
+                                       "searched around the observer's first position")
+    velocity_guess_mps: list[Finite] = Field(
+        default_factory=lambda: [0.0, 0.0], description="the velocity [vx, vy] every run's "
+        "filters (and the auxiliary filter) start from: the GA searches the position only")
+    aux_std: list[PositiveFloat] = Field(
+        default_factory=lambda: [200.0, 200.0, 10.0, 10.0, 5.0],
+        description="the auxiliary filter's prior standard deviations [x, y, vx, vy, f0]: "
+        "small in position so that the cost scores the candidate position itself",
+        json_schema_extra=_unit("SI"))
+    std: list[PositiveFloat] = Field(
+        default_factory=lambda: [1000.0, 1000.0, 10.0, 10.0, 5.0],
+        description="the filters' initial standard deviations [x, y, vx, vy, f0] after a GA "
+        "start: P0 = diag(std^2). Default: 1000 m, the accuracy the paper claims (Fig. 17), "
+        "10 m/s around the velocity guess (a ship's speed) and 5 Hz around the first measured "
+        "frequency (the Doppler shift f0 v / c is 5 Hz at 15 kn and 500 Hz)",
+        json_schema_extra=_unit("SI"))
+
+    @model_validator(mode="after")
+    def _block_divides(self) -> GAInitSpec:
+        if self.block % 2 == 0:
+            raise_at(("block",), self.block, f"prior.ga.block = {self.block}; expected an "
+                     "odd number (each block stands for its centre measurement)")
+        if self.measurements % self.block:
+            raise_at(("measurements",), self.measurements,
+                     f"prior.ga.measurements = {self.measurements} is not a multiple of "
+                     f"block = {self.block}; expected a whole number of blocks")
+        if len(self.velocity_guess_mps) != 2:
+            raise_at(("velocity_guess_mps",), self.velocity_guess_mps,
+                     f"prior.ga.velocity_guess_mps has {len(self.velocity_guess_mps)} values; "
+                     "expected 2, [vx, vy]")
+        for name in ("aux_std", "std"):
+            values = getattr(self, name)
+            if len(values) != 5:
+                raise_at((name,), values, f"prior.ga.{name} has {len(values)} values; "
+                         "expected 5, for the Doppler-bearing state [x, y, vx, vy, f0]")
+        return self
+
+
 class PriorSpec(_Strict):
     """Filter prior: ``std`` (SI, state order) gives P0 = diag(std^2), or ``cov`` gives P0 in
     full (symmetric positive definite). Without ``mean`` the prior mean of each run is the
@@ -365,7 +449,6 @@ class PriorSpec(_Strict):
     mean: list[Finite] | None = Field(
         None, description="the prior mean of every run; without it, each run's is the truth "
         "plus a draw from N(0, P0)", json_schema_extra=_unit("SI"))
-
     @model_validator(mode="after")
     def _one_cov(self) -> PriorSpec:
         if (self.std is None) == (self.cov is None):
@@ -387,6 +470,40 @@ class PriorSpec(_Strict):
     @property
     def size(self) -> int:
         return len(self.std) if self.std is not None else len(self.cov)
+
+
+class ScenarioPriorSpec(PriorSpec):
+    """The scenario's prior (``[prior]``): a filter prior (``std`` or ``cov``, ``mean``) that
+    is also the PCRLB's ``J0 = P0^-1``, and how every filter's first estimate is made:
+    ``initialiser = "draw"`` (the prior) or ``"ga"`` (the GA initialiser of seed 002 paper b,
+    settings in ``prior.ga``)."""
+
+    initialiser: Literal["draw", "ga"] = Field(
+        "draw", description="how every filter's first estimate is made: \"draw\", the "
+        "prior above (mean, or the truth plus a draw from N(0, P0)); \"ga\", the GA "
+        "initialiser of seed 002 paper (b) from the first measurements (settings in "
+        "prior.ga; Doppler-bearing scenarios only). With \"ga\" the prior above is still the "
+        "PCRLB's J0 = P0^-1, which a GA-started filter does not use")
+    ga: GAInitSpec | None = Field(None, description="the GA initialiser's settings (with "
+                                  "initialiser = \"ga\"; defaults: the paper's GA, 800 "
+                                  "measurements in blocks of 25)")
+
+    @model_validator(mode="after")
+    def _initialiser(self) -> ScenarioPriorSpec:
+        if self.ga is not None and self.initialiser != "ga":
+            raise_at(("ga",), "...", f"prior.ga is set but initialiser = "
+                     f"{self.initialiser!r}; expected initialiser = \"ga\" with a ga table "
+                     "(or no ga table)")
+        if self.initialiser == "ga" and self.mean is not None:
+            raise_at(("mean",), self.mean, "prior.mean is set with initialiser = \"ga\", "
+                     "which makes each run's mean from the GA; expected no mean (or "
+                     "initialiser = \"draw\")")
+        return self
+
+    @property
+    def ga_settings(self) -> GAInitSpec:
+        """The GA initialiser's settings (the defaults when ``ga`` is not given)."""
+        return self.ga if self.ga is not None else GAInitSpec()
 
 
 class GapsSpec(_Strict):
@@ -822,17 +939,58 @@ class RunSpec(_Strict):
         "independent of how runs are split over executors")
 
 
+ErrorGroup = Literal["position", "velocity", "speed", "course", "x", "y", "z", "vx", "vy", "vz",
+                    "x1", "x2", "x3", "frequency", "bearing"]
+
+
+class PublishedSpec(_Strict):
+    """A paper's error table for this scenario, as the paper prints it: a report marks its
+    ratios (each filter's error over the reference filter's, derived, never typed in) beside
+    ours."""
+
+    group: ErrorGroup = Field("position", description="the error group of the table")
+    versus: str = Field(description="the reference filter the ratios divide by (a filter "
+                        "name of this scenario)")
+    rmse: dict[str, PositiveFloat] = Field(description="the published RMSE by filter name "
+                                           "(SI units), the reference filter's included")
+    source: str = Field(description="where the numbers are printed (paper, table)")
+
+    @model_validator(mode="after")
+    def _has_reference(self) -> PublishedSpec:
+        if self.versus not in self.rmse:
+            raise_at(("versus",), self.versus, f"report.published versus = {self.versus!r} "
+                     f"has no rmse entry; expected one of {sorted(self.rmse)}")
+        return self
+
+    def ratio(self, name: str) -> float:
+        """The paper's RMSE of ``name`` over that of ``versus``."""
+        return self.rmse[name] / self.rmse[self.versus]
+
+    def filters(self) -> list[str]:
+        """The filters the paper gives a ratio for (all but the reference)."""
+        return [f for f in self.rmse if f != self.versus]
+
+
 class ReportSpec(_Strict):
     """What the report shows."""
 
-    groups: list[Literal["position", "velocity", "speed", "course", "x", "y", "z", "vx",
-                         "vy", "vz", "x1", "x2", "x3", "frequency", "bearing"]] = Field(
+    groups: list[ErrorGroup] = Field(
         default_factory=lambda: ["position", "velocity"],
         description="the error groups of the RMSE tables and plots (x1, x2, x3: the states "
         "of a Linear or ContinuousLinear target, whose positions and velocities, when its "
         "state has them, are its first 2 dim components)")
     average_from_s: NonNegFloat = Field(0.0, description="RMSE, ANEES and ANIS are averaged "
                                         "from this time on (after convergence)")
+    windows: dict[str, list[NonNegFloat]] = Field(
+        default_factory=dict, description="named error windows, each [start_s, end_s]: RMSE, "
+        "RMSE/PCRLB, ANEES and ANIS over the measurement times start_s <= t < end_s (a window "
+        "ending at duration_s includes the last measurement), reported beside the average "
+        "from average_from_s; e.g. { transient = [600, 1000], steady = [1000, 2000] }",
+        json_schema_extra=_unit("s"))
+    published: list[PublishedSpec] = Field(
+        default_factory=list, description="a paper's error tables for this scenario "
+        "({ group, versus, rmse = { FILTER = RMSE, ... }, source }): the sweep report marks "
+        "the paper's ratios beside ours")
     matching: bool = Field(False, description="report seed 000's J1-J4 and the per-step R, "
                            "S, C, DOM of run 0 (trackkit.eval.matching)")
     dom_alpha: PositiveFloat = Field(1000.0, description="the alpha of J4 = alpha sum_i "
@@ -851,6 +1009,23 @@ class ReportSpec(_Strict):
                                      "round(after_gap_s / step_s) measurements that follow "
                                      "the gap's last missing one, themselves not missing)")
 
+    @field_validator("windows")
+    @classmethod
+    def _windows_ordered(cls, windows: dict[str, list[float]]) -> dict[str, list[float]]:
+        for name, span in windows.items():
+            if not WINDOW_NAME.fullmatch(name):
+                raise_at((name,), name, f"report.windows has a window named {name!r}; "
+                         "expected a name of letters, digits, '_' and '-', starting with a "
+                         "letter (it labels the report's columns)")
+            if len(span) != 2:
+                raise_at((name,), span, f"report.windows.{name} has {len(span)} values; "
+                         "expected 2, [start_s, end_s]")
+            a, b = span
+            if not a < b:
+                raise_at((name,), [a, b], f"report.windows.{name} = [{a:g}, {b:g}]; "
+                         "expected [start_s, end_s] with start_s < end_s")
+        return windows
+
 
 class Scenario(_Strict):
     """A scenario: the truth, the observers and their sensors, the filters to compare, the
@@ -866,7 +1041,8 @@ class Scenario(_Strict):
     target: Target = Field(description="the target's truth")
     observers: list[Observer] = Field(min_length=1, description="the sensor platforms (their "
                                       "measurements are stacked)")
-    prior: PriorSpec = Field(description="the filters' prior")
+    prior: ScenarioPriorSpec = Field(description="the filters' prior (and the PCRLB's), "
+                                     "and how they start (initialiser)")
     filters: list[FilterSpec] = Field(min_length=1, description="the filters compared")
     run: RunSpec = Field(default_factory=RunSpec, description="the Monte Carlo runs")
     report: ReportSpec = Field(default_factory=ReportSpec, description="what the report shows")
@@ -900,6 +1076,9 @@ class Scenario(_Strict):
         if self.report.average_from_s >= self.time.duration_s:
             raise ValueError(f"report.average_from_s = {self.report.average_from_s} is not "
                              f"before the end of the scenario ({self.time.duration_s} s)")
+        self._check_windows()
+        self._check_published(names)
+        self._check_initialiser()
         if self.dim == 2 and (self.target.initial.z_m is not None):
             raise ValueError("target.initial.z_m is set but dim = 2")
         if self.linear_system and (self.target.state is None or self.target.legs):
@@ -1015,6 +1194,55 @@ class Scenario(_Strict):
                     f"{who}: the IMM's union state has {u} components, fewer than the "
                     f"scenario's {n}; expected models whose largest state holds the "
                     "scenario's")
+
+    def _check_published(self, names: list[str]) -> None:
+        """A published table names filters of this scenario."""
+        for i, pub in enumerate(self.report.published):
+            unknown = sorted(set(pub.rmse) - set(names))
+            if unknown:
+                raise_at(("report", "published", i, "rmse"), unknown,
+                         f"report.published.{i}.rmse names {unknown}, which are not filters "
+                         f"of this scenario; expected names among {names}")
+
+    def _check_windows(self) -> None:
+        """Every error window ends within the scenario and holds a measurement time."""
+        T, dt, end = self.time.steps, self.time.step_s, self.time.duration_s
+        for name, (a, b) in self.report.windows.items():
+            if b > end * (1 + 1e-12):
+                raise_at(("report", "windows", name), [a, b],
+                         f"report.windows.{name} = [{a:g}, {b:g}] ends after the scenario "
+                         f"(duration_s = {end:g}); expected 0 <= start_s < end_s <= {end:g}")
+            k0, k1 = window_steps(a, b, T, dt)
+            if k1 <= k0:
+                raise_at(("report", "windows", name), [a, b],
+                         f"report.windows.{name} = [{a:g}, {b:g}] holds no measurement time "
+                         f"(t = {dt:g} .. {T * dt:g} s, every {dt:g} s); expected start_s "
+                         "<= t < end_s for at least one")
+
+    def _check_initialiser(self) -> None:
+        """The GA initialiser needs a Doppler-bearing problem and owns every filter's start."""
+        if self.prior.initialiser != "ga":
+            return
+        ga = self.prior.ga_settings
+        sensors = [o.sensor.model for o in self.observers]
+        if (self.dim != 2 or self.linear_system or len(self.target.extras) != 1
+                or sensors != ["BearingFrequency"]):
+            raise_at(("prior", "initialiser"), "ga",
+                     f"prior.initialiser = \"ga\" searches the initial position of a "
+                     "Doppler-bearing target; expected dim = 2, the state [x, y, vx, vy, f0] "
+                     "(one target.extras) and one observer with a BearingFrequency sensor, "
+                     f"got dim = {self.dim}, {self.state_dim} state components and sensors "
+                     f"{sensors}")
+        if ga.measurements > self.time.steps:
+            raise_at(("prior", "ga", "measurements"), ga.measurements,
+                     f"prior.ga.measurements = {ga.measurements}; the scenario has "
+                     f"{self.time.steps} measurements, so expected at most {self.time.steps}")
+        for i, f in enumerate(self.filters):
+            if f.prior is not None:
+                raise_at(("filters", i, "prior"), "...",
+                         f"filter {f.name!r} has its own prior, but prior.initialiser = "
+                         "\"ga\" starts every filter from the GA estimate; expected no "
+                         "filters[].prior (or initialiser = \"draw\")")
 
     def _check_gaps(self) -> None:
         """Every gap interval lies within the scenario's measurements, and a sine fit has
