@@ -170,11 +170,17 @@ def fit_rich_table(s: Summary, width: int | None = None, plain_rows: int | None 
             for i in range(n, len(s.rows)):
                 table.rows[i].style = "italic"
         return table
-    table = Table(title=s.title or None, caption=s.caption, header_style="bold",
-                  box=box.SIMPLE_HEAD)
+    return _transposed(s, n, s.title or None)
+
+
+def _transposed(s: Summary, plain_rows: int, title: str | None) -> Table:
+    """``s`` with one column per row and one row per metric (rows from ``plain_rows`` on
+    italic): the form that fits a narrow terminal."""
+    table = Table(title=title, caption=s.caption, header_style="bold", box=box.SIMPLE_HEAD)
     table.add_column("metric", justify="left")
     for i, row in enumerate(s.rows):
-        table.add_column(Text(row[0]), justify="right", style="italic" if i >= n else None)
+        table.add_column(Text(row[0]), justify="right",
+                         style="italic" if i >= plain_rows else None)
     for j, h in enumerate(s.headers[1:], start=1):
         table.add_row(Text(h.replace("\n", " ")), *(Text(row[j]) for row in s.rows))
     return table
@@ -219,20 +225,15 @@ def rich_table(result: MonteCarloResult, width: int | None = None) -> Table:
     filter and a PCRLB column, one row per metric)."""
     s = summary(result)
     n_filters = len(result.filters)
-    table = Table(title=f"trackkit: {result.scenario}", caption=s.caption, header_style="bold",
-                  box=box.SIMPLE_HEAD)
-    if width is None or _natural_width(s) <= width:
-        for i, h in enumerate(s.headers):
-            table.add_column(Text(h), justify="left" if i == 0 else "right")
-        for i, row in enumerate(s.rows):
-            table.add_row(*map(Text, row), style="italic" if i >= n_filters else None,
-                          end_section=i == n_filters - 1)
-        return table
-    table.add_column("metric", justify="left")
+    title = f"trackkit: {result.scenario}"
+    if width is not None and _natural_width(s) > width:
+        return _transposed(s, n_filters, title)
+    table = Table(title=title, caption=s.caption, header_style="bold", box=box.SIMPLE_HEAD)
+    for i, h in enumerate(s.headers):
+        table.add_column(Text(h), justify="left" if i == 0 else "right")
     for i, row in enumerate(s.rows):
-        table.add_column(Text(row[0]), justify="right", style="italic" if i >= n_filters else None)
-    for j, h in enumerate(s.headers[1:], start=1):
-        table.add_row(Text(h.replace("\n", " ")), *(Text(row[j]) for row in s.rows))
+        table.add_row(*map(Text, row), style="italic" if i >= n_filters else None,
+                      end_section=i == n_filters - 1)
     return table
 
 
