@@ -10,14 +10,15 @@ from __future__ import annotations
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from trackkit.scenario.schema import KNOT, PLAIN_NAME, Scenario
 from trackkit.scenario.toml_writer import dumps
 
-__all__ = ["Scenario", "ScenarioError", "load", "parse", "dumps", "bundled", "DEFAULT", "KNOT"]
+__all__ = ["Scenario", "ScenarioError", "load", "parse", "validated", "dumps", "bundled", "DEFAULT",
+           "KNOT"]
 
 DEFAULT = "bo-cv"
 
@@ -79,16 +80,25 @@ class _Missing:
         return "(missing)"
 
 
+M = TypeVar("M", bound=BaseModel)
+
+
+def validated(model: type[M], data: dict, source: str) -> M:
+    """``data`` validated as ``model`` (a scenario schema); every problem is a ScenarioError
+    naming ``source``, the field, the value and what is expected."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(_format(_pydantic_problems(err), source)) from None
+
+
 def parse(data: dict, source: str = "<scenario>") -> Scenario:
     """Validate a scenario given as a dict (e.g. parsed TOML): the schema, then the numbers
     (``trackkit.scenario.build.numeric_problems``): every problem is a ScenarioError naming
     ``source``, the field, the value and what is expected."""
     from trackkit.scenario.build import numeric_problems
 
-    try:
-        scenario = Scenario.model_validate(data)
-    except ValidationError as err:
-        raise ScenarioError(_format(_pydantic_problems(err), source)) from None
+    scenario = validated(Scenario, data, source)
     problems = numeric_problems(scenario)
     if problems:
         raise ScenarioError(_format(problems, source))

@@ -55,16 +55,14 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from trackkit.scenario import (
-    ScenarioError,
-    _format,
     _Missing,
-    _pydantic_problems,
     descriptions,
     holds_table,
     read_scenario,
+    validated,
 )
 from trackkit.scenario.schema import (
     NonNegFloat,
@@ -308,10 +306,7 @@ def bundled_multitarget() -> dict[str, str]:
 def parse_multitarget(data: dict, source: str = "<scenario>") -> MultiTargetScenario:
     """Validate a multi-target scenario given as a dict (e.g. parsed TOML); every problem is
     a ScenarioError naming ``source``, the field, the value and what is expected."""
-    try:
-        return MultiTargetScenario.model_validate(data)
-    except ValidationError as err:
-        raise ScenarioError(_format(_pydantic_problems(err), source)) from None
+    return validated(MultiTargetScenario, data, source)
 
 
 def is_multitarget(name_or_path: str | Path) -> bool:

@@ -80,16 +80,14 @@ from typing import Annotated, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from trackkit.scenario import (
-    ScenarioError,
-    _format,
     _Missing,
-    _pydantic_problems,
     descriptions,
     holds_table,
     read_scenario,
+    validated,
 )
 from trackkit.scenario.schema import (
     Finite,
@@ -378,10 +376,7 @@ def bundled_network() -> dict[str, str]:
 def parse_network(data: dict, source: str = "<scenario>") -> NetworkScenario:
     """Validate a network scenario given as a dict (e.g. parsed TOML); every problem is a
     ScenarioError naming ``source``, the field, the value and what is expected."""
-    try:
-        return NetworkScenario.model_validate(data)
-    except ValidationError as err:
-        raise ScenarioError(_format(_pydantic_problems(err), source)) from None
+    return validated(NetworkScenario, data, source)
 
 
 def is_network(name_or_path: str | Path) -> bool:

@@ -66,17 +66,15 @@ from typing import Annotated, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from trackkit.identify import METHODS
 from trackkit.models.vessel import KNOT, CoefficientSet, reference_vessel
 from trackkit.scenario import (
-    ScenarioError,
-    _format,
-    _pydantic_problems,
     descriptions,
     holds_table,
     read_scenario,
+    validated,
 )
 from trackkit.scenario.schema import (
     NonNegFloat,
@@ -335,10 +333,7 @@ def bundled_vessel() -> dict[str, str]:
 def parse_vessel(data: dict, source: str = "<scenario>") -> VesselScenario:
     """Validate a vessel scenario given as a dict (e.g. parsed TOML); every problem is a
     ScenarioError naming ``source``, the field, the value and what is expected."""
-    try:
-        return VesselScenario.model_validate(data)
-    except ValidationError as err:
-        raise ScenarioError(_format(_pydantic_problems(err), source)) from None
+    return validated(VesselScenario, data, source)
 
 
 def is_vessel(name_or_path: str | Path) -> bool:
