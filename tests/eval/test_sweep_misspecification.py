@@ -39,7 +39,7 @@ def short_dbt(name: str = "dbt-receding"):
     d = load(name).model_dump()
     d["time"]["duration_s"] = 300.0
     d["report"]["average_from_s"] = 100.0
-    d["report"].pop("windows", None)  # the paper's windows end after 300 s
+    d["report"]["windows"] = {"early": [100.0, 200.0], "late": [200.0, 300.0]}
     d["run"] = {"runs": 4, "seed": 5, "block": 4}
     return parse(d)
 
@@ -163,6 +163,25 @@ def test_the_ratio_to_the_ekf_is_each_filters_rmse_over_the_ekfs_at_the_point(ca
     # mis-specification changes the filters' numbers, not the bound: one truth everywhere
     assert len({d["pcrlb"]["position"] for d in docs}) == 1
     assert len({d["filters"]["EKF"]["rmse"]["position"] for d in docs}) == 4
+
+
+def test_the_table_has_each_windows_metrics(campaign, docs):
+    table = sweep_table(campaign, docs).to_pylist()
+    assert len(table) == len(docs) * len(FILTERS)
+    for row in table:
+        (d,) = [d for d in docs if d["point"] == row["point"]]
+        for w in ("early", "late"):
+            win = d["windows"][w]
+            f = win["filters"][row["filter"]]
+            assert row[f"rmse_position_{w}"] == f["rmse"]["position"]
+            assert row[f"pcrlb_position_{w}"] == win["pcrlb"]["position"]
+            assert row[f"rmse_pcrlb_position_{w}"] == f["rmse_over_pcrlb"]["position"]
+            assert row[f"anees_{w}"] == f["anees"]
+        # the windows are parts of the averaging span, not copies of it
+        assert row["rmse_position_early"] != row["rmse_position_late"]
+    schema = sweep_table(campaign, docs).schema
+    assert schema.field("rmse_position_late").metadata == {b"unit": b"m"}
+    assert schema.field("anees_late").metadata == {b"unit": b"1"}
 
 
 def test_the_report_draws_every_filters_heat_maps_and_marks_the_papers_ratio(campaign, docs,

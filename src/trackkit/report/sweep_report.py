@@ -7,7 +7,9 @@ Files, written into the campaign directory all or nothing (``files.write_atomica
   parameter given as factors holds their text, ``x0.1``), ``filter``, ``runs``, then per
   error group ``g`` of the scenario's report: ``rmse_g``, ``pcrlb_g`` and ``rmse_pcrlb_g``
   (RMSE over the PCRLB, time averaged from ``report.average_from_s``), then ``anees``,
-  ``anis``, ``nees_in_bounds``, ``diverged`` (runs) and ``diverged_share``. SI units
+  ``anis``, ``nees_in_bounds``, ``diverged`` (runs) and ``diverged_share``; then, for each
+  error window ``w`` of the scenario (``report.windows``), ``rmse_g_w``, ``pcrlb_g_w``,
+  ``rmse_pcrlb_g_w`` and ``anees_w`` over the window's steps. SI units
   (radians for angles; the Parquet fields carry them as ``unit`` metadata); a missing value
   is null (Parquet) or empty (CSV); CSV floats are written as the shortest text that
   reads back to the same double.
@@ -118,6 +120,15 @@ def sweep_table(campaign: Any, docs: Sequence[dict]) -> pa.Table:
         cols.update({f"rmse_{g}": [], f"pcrlb_{g}": [], f"rmse_pcrlb_{g}": []})
     cols.update({"anees": [], "anis": [], "nees_in_bounds": [], "diverged": [],
                  "diverged_share": []})
+    windows = list(campaign.base.report.windows)
+    unit_of: dict[str, str | None] = {}
+    for w in windows:  # the scenario's error windows, each metric again over its steps
+        for g in groups:
+            cols.update({f"rmse_{g}_{w}": [], f"pcrlb_{g}_{w}": [], f"rmse_pcrlb_{g}_{w}": []})
+            unit_of.update({f"rmse_{g}_{w}": units.get(g), f"pcrlb_{g}_{w}": units.get(g),
+                            f"rmse_pcrlb_{g}_{w}": "1"})
+        cols[f"anees_{w}"] = []
+        unit_of[f"anees_{w}"] = "1"
     for d in docs:
         for name, f in d["filters"].items():
             cols["point"].append(d["point"])
@@ -133,6 +144,14 @@ def sweep_table(campaign: Any, docs: Sequence[dict]) -> pa.Table:
             for k in ("anees", "anis", "nees_in_bounds", "diverged"):
                 cols[k].append(f[k])
             cols["diverged_share"].append(f["diverged"] / d["runs"])
+            for w in windows:
+                win = d["windows"][w]
+                fw = win["filters"][name]
+                for g in groups:
+                    cols[f"rmse_{g}_{w}"].append(fw["rmse"].get(g))
+                    cols[f"pcrlb_{g}_{w}"].append(win["pcrlb"].get(g))
+                    cols[f"rmse_pcrlb_{g}_{w}"].append(fw["rmse_over_pcrlb"].get(g))
+                cols[f"anees_{w}"].append(fw["anees"])
     fields = []
     for name in cols:
         unit = None
@@ -143,6 +162,8 @@ def sweep_table(campaign: Any, docs: Sequence[dict]) -> pa.Table:
             unit = "runs" if name != "seed" else None
         elif name in kinds:
             kind = kinds[name]
+        elif name in unit_of:
+            kind, unit = pa.float64(), unit_of[name]
         else:
             kind = pa.float64()
             for prefix in ("rmse_pcrlb_", "rmse_", "pcrlb_"):
