@@ -402,3 +402,17 @@ def test_cli_list_shows_network_scenarios():
 
 def test_inf_ranges_write_and_read_back():
     assert math.isinf(load_network("net-baseline").agents[0].comm_range_m)
+
+
+def test_a_loss_outside_0_1_is_refused_naming_it(tmp_path):
+    from trackkit.network.run import check_loss
+
+    assert check_loss(0.0) == 0.0 and check_loss(0.999) == 0.999
+    for bad in (1.0, -0.1, math.nan):
+        with pytest.raises(ValueError, match=r"loss = .*expected a probability in \[0, 1\)"):
+            check_loss(bad)
+    f = tmp_path / "tiny.toml"
+    f.write_text(TINY, encoding="utf-8")
+    ran = trackkit("network", str(f), "--runs", "1", "--loss", "1.5", "--out",
+                   str(tmp_path / "out"))
+    assert_user_error(ran, 2, "--loss 1.5", "[0, 1)")

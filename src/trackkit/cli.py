@@ -860,6 +860,7 @@ def network(
 
     The same scenario and seed give byte-identical results.json on one machine."""
     with _user_errors() as state:
+        from trackkit.network.run import check_loss
         from trackkit.scenario.network import is_network, load_network
 
         if not is_network(scenario):
@@ -886,8 +887,8 @@ def network(
             raise ValueError("--delay, --kill, --host, --advertise and --launch act on "
                              "agents in their own processes; expected --agents processes "
                              "with them")
-        if loss is not None and not 0.0 <= loss < 1.0:
-            raise ValueError(f"--loss {loss!r}; expected a probability in [0, 1)")
+        if loss is not None:
+            check_loss(loss, "--loss")
         if not (math.isfinite(delay) and delay >= 0.0):
             raise ValueError(f"--delay {delay!r}; expected simulated seconds >= 0")
         name = f"{sc.name}-straight" if straight else str(sc.name)

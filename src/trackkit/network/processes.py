@@ -105,6 +105,7 @@ from trackkit.network.run import (
     _relay_to_hub,
     _Spacing,
     _world,
+    check_loss,
 )
 from trackkit.network.steering import Steering
 from trackkit.network.tracks import Message
@@ -499,8 +500,7 @@ def run_network_processes(
         on_event: called with the simulated time after every execution (progress; an
             exception it raises ends the run, cleanly).
     """
-    if not 0.0 <= loss < 1.0:
-        raise ValueError(f"loss = {loss!r}; expected a probability in [0, 1)")
+    check_loss(loss)
     if not (math.isfinite(delay) and delay >= 0):
         raise ValueError(f"delay = {delay!r}; expected simulated seconds >= 0")
     for name, v in (("timeout_s", timeout_s), ("start_timeout_s", start_timeout_s),

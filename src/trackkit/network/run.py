@@ -67,7 +67,7 @@ from trackkit.sim.network import (
     simulate_network,
 )
 
-__all__ = ["Trace", "NetworkResult", "run_network"]
+__all__ = ["Trace", "NetworkResult", "run_network", "check_loss"]
 
 Array = NDArray[np.float64]
 
@@ -170,6 +170,14 @@ class _Recorder:
                      np.asarray(self.truth), np.asarray(self.position), self.reports)
 
 
+def check_loss(loss: float, name: str = "loss =") -> float:
+    """``loss``, a probability that one delivery is lost, in [0, 1); else a ValueError naming
+    it as ``name`` (``--loss`` on the command line)."""
+    if not 0.0 <= loss < 1.0:
+        raise ValueError(f"{name} {loss!r}; expected a probability in [0, 1)")
+    return loss
+
+
 def run_network(
     seed: int,
     run: int,
@@ -207,8 +215,7 @@ def run_network(
         loss: probability that one delivery is lost (0 <= loss < 1).
         central_settings: the centralised filter's ``CentralSettings``.
     """
-    if not 0.0 <= loss < 1.0:
-        raise ValueError(f"loss = {loss!r}; expected a probability in [0, 1)")
+    check_loss(loss)
     w = _world(seed, run, targets, agents, duration=duration, period=period, sigma=sigma,
                mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings, steering=steering,
                central=central)
