@@ -53,7 +53,7 @@ import pyarrow.parquet as pq
 
 from trackkit.eval.sweep import factor_of
 from trackkit.report.files import write_atomically
-from trackkit.report.html import data_uri
+from trackkit.report.html import _CSS, data_uri
 from trackkit.report.tables import display_unit
 from trackkit.scenario.schema import PublishedSpec
 
@@ -591,19 +591,13 @@ def published_rows(campaign: Any, table: pa.Table, published: Sequence[Published
 
 # --- the page -----------------------------------------------------------------------------
 
-_CSS = """
-body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto;
-       max-width: 1100px; padding: 0 1em; color: #222; }
-h1 { font-size: 1.5em; margin-bottom: 0.2em; }
-.meta { color: #555; margin-top: 0; }
+# the reports' page and figure styles, and the sweep table's own
+_SWEEP_CSS = _CSS + """
 table.sweep { border-collapse: collapse; margin: 1em 0; font-size: 0.85em; }
 table.sweep th, table.sweep td { border-bottom: 1px solid #ddd; padding: 0.25em 0.6em; }
 table.sweep td { text-align: right; font-variant-numeric: tabular-nums; }
 table.sweep td.text { text-align: left; }
 table.sweep thead th { border-bottom: 2px solid #888; text-align: left; }
-figure { margin: 1.5em 0; }
-figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
-figcaption { color: #555; font-size: 0.9em; }
 """
 
 
@@ -658,7 +652,7 @@ def render_sweep_html(campaign: Any, table: pa.Table, images: dict[str, Path | b
     parts = ["<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
              '<meta name="viewport" content="width=device-width, initial-scale=1">',
              f"<title>trackkit sweep: {esc(campaign.base.name)}</title>",
-             f"<style>{_CSS}</style></head>", "<body>",
+             f"<style>{_SWEEP_CSS}</style></head>", "<body>",
              f"<h1>Sweep: {esc(campaign.base.name)}</h1>"]
     if campaign.base.description:
         parts.append(f"<p>{esc(campaign.base.description)}</p>")
