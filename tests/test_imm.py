@@ -342,6 +342,99 @@ def test_others_fill_keeps_the_receiving_models_extra_component_in_mixing():
     assert X0z[0, 1, 4] == pytest.approx(w * 0.8, rel=1e-14)
 
 
+def _nested(seed: int, r: int, carry: np.ndarray):
+    """Random means and PSD covariances of r models in a union state, zero where a model
+    does not carry a component."""
+    rng = np.random.default_rng(seed)
+    n = carry.shape[1]
+    X = np.where(carry, rng.normal(size=(r, n)), 0.0)
+    A = rng.normal(size=(r, n, n))
+    P = np.where(carry[:, :, None] & carry[:, None, :], A @ A.mT + 0.1 * np.eye(n), 0.0)
+    return X, P
+
+
+@pytest.mark.parametrize("w", [1e-300, np.finfo(float).tiny, 5e-324, 0.0])
+def test_combine_takes_the_carriers_own_moments_when_its_weight_underflows(w):
+    # CV-like model of 3 components and a model of 5: components 3-4 have one carrier; as
+    # its weight goes to 0 their moments are its own (the ratio mu x / mu), uncorrelated with
+    # the rest, and the common ones the other model's; at exactly 0 this was 0/0
+    carry = np.ones((2, 5), bool)
+    carry[0, 3:] = False
+    X, P = _nested(3, 2, carry)
+    x, Pm = combine(np.array([1.0 - w, w]), X, P, carry)
+    assert np.isfinite(x).all() and np.isfinite(Pm).all()
+    close(x[3:], X[1, 3:], rtol=1e-15, what="carrier's mean")
+    close(Pm[3:, 3:], P[1, 3:, 3:], rtol=1e-15, what="carrier's covariance")
+    close(x[:3], X[0, :3], rtol=1e-15, what="common mean")
+    close(Pm[:3, :3], P[0, :3, :3], rtol=1e-15, what="common covariance")
+    assert np.abs(Pm[:3, 3:]).max() <= 1e-290  # w times moments of order 1
+    # the same through the filter, from a belief with that mode probability
+    f = IMM([tk.models.ConstantAcceleration(dim=1), tk.models.LinearMotion(np.eye(5),
+             np.eye(5))], tk.filters.KF(), P_IJ)
+    g = f.estimate(IMMBelief(np.array([[1.0 - w, w]]), X[None], P[None]))
+    np.testing.assert_array_equal(g.mean[0], x)
+    np.testing.assert_array_equal(g.cov[0], Pm)
+
+
+def test_combine_with_several_carriers_underflowed_is_the_limit_of_their_ratio():
+    # three models carrying [0, 1], [0..3] and [0..4]: components 2-3 have two carriers.
+    # Weights a t and b t with t -> 0: the moments of components 2-4 tend to those at
+    # ratio a : b (homogeneous in the carriers' weights). Subnormal weights keep the ratio
+    # to their precision; at exactly 0 for both the rule is equal weights.
+    carry = np.zeros((3, 5), bool)
+    carry[0, :2], carry[1, :4], carry[2, :] = True, True, True
+    X, P = _nested(4, 3, carry)
+    ref = combine(np.array([1.0 - 4e-3, 1e-3, 3e-3]), X, P, carry)
+    lim = combine(np.array([0.0, 0.25, 0.75]), X, P, carry)  # the ratio alone
+    for t in (1e-100, 1e-300, 1e-310):
+        x, Pm = combine(np.array([1.0 - 4 * t, t, 3 * t]), X, P, carry)
+        rtol = 1e-15 if t >= 1e-300 else 1e-12  # 1e-310 holds 14 bits less
+        close(x[2:], lim[0][2:], rtol=rtol, what=f"mean at {t}")
+        close(Pm[2:, 2:], lim[1][2:, 2:], rtol=rtol, what=f"covariance at {t}")
+        close(x[:2], X[0, :2], rtol=1e-15, what="common mean")
+        assert np.abs(Pm[:2, 2:]).max() <= 1e3 * t
+    # the ratio's moments differ from the reference's in the common components only
+    close(ref[0][2:], lim[0][2:], rtol=1e-14, what="ratio")
+    x, Pm = combine(np.array([1.0, 0.0, 0.0]), X, P, carry)
+    eq = combine(np.array([0.0, 0.5, 0.5]), X, P, carry)
+    close(x[2:], eq[0][2:], rtol=1e-15, what="equal-weight mean")
+    close(Pm[2:, 2:], eq[1][2:, 2:], rtol=1e-15, what="equal-weight covariance")
+    assert (Pm[:2, 2:] == 0).all() and np.linalg.eigvalsh(Pm).min() > 0
+
+
+def test_imm_estimate_is_finite_when_the_only_carriers_probability_underflows():
+    # a 3-state model (CA on one axis) and a 5-state one that ignores acceleration (two
+    # extra components): on targets of large acceleration the 5-state model's plots are
+    # tens of sigma off, its mode probability underflows to exactly 0 at some steps, and
+    # the estimate of components 3-4 was 0/0. Now every estimate is finite and there equals
+    # the 5-state model's own moments (the other components the CA model's).
+    F = np.eye(5)
+    F[0, 1] = 1.0
+    f = IMM([tk.models.ConstantAcceleration(dim=1, q=1.0),
+             tk.models.LinearMotion(F, np.diag([0.01, 0.01, 0.0, 0.01, 0.01]))],
+            tk.filters.KF(), [[0.95, 0.05], [0.05, 0.95]])
+    runs, steps = 300, 100
+    rng = np.random.default_rng(11)
+    a = 100.0 * rng.standard_normal(runs)
+    Z = 0.5 * a[:, None, None] * np.arange(steps)[None, :, None] ** 2
+    Z = Z + rng.standard_normal((runs, steps, 1))
+    b = f.init(tk.Gaussian(np.zeros((runs, 5)), np.diag([10.0, 10.0, 1e4, 1.0, 1.0])))
+    zeros = 0
+    for k in range(steps):
+        if k:
+            b = f.predict(b, None, 1.0)
+        b, _ = f.update(b, Z[:, k], tk.models.Position(dim=1, sigma=1.0))
+        g = f.estimate(b)
+        assert np.isfinite(g.mean).all() and np.isfinite(g.cov).all()
+        at0 = b.mu[:, 1] == 0.0
+        zeros += int(at0.sum())
+        np.testing.assert_array_equal(g.mean[at0, 3:], b.mean[at0, 1, 3:])
+        np.testing.assert_array_equal(g.cov[at0, 3:, 3:], b.cov[at0, 1, 3:, 3:])
+        np.testing.assert_array_equal(g.mean[at0, :3], b.mean[at0, 0, :3])
+        assert (g.cov[at0, :3, 3:] == 0).all()
+    assert zeros > 100  # the case arises (measured: 1 646 run-steps in 22 runs)
+
+
 def test_state_maps_place_models_anywhere_in_the_union():
     # the same CV + CT problem with the union ordered [omega, x, y, vx, vy]: every result is
     # the prefix-map one, permuted (the inner filters and the sensor see each model's own

@@ -35,7 +35,10 @@ still enters every sum above; what it is taken to say about that component is ``
   (C_k the models carrying component k). Both are the moments of a true mixture when the
   models' component sets are nested (CV in CT, CV in CA), hence symmetric PSD. It is the
   augmentation of the smaller state from the larger model's own estimate, one of the
-  options Granstrom, Willett and Bar-Shalom (2015) compare with zero padding.
+  options Granstrom, Willett and Bar-Shalom (2015) compare with zero padding. When the
+  carriers' weights underflow (a mode probability of exactly 0 after a plot tens of sigma
+  from that model) the ratios are taken in the limit: one carrier gives its own moments,
+  several whose weights are all 0 are weighted equally (:func:`combine`).
 * ``"zero"``: the component is exactly zero under that model (mean 0, variance 0: a CV
   target is a CT target with omega = 0). Mixing pulls the CT model's turn rate toward 0 by
   the CV model's weight at every step and shrinks its variance, which biases it toward
@@ -102,6 +105,9 @@ __all__ = [
 Array = NDArray[np.float64]
 _LOG_2PI = float(np.log(2.0 * np.pi))
 _PROB_TOL = 1e-9  # how far a probability vector's sum may be from 1 (rounding of a user's)
+#: carriers' total weight below which :func:`combine` rescales the weights first: above it,
+#: a product ``mu_j v`` of a weight and an entry |v| >= eps^2 is a normal float
+_SMALL_WEIGHT = float(np.finfo(float).tiny / np.finfo(float).eps ** 2)
 
 
 class IMMBelief(NamedTuple):
@@ -184,19 +190,62 @@ def combine(mu: Array, X: Array, P: Array, carry: Array | None = None,
             fill: str = "others") -> tuple[Array, Array]:
     """The moment-matched Gaussian of the models' mixture: ``x = sum_j mu_j x_j`` and
     ``P = sum_j mu_j (P_j + (x_j - x)(x_j - x)^T)``, with the components a model lacks
-    filled as ``fill`` says (module docstring)."""
+    filled as ``fill`` says (module docstring).
+
+    With ``fill="others"`` a component's moments are ratios of sums over its carriers'
+    weights. Rows where some carriers' total weight is below ``_SMALL_WEIGHT`` (a mode
+    probability that underflowed, possibly to exactly 0) take the limit instead of 0/0
+    (:func:`_combine_limit`)."""
     x = np.einsum("...j,...jn->...n", mu, X)
     if carry is None or carry.all() or fill == "zero":
         d = X - x[..., None, :]
         Pm = np.einsum("...j,...jab->...ab", mu, P + d[..., :, None] * d[..., None, :])
         return x, symmetrize(Pm)
     cf = carry.astype(float)
-    x = x / np.einsum("...j,jn->...n", mu, cf)  # the carriers' weights, renormalised
-    d = np.where(carry, X - x[..., None, :], 0.0)
-    num = np.einsum("...j,...jab->...ab", mu, P + d[..., :, None] * d[..., None, :])
-    either = np.maximum(cf[:, :, None], cf[:, None, :])
-    den = np.einsum("...j,jab->...ab", mu, either)
-    return x, symmetrize(num / den)
+    total = np.einsum("...j,jn->...n", mu, cf)  # each component's carriers' weight
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = x / total  # the carriers' weights, renormalised
+        d = np.where(carry, X - x[..., None, :], 0.0)
+        num = np.einsum("...j,...jab->...ab", mu, P + d[..., :, None] * d[..., None, :])
+        either = np.maximum(cf[:, :, None], cf[:, None, :])
+        den = np.einsum("...j,jab->...ab", mu, either)
+        Pm = symmetrize(num / den)
+    small = (total < _SMALL_WEIGHT).any(-1)
+    if small.any():
+        batch = small.shape
+        x, Pm = np.array(np.broadcast_to(x, batch + x.shape[-1:])), np.array(Pm)
+        mu, X, P = (np.broadcast_to(a, batch + a.shape[a.ndim - k:])
+                    for a, k in ((mu, 1), (X, 2), (P, 3)))
+        x[small], Pm[small] = _combine_limit(mu[small], X[small], P[small], carry)
+    return x, Pm
+
+
+def _carrier_weights(mu: Array, sets: Array) -> Array:
+    """Weights ``(N, r, ...)`` of the models in each set ``sets (r, ...)`` (one per component
+    or pair of components) for the rows ``mu (N, r)``: ``mu_j / max_{i in set} mu_i``, or 1
+    for every member of a set whose weights are all 0; 0 outside the set."""
+    m = np.where(sets, mu.reshape(mu.shape + (1,) * (sets.ndim - 1)), 0.0)
+    top = m.max(axis=1, keepdims=True)
+    return np.where(sets, np.where(top > 0, m / np.where(top > 0, top, 1.0), 1.0), 0.0)
+
+
+def _combine_limit(mu: Array, X: Array, P: Array, carry: Array) -> tuple[Array, Array]:
+    """:func:`combine` with ``fill="others"`` (``mu (N, r)``) as the limit where carriers'
+    weights underflow. Each component's (and pair's) moments are ratios of sums over its
+    carriers, so dividing their weights by the largest changes nothing in exact arithmetic
+    and keeps the products normal floats; a carrier whose weight is 0 while another's is not
+    drops out. When every carrier of a component has weight 0 the limit depends on how the
+    weights went to 0, which ``mu`` no longer holds: those carriers are weighted equally
+    (the limit of weights that fall to 0 together, each infinitely below any positive one).
+    Then component k alone: ``x_k`` is its carriers' mean, uncorrelated with the components
+    of positive weight; one carrier gives its own moments."""
+    w = _carrier_weights(mu, carry)  # (N, r, n)
+    x = (w * X).sum(1) / w.sum(1)
+    d = np.where(carry, X - x[:, None, :], 0.0)
+    either = carry[:, :, None] | carry[:, None, :]
+    W = _carrier_weights(mu, either)  # (N, r, n, n)
+    num = (W * (P + d[..., :, None] * d[..., None, :])).sum(1)
+    return x, symmetrize(num / W.sum(1))
 
 
 def mode_probabilities(c: Array, loglik: Array) -> Array:
