@@ -112,6 +112,10 @@ def _history(t: dict, **kw) -> None:
     (lambda d: d["trackers"][1].update(associator="MHT"), "trackers.1.associator", "'MHT'"),
     (lambda d: _history(d["trackers"][0], confirm=[4, 3]), "trackers.0.confirm", "[4, 3]"),
     (lambda d: d["trackers"][1].update(cost="distance"), "trackers.1.cost", "'distance'"),
+    (lambda d: d["trackers"][0].update(missed_distance=10.0), "trackers.0.missed_distance",
+     "10.0"),
+    (lambda d: d["trackers"][0].update(cost="distance", missed_distance=0.0),
+     "trackers.0.missed_distance", "0.0"),
     (lambda d: d["scene"].update(n=50), "scene.n", "50"),
     (lambda d: d["trackers"][0].update(filter="KF"), "trackers.0.filter", "'KF'"),
     (lambda d: d["trackers"][1].update(name="GNN"), "trackers.1.name", "'GNN'"),
@@ -142,7 +146,8 @@ def test_other_filters_logics_and_initiators_build_and_track():
     data = load_multitarget("radar-crossing").model_dump(exclude_none=True)
     data["trackers"] = [
         {"name": "UKF", "filter": "UKF", "q": 1.0, "associator": "GNN", "cost": "distance",
-         "logic": "history", "confirm": [2, 3], "delete": [3, 3], "initiator": "two-point",
+         "missed_distance": 10.0, "logic": "history", "confirm": [2, 3], "delete": [3, 3],
+         "initiator": "two-point",
          "v_max_mps": 60.0, "margin_m": 100.0, "p_gate": 0.995},
         {"name": "CKF", "filter": "CKF", "q": 1.0, "associator": "JPDA"},
     ]
@@ -150,6 +155,7 @@ def test_other_filters_logics_and_initiators_build_and_track():
     scene, trackers = build(sc)
     assert trackers["UKF"].initiator.v_max == 60.0 and trackers["UKF"].p_gate == 0.995
     assert trackers["UKF"].logic.confirm == (2, 3)
+    assert trackers["UKF"].associator == GNN(cost="distance", missed_distance=10.0)
     assert trackers["CKF"].initiator == SinglePoint(v_std=100.0)  # the defaults
     result = run_tracking(scene, trackers, runs=1, seed=1, c=500.0, within=15.0)
     for tr in result.trackers.values():

@@ -22,7 +22,7 @@ from datetime import datetime, timedelta
 
 import numpy as np
 import pytest
-from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
+from stonesoup.dataassociator.neighbour import GlobalNearestNeighbour, GNNWith2DAssignment
 from stonesoup.dataassociator.probability import JPDA, JPDAwithLBP
 from stonesoup.hypothesiser.distance import DistanceHypothesiser
 from stonesoup.hypothesiser.probability import PDAHypothesiser
@@ -40,6 +40,7 @@ from stonesoup.updater.kalman import ExtendedKalmanUpdater
 from stonesoup.updater.probability import PDAUpdater
 
 import trackkit as tk
+from trackkit.tracking import GNN
 from trackkit.tracking.association import (
     clusters,
     distance_costs,
@@ -124,6 +125,63 @@ def _close(actual, expected, what):
     scale = np.max(np.abs(expected))
     err = np.max(np.abs(actual - expected))
     assert err <= RTOL * scale, f"{what}: max abs error {err:.3e} vs scale {scale:.3e}"
+
+
+def _far_plots(sc, rng, lo: float, hi: float) -> np.ndarray:
+    """The scene's plots and one more per track at a Mahalanobis distance in (lo, hi) of
+    its predicted measurement (inside Stone Soup's missed distance, outside a 0.99 gate)."""
+    mp = predict_measurement(sc.predicted, sc.sensor)
+    u = rng.standard_normal((len(mp.zhat), 2))
+    u *= rng.uniform(lo, hi, (len(u), 1)) / np.linalg.norm(u, axis=1, keepdims=True)
+    far = mp.zhat + (np.linalg.cholesky(mp.S) @ u[..., None])[..., 0]
+    return np.concatenate([sc.z, far])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_tracker_distance_cost_with_missed_distance_10_is_stonesoups_gnn(seed):
+    """``Tracker`` with ``GNN(cost="distance", missed_distance=10)`` takes the pairs of Stone
+    Soup's ``GlobalNearestNeighbour`` (exhaustive joint hypotheses) with a
+    ``DistanceHypothesiser(Mahalanobis(), missed_distance=10)``: the same tracks hit and the
+    same posteriors. The scene has a pair chosen at 5 < d < 10, which the gate's edge
+    (sqrt(chi2.ppf(0.99, 2)) = 3.03, the miss cost without missed_distance) refuses."""
+    md = 10.0
+    rng = np.random.default_rng(600 + seed)
+    sc = scene(rng, 6, side=600.0, clutter=3.0, pos_std=(5.0, 15.0), p_d=0.5)
+    sc = sc._replace(z=_far_plots(sc, rng, 5.0, 9.5))
+    mp = predict_measurement(sc.predicted, sc.sensor)
+    g = gate(mp.zhat, mp.S, sc.z, threshold=md**2)
+    assert np.bincount(g.det).max() >= 2  # tracks compete for a plot
+    tracks, dets, pred, upd, t1 = _stonesoup(sc)
+    hyp = DistanceHypothesiser(pred, upd, Mahalanobis(), missed_distance=md)
+    chosen = GlobalNearestNeighbour(hyp).associate(set(tracks), set(dets), t1)
+
+    def step(associator):
+        trk = tk.tracking.Tracker(tk.filters.KF(), sc.motion, sc.sensor, p_gate=P_G,
+                                  associator=associator,
+                                  logic=tk.tracking.HistoryLogic(confirm=(1, 1)))
+        T = len(tracks)
+        live = tk.tracking.Tracks(sc.prior, np.arange(T), trk.logic.init(T), np.zeros(T),
+                                  0.0, tk.tracking.IdCounter(T),
+                                  (np.zeros((0, 2)), np.zeros((0, 2, 2)), 0.0))
+        return trk.step(live, tk.tracking.scans.Scan(1.0, 0, sc.z))
+
+    out = step(GNN(cost="distance", missed_distance=md))
+    hit = np.array([bool(chosen[t]) for t in tracks])
+    np.testing.assert_array_equal(out.info.hit, hit)
+    assert (out.ids[:len(tracks)] == np.arange(len(tracks))).all()  # none deleted
+    far = []
+    for i, t in enumerate(tracks):
+        h = chosen[t]
+        ref = upd.update(h) if h else h.prediction
+        _close(out.belief.mean[i], np.asarray(ref.state_vector, dtype=float)[:, 0], f"mean {i}")
+        _close(out.belief.cov[i], np.asarray(ref.covar, dtype=float), f"cov {i}")
+        if h:
+            far.append(h.distance)
+    assert 5.0 < max(far) < md
+    # the gate's edge as the miss cost refuses that pair: another outcome
+    old = step(GNN(cost="distance"))
+    assert not np.array_equal(old.info.hit, hit) or not np.allclose(
+        old.belief.mean[:len(tracks)], out.belief.mean[:len(tracks)])
 
 
 @pytest.mark.parametrize("seed,T", [(0, 10), (1, 25), (2, 50)])

@@ -263,5 +263,11 @@ def test_bad_input_is_named():
             Tracker(tk.filters.EKF(), CV, RADAR, **kw)
     with pytest.raises(ValueError, match="cost"):
         GNN(cost="nearest")
+    for md in (0.0, -1.0, float("inf"), float("nan"), "10", True):
+        with pytest.raises(ValueError, match=r"GNN missed_distance = .*expected a finite"):
+            GNN(cost="distance", missed_distance=md)
+    with pytest.raises(ValueError, match="missed_distance = 10.0 applies to cost 'distance' "
+                       "only; got cost 'loglik'"):
+        GNN(missed_distance=10.0)
     with pytest.raises(ValueError, match="v_max"):
         TwoPoint(v_max=-1.0)

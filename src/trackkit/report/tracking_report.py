@@ -453,7 +453,7 @@ def _summary_table(doc: Mapping[str, Any]) -> str:
 
 def _settings_table(scenario: MultiTargetScenario) -> str:
     esc = html.escape
-    fields = ("filter", "q", "associator", "cost", "logic", "alpha", "beta",
+    fields = ("filter", "q", "associator", "cost", "missed_distance", "logic", "alpha", "beta",
               "new_target_density", "confirm", "delete", "initiator", "v_std_mps",
               "v_max_mps", "margin_m", "p_gate", "pd", "clutter_density")
     specs = scenario.trackers

@@ -23,6 +23,7 @@ The file (units in the field names as in the single-target schema; ``q`` in m^2/
     q = 1.0                        # the tracker's constant-velocity model
     associator = "GNN"             # or "JPDA"
     cost = "loglik"                # GNN only: loglik, distance, seed004
+    # missed_distance = 10.0       # cost "distance" only: a miss's cost and the gate
     logic = "score"                # SPRT score (alpha, beta, new_target_density) or
     alpha = 0.01                   # "history" (confirm = [M, N], delete = [P, R])
     beta = 0.001
@@ -136,6 +137,10 @@ class TrackerSpec(_Strict):
     cost: Literal["loglik", "distance", "seed004"] | None = Field(
         None, description="GNN only: the assignment cost (default loglik: negative "
         "log-likelihood ratio; distance: Mahalanobis; seed004: K1 (1 - exp(-K2 d^2)))")
+    missed_distance: PositiveFloat | None = Field(
+        None, description="GNN with cost distance only: the Mahalanobis distance a missed "
+        "detection costs, which is also the gate (default: the gate's edge, "
+        "sqrt(chi2.ppf(p_gate)))", json_schema_extra=_unit("1"))
     star: bool | None = Field(None, description="JPDA only: JPDA* (prune the joint events "
                               "that a swap of two tracks' detections would make more likely, "
                               "against track coalescence; default false)")
@@ -188,6 +193,7 @@ class TrackerSpec(_Strict):
     @model_validator(mode="after")
     def _fields_of_kind(self) -> TrackerSpec:
         own = {"cost": self.associator == "GNN", "star": self.associator == "JPDA",
+               "missed_distance": self.associator == "GNN" and self.cost == "distance",
                "alpha": self.logic == "score", "beta": self.logic == "score",
                "new_target_density": self.logic == "score",
                "confirm": self.logic == "history", "delete": self.logic == "history",
@@ -195,6 +201,8 @@ class TrackerSpec(_Strict):
                "v_max_mps": self.initiator == "two-point",
                "margin_m": self.initiator == "two-point"}
         kind = {"cost": f"associator {self.associator!r}",
+                "missed_distance": (f"cost {self.gnn_cost!r}" if self.associator == "GNN"
+                                    else f"associator {self.associator!r}"),
                 "star": f"associator {self.associator!r}",
                 "alpha": f"logic {self.logic!r}", "beta": f"logic {self.logic!r}",
                 "new_target_density": f"logic {self.logic!r}",
@@ -344,7 +352,7 @@ def build_tracker(spec: TrackerSpec, scene):
     lam = (spec.clutter_density if spec.clutter_density is not None
            else float(max(scene.clutter_density)))
     if spec.associator == "GNN":
-        associator = tt.GNN(cost=spec.gnn_cost)
+        associator = tt.GNN(cost=spec.gnn_cost, missed_distance=spec.missed_distance)
     else:
         associator = tt.JPDA(star=bool(spec.star))
     if spec.logic == "score":

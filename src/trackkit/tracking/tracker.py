@@ -73,17 +73,34 @@ class GNN:
     """Global nearest neighbour: the least-cost assignment, per cluster of tracks that share
     gated detections. ``cost``: "loglik" (negative log-likelihood ratio against clutter and
     a miss: the most probable joint event), "distance" (the Mahalanobis distance d, a miss
-    costing the gate's edge sqrt(gamma), as Stone Soup's ``DistanceHypothesiser``) or
-    "seed004" (``K1 (1 - exp(-K2 d^2))``, 004.md 2.6)."""
+    costing ``missed_distance`` M, as Stone Soup's ``DistanceHypothesiser``) or
+    "seed004" (``K1 (1 - exp(-K2 d^2))``, 004.md 2.6).
+
+    With the distance cost and no ``missed_distance`` the miss costs the gate's edge
+    sqrt(gamma), gamma = chi2.ppf(P_G, m). With ``missed_distance`` M the gate is M instead
+    (``d^2 <= M^2``; the tracker's ``p_gate`` then plays no part): a pair at d < M costs
+    less than a miss. M = 10 in two dimensions would need P_G = 1 - 2e-22, which is 1.0 in
+    floating point."""
 
     cost: Literal["loglik", "distance", "seed004"] = "loglik"
     k1: float = 1.0
     k2: float = 0.5
+    missed_distance: float | None = None
 
     def __post_init__(self) -> None:
         if self.cost not in ("loglik", "distance", "seed004"):
             raise ValueError(f"GNN cost = {self.cost!r}; expected 'loglik', 'distance' or "
                              "'seed004'")
+        md = self.missed_distance
+        if md is None:
+            return
+        if self.cost != "distance":
+            raise ValueError(f"GNN missed_distance = {md!r} applies to cost 'distance' only; "
+                             f"got cost {self.cost!r}")
+        if (isinstance(md, bool) or not isinstance(md, (int, float, np.floating, np.integer))
+                or not (np.isfinite(md) and md > 0)):
+            raise ValueError(f"GNN missed_distance = {md!r}; expected a finite Mahalanobis "
+                             "distance > 0")
 
 
 @dataclass(frozen=True)
@@ -301,7 +318,8 @@ class Tracker:
         if T:
             belief = self.filter.predict(belief, self.motion, dt)
             zhat, S = self.measurement_prediction(belief, sensor)
-            g = gate(zhat, S, z, self.p_gate, angular=getattr(sensor, "angular", None))
+            g = gate(zhat, S, z, self.p_gate, angular=getattr(sensor, "angular", None),
+                     threshold=self._gate_threshold())
             info["pairs"] = g.size
             if isinstance(self.associator, JPDA):
                 belief, hit, ll, claimed = self._jpda(belief, g, z, sensor, info)
@@ -332,12 +350,17 @@ class Tracker:
             register(belief.cov)
         return Tracks(belief, ids, state, born, float(scan.time), counter, waiting, step_info)
 
+    def _gate_threshold(self) -> float | None:
+        """gamma of the gate: the GNN's missed distance squared, or None (from p_gate)."""
+        md = getattr(self.associator, "missed_distance", None)
+        return None if md is None else float(md) ** 2
+
     def _gnn(self, belief: Any, g: Gate, z: Array, sensor: Any, info: dict):
         a = self.associator
         if a.cost == "loglik":
             costs = loglik_costs(g, self.pd, self.clutter_density, self.p_gate)
         elif a.cost == "distance":
-            costs = distance_costs(g)
+            costs = distance_costs(g, a.missed_distance)
         else:
             costs = seed004_costs(g, a.k1, a.k2)
         assignment = gnn(g, costs)
