@@ -1521,15 +1521,20 @@ def _print_track_summary(read: Any, job: SimpleNamespace, paths: dict[str, Path]
         console.print(Text(f"{job.plots} plots in {len(job.scans)} scans"))
     console.print(Text(f"tracks: {res['tracks_confirmed']} confirmed of "
                        f"{res['tracks_started']} started"), soft_wrap=True)
+    if res["tracks_confirmed"] == 0:
+        from trackkit.report.tracks import NO_TRACK_CONFIRMED
+
+        console.print(Text(NO_TRACK_CONFIRMED, style="yellow"), soft_wrap=True)
     g = res.get("gospa")
     if g is not None:
         t = res["tracks"]
+        rmse = "n/a" if t["rmse"] is None else f"{t['rmse']:.3g} m"
         console.print(Text(
             f"mean GOSPA {g['mean']:.4g} m (c = {g['c']:g} m; per scan on average "
             f"{g['objects_per_scan']:.1f} objects, {g['missed_per_scan']:.2f} missed, "
             f"{g['false_per_scan']:.2f} false tracks; localisation part "
             f"{g['localisation']:.4g} m^2); {t['truths_confirmed']} of {t['truths']} objects "
-            f"tracked, {t['breaks']} track breaks, position RMSE {t['rmse']:.3g} m"),
+            f"tracked, {t['breaks']} track breaks, position RMSE {rmse}"),
             soft_wrap=True)
     html = paths.get("html")
     console.print(Text(f"wrote {len(paths)} files to {html.parent if html else ''}",

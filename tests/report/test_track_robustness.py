@@ -1,0 +1,76 @@
+"""``trackkit track`` on awkward input, through the real command in a subprocess: a run that
+confirms no track, a byte that is not UTF-8, a corrupt Parquet file, and finite but absurd
+values. Each checks the exit code, the words of the message (file, line, field, value), that no
+traceback or numpy warning leaks, and which files exist afterwards."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
+from ..cli_helpers import assert_user_error, trackkit
+
+AIS_HEADER = "Time,MMSI,Latitude_degrees,Longitude_degrees,COG_degrees,SOG_knots"
+TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "var_x", "var_y",
+                 "var_vx", "var_vy", "status", "lat", "lon"]
+RADAR_FILES = {"tracks.parquet", "tracks.csv", "tracks.geojson", "tracks.png", "gospa.png",
+               "report.html", "results.json"}
+
+
+def _ais_lines(n_vessels: int = 4, minutes: float = 3.0) -> list[str]:
+    """Vessels sailing straight near 50.8 N 1.1 W, a report from each every 3 s."""
+    rng = np.random.default_rng(7)
+    lines = [AIS_HEADER]
+    start = np.datetime64("2016-01-12T13:02:11", "ms")
+    for k in range(int(minutes * 20)):
+        for v in range(n_vessels):
+            t = start + np.timedelta64(3000 * k + 100 * v, "ms")
+            lat = 50.80 + 0.01 * v + 2e-5 * k
+            lon = -1.10 + 0.015 * v + 3e-5 * k
+            lines.append(f"{str(t).replace('T', ' ')},{235000000 + v},{lat:.6f},{lon:.6f},"
+                         f"{45 + rng.normal(0, 1):.1f},{8 + rng.normal(0, 0.1):.1f}")
+    return lines
+
+
+def _names(out: Path) -> set[str]:
+    return {p.name for p in out.iterdir()}
+
+
+# --- a run that confirms no track ----------------------------------------------------------
+
+
+def test_no_confirmed_track_is_a_result_not_a_bug(tmp_path):
+    f = tmp_path / "ais.csv"
+    f.write_text("\n".join(_ais_lines()) + "\n", encoding="utf-8")
+    out = tmp_path / "two"
+    ran = trackkit("track", str(f), "--as-radar", "--max-scans", "2", "--out", str(out),
+                   cwd=tmp_path)
+    assert_user_error(ran, 0, "0 confirmed of", "No track was confirmed", "position RMSE n/a")
+    assert "trackkit bug" not in ran.text and "error" not in ran.text
+    assert _names(out) == RADAR_FILES  # no lock, no skipped.csv, nothing half-written
+    # the tentative states of the tracks started, as in any run; none confirmed
+    for table in (pacsv.read_csv(out / "tracks.csv"), pq.read_table(out / "tracks.parquet")):
+        assert table.column_names == TRACK_COLUMNS and table.num_rows > 0
+        assert set(table["status"].to_pylist()) == {"tentative"}
+    geo = json.loads((out / "tracks.geojson").read_text())
+    assert [f["properties"]["kind"] for f in geo["features"]] == ["radar site"]
+    doc = json.loads((out / "results.json").read_text())
+    res = doc["results"]
+    assert res["scans"] == 2 and res["tracks_confirmed"] == 0 and res["tracks_started"] > 0
+    assert res["tracks"]["rmse"] is None and res["tracks"]["truths_confirmed"] == 0
+    page = (out / "report.html").read_text()
+    assert "No track was confirmed" in page and "None" not in page
+
+    # no plot at all (nothing in range, no clutter): track files with their columns, no rows
+    out = tmp_path / "none"
+    ran = trackkit("track", str(f), "--as-radar", "--clutter", "0", "--min-range", "1",
+                   "--max-range", "2", "--out", str(out), cwd=tmp_path)
+    assert_user_error(ran, 0, "0 confirmed of 0 started", "No track was confirmed")
+    assert _names(out) == RADAR_FILES
+    assert (out / "tracks.csv").read_text().splitlines() == [",".join(TRACK_COLUMNS)]
+    table = pq.read_table(out / "tracks.parquet")
+    assert table.column_names == TRACK_COLUMNS and table.num_rows == 0
