@@ -1116,9 +1116,9 @@ def _number(lo: float | None = None, hi: float | None = None, *, open_lo: bool =
 
 def _header_of(path: Path) -> list[str]:
     if path.suffix.lower() in (".parquet", ".pq"):
-        import pyarrow.parquet as pq
+        from trackkit.io._table import open_parquet
 
-        return list(pq.ParquetFile(path).schema_arrow.names)
+        return list(open_parquet(path).schema_arrow.names)
     from trackkit.io._table import _header
 
     return _header(str(path))

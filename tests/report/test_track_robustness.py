@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
@@ -74,3 +75,30 @@ def test_no_confirmed_track_is_a_result_not_a_bug(tmp_path):
     assert (out / "tracks.csv").read_text().splitlines() == [",".join(TRACK_COLUMNS)]
     table = pq.read_table(out / "tracks.parquet")
     assert table.column_names == TRACK_COLUMNS and table.num_rows == 0
+
+
+# --- a corrupt Parquet file ------------------------------------------------------------------
+
+
+def test_corrupt_parquet_is_named(tmp_path):
+    rng = np.random.default_rng(0)
+    n = 3000
+    table = pa.table({"time": np.repeat(np.arange(n // 3, dtype=float), 3),
+                      "x": rng.normal(0, 1e3, n), "y": rng.normal(0, 1e3, n)})
+    good = tmp_path / "good.parquet"
+    pq.write_table(table, good, row_group_size=1000, compression="snappy")
+    raw = bytearray(good.read_bytes())
+    cases = {"noise.parquet": bytes(rng.integers(0, 256, 400, dtype=np.uint8)),
+             "cut.parquet": bytes(raw[: len(raw) // 2]),
+             # the footer intact, the second row group's pages overwritten
+             "pages.parquet": bytes(raw[: len(raw) // 2] + b"\x55" * (len(raw) // 4)
+                                    + raw[len(raw) // 2 + len(raw) // 4:])}
+    for name, data in cases.items():
+        f = tmp_path / name
+        f.write_bytes(data)
+        out = tmp_path / f"out-{name}"
+        ran = trackkit("track", str(f), "--out", str(out), cwd=tmp_path)
+        assert_user_error(ran, 2, f"{f}: not a readable Parquet file")
+        if name == "pages.parquet":
+            assert " from row " in ran.text  # the footer was read; the pages were not
+        assert not out.exists()  # the directory the run created is removed again

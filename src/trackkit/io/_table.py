@@ -503,15 +503,39 @@ def _lines(start: int, n: int, skipped: list[int]) -> np.ndarray:
         k = int(hit.sum())
 
 
+def _corrupt(err: Exception) -> bool:
+    """pyarrow reports corrupt data as ArrowInvalid or as an OSError without an errno (a
+    real I/O failure, such as permission denied, has one)."""
+    return isinstance(err, pa.ArrowException) or (isinstance(err, OSError) and
+                                                   err.errno is None)
+
+
+def _not_parquet(path: str, err: Exception, where: str = "") -> ValueError:
+    return ValueError(f"{path}: not a readable Parquet file{where} ({str(err).strip()}); "
+                      "expected a Parquet file as pyarrow or pandas write it, or a CSV file "
+                      "named .csv")
+
+
+def open_parquet(path: str | os.PathLike):
+    """``pyarrow.parquet.ParquetFile`` of ``path``; a corrupt or truncated file is a
+    ValueError naming it (pyarrow's own message names no file)."""
+    import pyarrow.parquet as pq
+
+    try:
+        return pq.ParquetFile(path)
+    except (pa.ArrowException, OSError) as err:
+        if not _corrupt(err):
+            raise
+        raise _not_parquet(os.fspath(path), err) from None
+
+
 def read_parquet_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str = "skip",
                        progress: Progress | None = None, soft: frozenset[str] = frozenset(),
                        max_listed: int = 100, row_check: RowCheck | None = None,
                        batch_size: int = 1 << 16) -> Table:
     """Stream a Parquet file through the fields; records are numbered by row from 1."""
-    import pyarrow.parquet as pq
-
     path = os.fspath(path)
-    pf = pq.ParquetFile(path)
+    pf = open_parquet(path)
     names = pf.schema_arrow.names
     _check_columns(path, names, fields, "")
     order = {f.role: names.index(f.column) for f in fields}
@@ -520,7 +544,16 @@ def read_parquet_table(path: str | os.PathLike, fields: Sequence[Field], on_bad:
     size = os.path.getsize(path)
     done = 0
     wanted = sorted({f.column for f in fields}, key=names.index)
-    for batch in pf.iter_batches(batch_size=batch_size, columns=wanted):
+    batches = pf.iter_batches(batch_size=batch_size, columns=wanted)
+    while True:
+        try:
+            batch = next(batches)
+        except StopIteration:
+            break
+        except (pa.ArrowException, OSError) as err:  # a corrupt page further in
+            if not _corrupt(err):
+                raise
+            raise _not_parquet(path, err, f" from row {done + 1} on") from None
         n = batch.num_rows
         cols = {f.role: batch.column(f.column) for f in fields}
         acc.add(cols, np.arange(done + 1, done + n + 1, dtype=np.int64))
