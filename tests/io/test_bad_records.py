@@ -258,3 +258,35 @@ def test_number_pattern_agrees_with_the_cast(s):
     if pc.match_substring_regex(arr, _NUMBER)[0].as_py():
         v = pc.cast(arr, pa.float64())[0].as_py()
         assert v == float(s) or (np.isnan(v) and np.isnan(float(s)))
+
+
+@pytest.mark.parametrize("read_size", [1, 7, 1 << 20])
+def test_a_byte_that_is_not_utf8_is_one_bad_record(tmp_path, monkeypatch, read_size):
+    # multi-byte characters (ids) and bad bytes cut anywhere by the reads of the file
+    monkeypatch.setattr(_table, "READ_SIZE", read_size)
+    rows = [f"2016-01-12 13:02:{10 + k:02d}.000,Ålesund-{k}é,50.{k},-1.1,10,5".encode()
+            for k in range(12)]
+    rows[3] = rows[3].replace(b"50.3", b"5\xea0.3")                   # Latin-1 e-circumflex
+    rows[6] = rows[6].replace("Ålesund".encode(), b"\xc5lesund")      # Latin-1 A-ring
+    rows[9] = rows[9] + b",\xff\xfe"                                  # and a field too many
+    rows[11] = rows[11].replace(b"-1.1", b"-1.1\xe2\x82")             # a cut-off character
+    p = tmp_path / "ais.csv"
+    p.write_bytes(HEADER.encode() + b"\n" + b"\n".join(rows) + b"\n")
+    r, rep = read_ais_csv(p)
+    assert [(b.line, b.column, b.reason, b.value, b.expected) for b in rep.bad] == [
+        (5, "Latitude_degrees", "not UTF-8 text", "5\\xea0.3", "UTF-8 text, not byte 0xea"),
+        (8, "MMSI", "not UTF-8 text", "\\xc5lesund-6é", "UTF-8 text, not byte 0xc5"),
+        (11, "*", "wrong number of fields",
+         "2016-01-12 13:02:19.000,Ålesund-9é,50.9,-1.1,10,5,\\xff\\xfe", "6 fields, got 7"),
+        (13, "Longitude_degrees", "not UTF-8 text", "-1.1\\xe2\\x82",
+         "UTF-8 text, not byte 0xe2")]
+    assert dict(rep.skipped) == {"not UTF-8 text": 3, "wrong number of fields": 1}
+    assert rep.rows_read == 12 and rep.rows_kept == len(r) == 8
+    assert sorted(r.ids.tolist()) == sorted(f"Ålesund-{k}é" for k in (0, 1, 2, 4, 5, 7, 8, 10))
+    with pytest.raises(ValueError) as e:
+        read_ais_csv(p, on_bad="stop")
+    assert str(e.value).startswith(f"{p}:5:Latitude_degrees: not UTF-8 text (value "
+                                   "'5\\\\xea0.3'; expected UTF-8 text, not byte 0xea)")
+    p.write_bytes(b"T\xefme" + HEADER.encode()[4:] + b"\n" + rows[0] + b"\n")
+    with pytest.raises(ValueError, match=r"ais.csv:1: the header is not UTF-8 text \(byte 0xef"):
+        read_ais_csv(p)

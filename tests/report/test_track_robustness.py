@@ -102,3 +102,42 @@ def test_corrupt_parquet_is_named(tmp_path):
         if name == "pages.parquet":
             assert " from row " in ran.text  # the footer was read; the pages were not
         assert not out.exists()  # the directory the run created is removed again
+
+
+# --- a byte that is not UTF-8 ----------------------------------------------------------------
+
+
+def test_a_byte_that_is_not_utf8_is_one_bad_record(tmp_path):
+    lines = [line.encode() for line in _ais_lines()]
+    lines[10] = lines[10].replace(b",50.", b",5\xea0.", 1)    # line 11: a Latin-1 byte
+    lines[13] = lines[13] + b",\xff"                           # line 14: and a field too many
+    f = tmp_path / "ais.csv"
+    f.write_bytes(b"\n".join(lines) + b"\n")
+    out = tmp_path / "skip"
+    ran = trackkit("track", str(f), "--as-radar", "--out", str(out), cwd=tmp_path)
+    assert_user_error(ran, 0, f"{f}:11:Latitude_degrees: not UTF-8 text", "byte 0xea",
+                      f"{f}:14:*: wrong number of fields", "skipped 2: ",
+                      "1 not UTF-8 text", f"listed in {out / 'skipped.csv'}")
+    assert "codec" not in ran.text
+    assert _names(out) == RADAR_FILES | {"skipped.csv"}
+    first, second = (out / "skipped.csv").read_text().splitlines()[1:]
+    assert first.startswith('11,"Latitude_degrees","not UTF-8 text","5\\xea0.')
+    assert first.endswith('","UTF-8 text, not byte 0xea"')
+    assert second.startswith('14,"*","wrong number of fields","2016-01-12 13:02:')
+    assert second.endswith(',\\xff","6 fields, got 7"')
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["input"]["records_skipped"] == 2 and doc["input"]["skipped_by_reason"] == {
+        "not UTF-8 text": 1, "wrong number of fields": 1}
+    assert doc["input"]["records_kept"] == len(lines) - 3
+
+    ran = trackkit("track", str(f), "--as-radar", "--on-bad", "stop", "--out",
+                   str(tmp_path / "stop"), cwd=tmp_path)
+    assert_user_error(ran, 2, f"{f}:11:Latitude_degrees: not UTF-8 text", "0xea",
+                      "--on-bad skip")
+    assert not (tmp_path / "stop").exists()
+
+    f.write_bytes(b"\n".join([lines[0].replace(b"Time", b"T\xefme")] + lines[1:]) + b"\n")
+    ran = trackkit("track", str(f), "--as-radar", "--out", str(tmp_path / "header"),
+                   cwd=tmp_path)
+    assert_user_error(ran, 2, f"{f}:1: the header is not UTF-8 text", "byte 0xef")
+    assert not (tmp_path / "header").exists()

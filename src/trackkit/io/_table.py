@@ -6,7 +6,9 @@ whether it may be blank, its valid range). :func:`read_csv_table` and
 :func:`read_parquet_table` stream the file (pyarrow, a few MB at a time, every column read as
 text from CSV so that one bad value cannot fail the whole parse), convert every field of a
 block at once, and build per-record messages only for the bad records. A record with several
-bad fields is counted once, under its first bad field in the file's column order.
+bad fields is counted once, under its first bad field in the file's column order. CSV files are UTF-8: a byte that is not UTF-8 makes its
+record bad (reason "not UTF-8 text", the byte named), like any other bad value; only a header
+that is not UTF-8 rejects the file.
 
 CSV line numbers are physical lines (the header is line 1) as long as no quoted value holds a
 line break; Parquet records are numbered by row from 1.
@@ -14,6 +16,7 @@ line break; Parquet records are numbered by row from 1.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import os
 from collections import Counter
@@ -49,6 +52,7 @@ TIME_FORMATS = {
 }
 BAD_FIELDS = "wrong number of fields"
 BLANK = "blank line"  # skipped and counted, but never fatal
+NOT_UTF8 = "not UTF-8 text"
 NAT = np.iinfo(np.int64).min  # numpy's NaT: a time not given
 BLOCK_SIZE = 1 << 22  # bytes of CSV parsed at a time: memory is a few blocks, not the file
 
@@ -232,6 +236,78 @@ def _bools(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
     return t, ~(t | f)
 
 
+# A byte that is not UTF-8 becomes the code point _MARK + byte (the last private-use code
+# points of plane 16, never in real data) as the file is read: the parser then sees valid
+# text, and the bad byte is one bad value of one record, found and shown as \xNN.
+_MARK = 0x10FF00
+_MARKED = r"[\x{10FF80}-\x{10FFFF}]"
+_SHOW = {_MARK + b: f"\\x{b:02x}" for b in range(0x80, 0x100)}
+READ_SIZE = 1 << 20  # bytes of the file decoded at a time
+
+
+def _mark(err: UnicodeError) -> tuple[str, int]:
+    bad = err.object[err.start:err.end]  # type: ignore[attr-defined]
+    return "".join(chr(_MARK + b) for b in bad), err.end  # type: ignore[attr-defined]
+
+
+codecs.register_error("trackkit-mark-bytes", _mark)
+
+
+def shown(text: str) -> str:
+    """A value as read, its marked bad bytes written back as ``\\xNN``."""
+    return text.translate(_SHOW)
+
+
+class _MarkedUtf8:
+    """A CSV file as UTF-8 bytes for the parser, every byte that is not UTF-8 marked;
+    ``tell()`` is the position in the file (for the progress), ``marked`` whether any byte
+    so far was bad."""
+
+    def __init__(self, raw) -> None:
+        self.raw, self.buf, self.marked, self.closed = raw, b"", False, False
+        self.decoder = codecs.getincrementaldecoder("utf-8")("trackkit-mark-bytes")
+
+    def read(self, n: int = -1) -> bytes:
+        while n < 0 or len(self.buf) < n:
+            chunk = self.raw.read(READ_SIZE)
+            text = self.decoder.decode(chunk, final=not chunk)
+            if text and not self.marked and max(text) >= chr(_MARK + 0x80):
+                self.marked = True
+            self.buf += text.encode("utf-8")
+            if not chunk:
+                break
+        out, self.buf = (self.buf, b"") if n < 0 else (self.buf[:n], self.buf[n:])
+        return out
+
+    def tell(self) -> int:
+        return self.raw.tell()
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return False
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def _undecodable(arr: pa.Array) -> list:
+    """``(rows, reason, expected)`` entries for the values of a text column holding marked
+    bytes, one per first bad byte."""
+    m = np.asarray(pc.match_substring_regex(arr, _MARKED).fill_null(False)
+                   .to_numpy(zero_copy_only=False), dtype=bool)
+    if not m.any():
+        return []
+    rows = np.flatnonzero(m)
+    by_byte: dict[int, list[int]] = {}
+    for i, v in zip(rows, arr.take(pa.array(rows)).to_pylist(), strict=True):
+        first = next(ord(c) - _MARK for c in v if ord(c) >= _MARK + 0x80)
+        by_byte.setdefault(first, []).append(int(i))
+    return [(np.asarray(r), NOT_UTF8, f"UTF-8 text, not byte 0x{b:02x}")
+            for b, r in sorted(by_byte.items())]
+
+
 def convert(field: Field, raw: pa.Array):
     """Convert one column of a block. Returns ``(values, entries, not_given)`` where
     entries is a list of ``(row indices, reason, expected)`` for the bad values and
@@ -313,7 +389,10 @@ class _Accumulator:
         if len(self.bad) < self.max_listed:
             self.bad.append(rec)
 
-    def add(self, cols: dict[str, pa.Array], lines: np.ndarray) -> None:
+    def add(self, cols: dict[str, pa.Array], lines: np.ndarray,
+            undecodable: dict[str, list] | None = None) -> None:
+        """One block: ``cols`` by role, each record's line, and per role the entries of
+        values that were not UTF-8 (:func:`_undecodable`)."""
         n = len(lines)
         self.rows += n
         values, idx, col, reason, expected, ngs = {}, [], [], [], [], {}
@@ -328,6 +407,8 @@ class _Accumulator:
             expected.extend(["a record"] * int(all_blank.sum()))
         for f in self.fields:
             v, entries, ngs[f.label] = convert(f, cols[f.role])
+            # first, so that a value with a bad byte is named for that, not as a bad number
+            entries = (undecodable or {}).get(f.role, []) + entries
             values[f.role] = v
             for i, r, e in entries:
                 if len(i):
@@ -376,7 +457,8 @@ class _Accumulator:
                 v = "" if f is None else cols[f.role][int(rows[k])].as_py()
                 recs.append(BadRecord(self.path, int(lines[rows[k]]),
                                       "*" if f is None else f.column, reasons[k],
-                                      "" if v is None else str(v), exp[sel[k]], self.unit))
+                                      "" if v is None else shown(str(v)), exp[sel[k]],
+                                      self.unit))
                 if fatal:
                     break
         for r in sorted(recs, key=lambda r: r.line):
@@ -395,7 +477,7 @@ class _Accumulator:
         self.rows += 1
         self.skipped[BAD_FIELDS] += 1
         self.bad_lines.append(np.array([line], dtype=np.int64))
-        self.whole_rows.append(BadRecord(self.path, line, "*", BAD_FIELDS, text[:200],
+        self.whole_rows.append(BadRecord(self.path, line, "*", BAD_FIELDS, shown(text[:200]),
                                          f"{expected} fields, got {actual}", self.unit))
 
     def finish(self) -> Table:
@@ -421,8 +503,16 @@ class _Accumulator:
 
 
 def _header(path: str) -> list[str]:
-    with open(path, encoding="utf-8-sig", newline="") as fh:
-        header = next(csv.reader(fh), None)
+    # the first line only: a bad byte further down is a bad record, not a bad header
+    with open(path, "rb") as fh:
+        first = fh.readline()
+    try:
+        text = first.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise ValueError(f"{path}:1: the header is not UTF-8 text (byte "
+                         f"0x{first[err.start]:02x} at byte {err.start + 1} of the line); "
+                         "expected the column names, saved as UTF-8") from None
+    header = next(csv.reader([text]), None)
     if not header:
         raise ValueError(f"{path}:1: no header line; expected the column names")
     return [h.strip() for h in header]
@@ -460,9 +550,10 @@ def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str
     wanted = sorted({f.column for f in fields}, key=header.index)
     size = os.path.getsize(path)
     next_line = 2
-    with pa.OSFile(path) as fh:
+    with open(path, "rb") as fh:
+        text = _MarkedUtf8(fh)
         reader = pacsv.open_csv(
-            fh,
+            text,
             # single-threaded: the parser then knows the line of a bad row, and memory stays
             # one block
             read_options=pacsv.ReadOptions(use_threads=False,
@@ -483,7 +574,9 @@ def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str
             if n:
                 next_line = int(lines[-1]) + 1
             cols = {f.role: batch.column(f.column) for f in fields}
-            acc.add(cols, lines)
+            bad_bytes = {r: e for r, c in cols.items() if (e := _undecodable(c))} \
+                if text.marked else None
+            acc.add(cols, lines, bad_bytes)
             if progress is not None:
                 progress(min(fh.tell(), size), size)
     if progress is not None:
