@@ -141,3 +141,70 @@ def test_a_byte_that_is_not_utf8_is_one_bad_record(tmp_path):
                    cwd=tmp_path)
     assert_user_error(ran, 2, f"{f}:1: the header is not UTF-8 text", "byte 0xef")
     assert not (tmp_path / "header").exists()
+
+
+# --- finite but absurd values ----------------------------------------------------------------
+
+
+def _plots() -> list[str]:
+    """Three targets moving straight for 30 scans of 2 s (x, y in m)."""
+    lines = ["time,x,y"]
+    for k in range(30):
+        lines += [f"{2.0 * k},{1000 * i + 10 * k:.1f},{500 * i + 5 * k:.1f}" for i in range(3)]
+    return lines
+
+
+def test_absurd_detections_are_bad_records(tmp_path):
+    lines = _plots()
+    lines[10] = "6.0,1e300,12.0"     # 1e300 m: finite, absurd
+    lines[20] = "12.0,1000,-2e8"     # 200 000 km
+    lines[30] = "1e300,2000,500"     # a time of 1e300 s
+    f = tmp_path / "plots.csv"
+    f.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "skip"
+    ran = trackkit("track", str(f), "--out", str(out), cwd=tmp_path)
+    assert_user_error(ran, 0, f"{f}:11:x: |x| above 1e+08", "'1e300'",
+                      f"{f}:21:y: |y| above 1e+08", "'-2e8'",
+                      f"{f}:31:time: time out of range", "skipped 3")
+    assert "overflow" not in ran.text and "warning" not in ran.text.lower()
+    assert _names(out) == {"tracks.parquet", "tracks.csv", "tracks.png", "report.html",
+                           "results.json", "skipped.csv"}
+    assert [row.split(",")[:2] for row in (out / "skipped.csv").read_text().splitlines()[1:]] \
+        == [["11", '"x"'], ["21", '"y"'], ["31", '"time"']]
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["input"]["skipped_by_reason"] == {"|x| above 1e+08": 1, "|y| above 1e+08": 1,
+                                                 "time out of range": 1}
+    assert doc["results"]["tracks_confirmed"] >= 3
+    tracks = pacsv.read_csv(out / "tracks.csv")
+    assert np.max(np.abs(tracks["x"].to_numpy())) < 1e4
+    assert np.max(np.abs(tracks["time"].to_numpy())) <= 58.0
+
+    ran = trackkit("track", str(f), "--on-bad", "stop", "--out", str(tmp_path / "stop"),
+                   cwd=tmp_path)
+    assert_user_error(ran, 2, f"{f}:11:x: |x| above 1e+08", "'1e300'", "geostationary",
+                      "--on-bad skip")
+    assert not (tmp_path / "stop").exists()
+
+
+def test_absurd_ais_reports_are_bad_records(tmp_path):
+    lines = _ais_lines()
+    cut = [line.split(",") for line in lines]
+    cut[4][2] = "91"                            # latitude
+    cut[5][3] = "1e300"                         # longitude
+    cut[6][5] = "1e300"                         # speed (knots)
+    cut[7][0] = "2250-01-12 13:02:20.000"       # time
+    f = tmp_path / "ais.csv"
+    f.write_text("\n".join(",".join(c) for c in cut) + "\n")
+    out = tmp_path / "skip"
+    ran = trackkit("track", str(f), "--as-radar", "--out", str(out), cwd=tmp_path)
+    assert_user_error(ran, 0, f"{f}:5:Latitude_degrees: latitude outside [-90, 90]", "'91'",
+                      f"{f}:6:Longitude_degrees: longitude outside [-180, 180]", "'1e300'",
+                      f"{f}:7:SOG_knots: |speed| above 1943.84", "Mach 3",
+                      f"{f}:8:Time: time out of range", "'2250-01-12 13:02:20.000'",
+                      "skipped 4")
+    assert "overflow" not in ran.text and "warning" not in ran.text.lower()
+    assert _names(out) == RADAR_FILES | {"skipped.csv"}
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["input"]["records_skipped"] == 4
+    assert doc["input"]["records_kept"] == len(lines) - 5
+    assert doc["results"]["tracks"]["truths"] == 4 and doc["results"]["tracks_confirmed"] >= 4

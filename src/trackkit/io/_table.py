@@ -6,9 +6,12 @@ whether it may be blank, its valid range). :func:`read_csv_table` and
 :func:`read_parquet_table` stream the file (pyarrow, a few MB at a time, every column read as
 text from CSV so that one bad value cannot fail the whole parse), convert every field of a
 block at once, and build per-record messages only for the bad records. A record with several
-bad fields is counted once, under its first bad field in the file's column order. CSV files are UTF-8: a byte that is not UTF-8 makes its
-record bad (reason "not UTF-8 text", the byte named), like any other bad value; only a header
-that is not UTF-8 rejects the file.
+bad fields is counted once, under its first bad field in the file's column order.
+
+CSV files are UTF-8: a byte that is not UTF-8 makes its record bad (reason "not UTF-8 text",
+the byte named), like any other bad value; only a header that is not UTF-8 rejects the file.
+Finite values beyond physical limits (:data:`MAX_DISTANCE`, :data:`MAX_SPEED`,
+:data:`ALTITUDE`, :data:`MAX_SECONDS`, :data:`TIME_SPAN`) are bad records too.
 
 CSV line numbers are physical lines (the header is line 1) as long as no quoted value holds a
 line break; Parquet records are numbered by row from 1.
@@ -56,6 +59,22 @@ NOT_UTF8 = "not UTF-8 text"
 NAT = np.iinfo(np.int64).min  # numpy's NaT: a time not given
 BLOCK_SIZE = 1 << 22  # bytes of CSV parsed at a time: memory is a few blocks, not the file
 
+# Physical limits: a finite value beyond them is a corrupt record, not a measurement (and
+# would overflow the tracker's squares into inf).
+#: m: the largest |x|, |y|, |z| or range of a detection, 100 000 km (beyond geostationary
+#: orbit, 42 164 km from the earth's centre; a quarter of the way to the moon)
+MAX_DISTANCE = 1e8
+#: m/s: the largest speed or vertical rate, Mach 3 (faster than any vessel or aircraft that
+#: reports AIS or ADS-B)
+MAX_SPEED = 1000.0
+#: m: altitudes from below the lowest shore (the Dead Sea, -430 m) to the edge of space
+ALTITUDE = (-1e3, 1e5)
+#: s: the largest |time| relative to an epoch (about 317 years)
+MAX_SECONDS = 1e10
+#: absolute times: from 1900 to 2200 UTC; outside, a clock error, not a recording
+TIME_SPAN = (np.datetime64("1900-01-01", "ns").astype(np.int64),
+             np.datetime64("2200-01-01", "ns").astype(np.int64))
+
 
 @dataclass(frozen=True)
 class Field:
@@ -66,7 +85,9 @@ class Field:
     skipped even with ``on_bad="stop"``, when ``missing_soft``); of an optional field it is
     "not given": nan (numbers), False (bool), counted in ``not_given``. ``unavailable`` is a
     code that the source uses for "not available" (AIS COG 360): read as not given. ``lo,
-    hi`` bound valid numbers (inclusive).
+    hi`` bound valid numbers (inclusive); ``limit`` bounds their magnitude (in the file's
+    units; ``limit_why`` says what it is in words), a physical limit such as
+    :data:`MAX_DISTANCE`.
     """
 
     role: str
@@ -80,6 +101,8 @@ class Field:
     time_format: str = "iso"
     missing: str = "missing value"
     missing_soft: bool = False
+    limit: float | None = None
+    limit_why: str = ""
 
     @property
     def label(self) -> str:
@@ -197,6 +220,14 @@ def _times(arr: pa.Array, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     ns = np.asarray(ts.cast(pa.int64()).fill_null(0).to_numpy(zero_copy_only=False),
                     dtype=np.int64)
     return ns, np.asarray(pc.is_null(ts).to_numpy(zero_copy_only=False), dtype=bool)
+
+
+def _far_time(v: np.ndarray, fmt: str) -> np.ndarray:
+    """Times beyond :data:`MAX_SECONDS` (relative) or outside :data:`TIME_SPAN`."""
+    if fmt == "seconds":
+        with np.errstate(invalid="ignore"):
+            return np.abs(v) > MAX_SECONDS
+    return (v < TIME_SPAN[0]) | (v >= TIME_SPAN[1])
 
 
 def _offset_ns(tz: str) -> int:
@@ -340,14 +371,22 @@ def convert(field: Field, raw: pa.Array):
                       else f"{field.label} outside {field.range_text()}")
             entries.append((np.flatnonzero(out), reason,
                             f"a {field.label} in {field.range_text()}"))
+        if field.limit is not None:
+            big = given & (np.abs(v) > field.limit)
+            entries.append((np.flatnonzero(big), f"|{field.label}| above {field.limit:g}",
+                            f"|{field.label}| at most {field.limit:g} ({field.limit_why})"))
         return np.where(given, v, np.nan), entries, ng | unavail
     if kind == "time":
         v, bad = _times(arr, field.time_format)
         bad &= ~blank
+        far = _far_time(v, field.time_format) & ~blank & ~bad
         # blank (or bad) times are NaT for absolute times, nan for relative ones
-        v = np.where(blank | bad, NAT if v.dtype == np.int64 else np.nan, v)
+        v = np.where(blank | bad | far, NAT if v.dtype == np.int64 else np.nan, v)
         expected = TIME_FORMATS.get(field.time_format, f"a time like {field.time_format!r}")
         entries.append((np.flatnonzero(bad), "bad time", expected))
+        entries.append((np.flatnonzero(far), "time out of range", (
+            f"|time| at most {MAX_SECONDS:g} s" if field.time_format == "seconds" else
+            "a time from 1900 to 2200 UTC")))
         return v, entries, ng
     if kind == "int":
         v, bad = _ints(arr)
