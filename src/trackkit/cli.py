@@ -473,6 +473,13 @@ def list_scenarios() -> None:
                 label.append(" (default)", style="dim")
             table.add_row(label, Text(description))
         Console().print(table)
+        from trackkit.io.samples import SAMPLES
+
+        samples = Table("sample", "description", title="bundled samples (trackkit track NAME "
+                        "--as-radar)", title_justify="left")
+        for name, (_, description) in SAMPLES.items():
+            samples.add_row(Text(name, style="bold"), Text(description))
+        Console().print(samples)
 
 
 @app.command()
@@ -1218,7 +1225,8 @@ def _tracker(sensor: Any, pd: float, clutter_density: float, q: float, v_std: fl
 @app.command()
 def track(
     file: Annotated[Path, typer.Argument(
-        help="Detections (CSV or Parquet), AIS CSV or OpenSky state-vector CSV.")],
+        help="Detections (CSV or Parquet), AIS CSV or OpenSky state-vector CSV, or a bundled "
+        "sample: solent-ais, opensky-adsb (see trackkit list).")],
     fmt: Annotated[TrackFormat | None, typer.Option(
         "--format", "-f", help="What the file holds.",
         show_default="guessed from the columns")] = None,
@@ -1298,11 +1306,10 @@ def track(
 ) -> None:
     """Track recorded data; write tracks (Parquet, CSV, GeoJSON), pictures, results.json and
     report.html. AIS and ADS-B need --as-radar: a virtual radar makes plots of the reported
-    positions, and the tracks are scored against those positions with GOSPA."""
+    positions, and the tracks are scored against those positions with GOSPA. Try it on a
+    bundled sample: trackkit track solent-ais --as-radar."""
     with _user_errors() as state:
-        if not file.is_file():
-            what = "is not a file" if file.exists() else "no such file"
-            raise ValueError(f"{file}: {what}; expected a detections, AIS or OpenSky file")
+        file = _sample_or_file(file)
         header = _header_of(file)
         kind = fmt or _guess_format(file, header)
         if kind is not TrackFormat.detections and not as_radar:
@@ -1365,6 +1372,19 @@ def track(
                 paths = write_track_report(rep, where.path)
             state.interrupted = "interrupted"
             _print_track_summary(read, job, paths)
+
+
+def _sample_or_file(file: Path) -> Path:
+    """The file, else the bundled sample of that name (a file of that name comes first)."""
+    from trackkit.io import samples
+
+    if not file.exists() and str(file) in samples.SAMPLES:
+        return samples.path(str(file))
+    if not file.is_file():
+        what = "is not a file" if file.exists() else "no such file"
+        raise ValueError(f"{file}: {what}; expected a detections, AIS or OpenSky file, or a "
+                         f"bundled sample ({', '.join(samples.SAMPLES)})")
+    return file
 
 
 def _notes(read: Any) -> list[str]:

@@ -208,3 +208,41 @@ def test_absurd_ais_reports_are_bad_records(tmp_path):
     assert doc["input"]["records_skipped"] == 4
     assert doc["input"]["records_kept"] == len(lines) - 5
     assert doc["results"]["tracks"]["truths"] == 4 and doc["results"]["tracks_confirmed"] >= 4
+
+
+# --- the bundled samples, by name ------------------------------------------------------------
+
+
+def test_solent_sample_by_name(tmp_path):
+    """`trackkit track solent-ais --as-radar`: the default output directory is named after
+    the sample; a marine radar at the data's median tracks nearly every vessel."""
+    ran = trackkit("track", "solent-ais", "--as-radar", cwd=tmp_path)
+    out = tmp_path / "trackkit-out" / "track-solent-ais"
+    assert_user_error(ran, 0, "solent-ais.csv: 2159 records read, 2158 kept",
+                      "no records skipped", f"report: {out / 'report.html'}")
+    assert _names(out) == RADAR_FILES
+    doc = json.loads((out / "results.json").read_text())
+    radar, res = doc["config"]["virtual radar"], doc["results"]
+    assert radar["scans"] == 200 and radar["objects_in_file"] == 77
+    assert res["tracks"]["confirmed_fraction"] > 0.9 and res["tracks"]["rmse"] < 60
+    assert res["gospa"]["false_per_scan"] < 2 and res["gospa"]["missed_per_scan"] < 2
+
+
+def test_opensky_sample_by_name_and_a_file_of_that_name_first(tmp_path):
+    ran = trackkit("track", "opensky-adsb", "--as-radar", "--out", "o", cwd=tmp_path)
+    assert_user_error(ran, 0, "opensky-adsb.csv: 1556 records read, 1452 kept",
+                      "dropped 104 exact duplicates")
+    assert _names(tmp_path / "o") == RADAR_FILES
+    doc = json.loads((tmp_path / "o" / "results.json").read_text())
+    res = doc["results"]
+    assert doc["config"]["virtual radar"]["scans"] == 30
+    assert res["tracks"]["confirmed_fraction"] > 0.9 and res["tracks"]["rmse"] < 600
+    # a real file of a sample's name is read instead of the sample
+    (tmp_path / "opensky-adsb").write_text("\n".join(_ais_lines()) + "\n")
+    ran = trackkit("track", "opensky-adsb", "--as-radar", "--out", "mine", cwd=tmp_path)
+    assert_user_error(ran, 0, f"opensky-adsb: {len(_ais_lines()) - 1} records read")
+    assert json.loads((tmp_path / "mine" / "results.json").read_text())["input"][
+        "format"] == "ais"
+    ran = trackkit("track", "opensky", "--as-radar", cwd=tmp_path)
+    assert_user_error(ran, 2, "opensky: no such file", "bundled sample",
+                      "solent-ais, opensky-adsb")
