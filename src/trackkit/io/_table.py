@@ -225,8 +225,7 @@ def _times(arr: pa.Array, fmt: str) -> tuple[np.ndarray, np.ndarray]:
 def _far_time(v: np.ndarray, fmt: str) -> np.ndarray:
     """Times beyond :data:`MAX_SECONDS` (relative) or outside :data:`TIME_SPAN`."""
     if fmt == "seconds":
-        with np.errstate(invalid="ignore"):
-            return np.abs(v) > MAX_SECONDS
+        return np.abs(v) > MAX_SECONDS
     return (v < TIME_SPAN[0]) | (v >= TIME_SPAN[1])
 
 
