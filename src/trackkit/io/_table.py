@@ -275,9 +275,8 @@ _SHOW = {_MARK + b: f"\\x{b:02x}" for b in range(0x80, 0x100)}
 READ_SIZE = 1 << 20  # bytes of the file decoded at a time
 
 
-def _mark(err: UnicodeError) -> tuple[str, int]:
-    bad = err.object[err.start:err.end]  # type: ignore[attr-defined]
-    return "".join(chr(_MARK + b) for b in bad), err.end  # type: ignore[attr-defined]
+def _mark(err: UnicodeDecodeError) -> tuple[str, int]:
+    return "".join(chr(_MARK + b) for b in err.object[err.start:err.end]), err.end
 
 
 codecs.register_error("trackkit-mark-bytes", _mark)
