@@ -473,6 +473,13 @@ def list_scenarios() -> None:
                 label.append(" (default)", style="dim")
             table.add_row(label, Text(description))
         Console().print(table)
+        from trackkit.io.samples import SAMPLES
+
+        samples = Table("sample", "description", title="bundled samples (trackkit track NAME "
+                        "--as-radar)", title_justify="left")
+        for name, (_, description) in SAMPLES.items():
+            samples.add_row(Text(name, style="bold"), Text(description))
+        Console().print(samples)
 
 
 @app.command()
@@ -1116,9 +1123,9 @@ def _number(lo: float | None = None, hi: float | None = None, *, open_lo: bool =
 
 def _header_of(path: Path) -> list[str]:
     if path.suffix.lower() in (".parquet", ".pq"):
-        import pyarrow.parquet as pq
+        from trackkit.io._table import open_parquet
 
-        return list(pq.ParquetFile(path).schema_arrow.names)
+        return list(open_parquet(path).schema_arrow.names)
     from trackkit.io._table import _header
 
     return _header(str(path))
@@ -1218,7 +1225,8 @@ def _tracker(sensor: Any, pd: float, clutter_density: float, q: float, v_std: fl
 @app.command()
 def track(
     file: Annotated[Path, typer.Argument(
-        help="Detections (CSV or Parquet), AIS CSV or OpenSky state-vector CSV.")],
+        help="Detections (CSV or Parquet), AIS CSV or OpenSky state-vector CSV, or a bundled "
+        "sample: solent-ais, opensky-adsb (see trackkit list).")],
     fmt: Annotated[TrackFormat | None, typer.Option(
         "--format", "-f", help="What the file holds.",
         show_default="guessed from the columns")] = None,
@@ -1298,11 +1306,10 @@ def track(
 ) -> None:
     """Track recorded data; write tracks (Parquet, CSV, GeoJSON), pictures, results.json and
     report.html. AIS and ADS-B need --as-radar: a virtual radar makes plots of the reported
-    positions, and the tracks are scored against those positions with GOSPA."""
+    positions, and the tracks are scored against those positions with GOSPA. Try it on a
+    bundled sample: trackkit track solent-ais --as-radar."""
     with _user_errors() as state:
-        if not file.is_file():
-            what = "is not a file" if file.exists() else "no such file"
-            raise ValueError(f"{file}: {what}; expected a detections, AIS or OpenSky file")
+        file = _sample_or_file(file)
         header = _header_of(file)
         kind = fmt or _guess_format(file, header)
         if kind is not TrackFormat.detections and not as_radar:
@@ -1365,6 +1372,19 @@ def track(
                 paths = write_track_report(rep, where.path)
             state.interrupted = "interrupted"
             _print_track_summary(read, job, paths)
+
+
+def _sample_or_file(file: Path) -> Path:
+    """The file, else the bundled sample of that name (a file of that name comes first)."""
+    from trackkit.io import samples
+
+    if not file.exists() and str(file) in samples.SAMPLES:
+        return samples.path(str(file))
+    if not file.is_file():
+        what = "is not a file" if file.exists() else "no such file"
+        raise ValueError(f"{file}: {what}; expected a detections, AIS or OpenSky file, or a "
+                         f"bundled sample ({', '.join(samples.SAMPLES)})")
+    return file
 
 
 def _notes(read: Any) -> list[str]:
@@ -1521,15 +1541,20 @@ def _print_track_summary(read: Any, job: SimpleNamespace, paths: dict[str, Path]
         console.print(Text(f"{job.plots} plots in {len(job.scans)} scans"))
     console.print(Text(f"tracks: {res['tracks_confirmed']} confirmed of "
                        f"{res['tracks_started']} started"), soft_wrap=True)
+    if res["tracks_confirmed"] == 0:
+        from trackkit.report.tracks import NO_TRACK_CONFIRMED
+
+        console.print(Text(NO_TRACK_CONFIRMED, style="yellow"), soft_wrap=True)
     g = res.get("gospa")
     if g is not None:
         t = res["tracks"]
+        rmse = "n/a" if t["rmse"] is None else f"{t['rmse']:.3g} m"
         console.print(Text(
             f"mean GOSPA {g['mean']:.4g} m (c = {g['c']:g} m; per scan on average "
             f"{g['objects_per_scan']:.1f} objects, {g['missed_per_scan']:.2f} missed, "
             f"{g['false_per_scan']:.2f} false tracks; localisation part "
             f"{g['localisation']:.4g} m^2); {t['truths_confirmed']} of {t['truths']} objects "
-            f"tracked, {t['breaks']} track breaks, position RMSE {t['rmse']:.3g} m"),
+            f"tracked, {t['breaks']} track breaks, position RMSE {rmse}"),
             soft_wrap=True)
     html = paths.get("html")
     console.print(Text(f"wrote {len(paths)} files to {html.parent if html else ''}",

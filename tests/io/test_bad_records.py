@@ -258,3 +258,75 @@ def test_number_pattern_agrees_with_the_cast(s):
     if pc.match_substring_regex(arr, _NUMBER)[0].as_py():
         v = pc.cast(arr, pa.float64())[0].as_py()
         assert v == float(s) or (np.isnan(v) and np.isnan(float(s)))
+
+
+@pytest.mark.parametrize("read_size", [1, 7, 1 << 20])
+def test_a_byte_that_is_not_utf8_is_one_bad_record(tmp_path, monkeypatch, read_size):
+    # multi-byte characters (ids) and bad bytes cut anywhere by the reads of the file
+    monkeypatch.setattr(_table, "READ_SIZE", read_size)
+    rows = [f"2016-01-12 13:02:{10 + k:02d}.000,Ålesund-{k}é,50.{k},-1.1,10,5".encode()
+            for k in range(12)]
+    rows[3] = rows[3].replace(b"50.3", b"5\xea0.3")                   # Latin-1 e-circumflex
+    rows[6] = rows[6].replace("Ålesund".encode(), b"\xc5lesund")      # Latin-1 A-ring
+    rows[9] = rows[9] + b",\xff\xfe"                                  # and a field too many
+    rows[11] = rows[11].replace(b"-1.1", b"-1.1\xe2\x82")             # a cut-off character
+    p = tmp_path / "ais.csv"
+    p.write_bytes(HEADER.encode() + b"\n" + b"\n".join(rows) + b"\n")
+    r, rep = read_ais_csv(p)
+    assert [(b.line, b.column, b.reason, b.value, b.expected) for b in rep.bad] == [
+        (5, "Latitude_degrees", "not UTF-8 text", "5\\xea0.3", "UTF-8 text, not byte 0xea"),
+        (8, "MMSI", "not UTF-8 text", "\\xc5lesund-6é", "UTF-8 text, not byte 0xc5"),
+        (11, "*", "wrong number of fields",
+         "2016-01-12 13:02:19.000,Ålesund-9é,50.9,-1.1,10,5,\\xff\\xfe", "6 fields, got 7"),
+        (13, "Longitude_degrees", "not UTF-8 text", "-1.1\\xe2\\x82",
+         "UTF-8 text, not byte 0xe2")]
+    assert dict(rep.skipped) == {"not UTF-8 text": 3, "wrong number of fields": 1}
+    assert rep.rows_read == 12 and rep.rows_kept == len(r) == 8
+    assert sorted(r.ids.tolist()) == sorted(f"Ålesund-{k}é" for k in (0, 1, 2, 4, 5, 7, 8, 10))
+    with pytest.raises(ValueError) as e:
+        read_ais_csv(p, on_bad="stop")
+    assert str(e.value).startswith(f"{p}:5:Latitude_degrees: not UTF-8 text (value "
+                                   "'5\\\\xea0.3'; expected UTF-8 text, not byte 0xea)")
+    p.write_bytes(b"T\xefme" + HEADER.encode()[4:] + b"\n" + rows[0] + b"\n")
+    with pytest.raises(ValueError, match=r"ais.csv:1: the header is not UTF-8 text \(byte 0xef"):
+        read_ais_csv(p)
+
+
+def test_finite_but_absurd_values_are_bad_records(tmp_path):
+    import warnings
+
+    from trackkit.io import DetectionColumns, DetectionUnits, read_detections
+
+    p = tmp_path / "os.csv"
+    p.write_text("time,icao24,lat,lon,velocity,heading,vertrate,geoaltitude\n"
+                 "1626098400,a,51,0,250,10,5,10000\n"
+                 "1626098400,b,51,0,1e300,10,5,10000\n"       # speed
+                 "1626098400,c,51,0,250,10,-1500,10000\n"     # vertical rate
+                 "1626098400,d,51,0,250,10,5,2e5\n"           # altitude, 200 km
+                 "1626098400,e,91,0,250,10,5,10000\n"         # latitude
+                 "1626098400,f,51,-1e300,250,10,5,10000\n"    # longitude
+                 "1626098410,a,51,0.01,999.9,10,-999,-999\n")  # just inside every limit
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r, rep = read_opensky_csv(p)
+    assert [(b.line, b.column, b.reason, b.value) for b in rep.bad] == [
+        (3, "velocity", "|speed| above 1000", "1e300"),
+        (4, "vertrate", "|vertrate| above 1000", "-1500"),
+        (5, "geoaltitude", "geoaltitude outside [-1000, 100000]", "2e5"),
+        (6, "lat", "latitude outside [-90, 90]", "91"),
+        (7, "lon", "longitude outside [-180, 180]", "-1e300")]
+    assert r.line.tolist() == [2, 8]
+    # detections: the limit of 1e8 m in the file's units, bearings within a turn either way
+    p = tmp_path / "d.csv"
+    p.write_text("time,r,b\n0,99999,-359\n1,100001,2\n2,5,361\n3,5,-360\n1e11,5,5\n")
+    s, rep = read_detections(p, DetectionColumns(sensor=None, range="r", bearing="b"),
+                             DetectionUnits(distance="km"))
+    assert [(b.line, b.reason) for b in rep.bad] == [
+        (3, "|range| above 100000"), (4, "bearing outside [-360, 360]"),
+        (6, "time out of range")]
+    assert "in km; 1e+08 m" in rep.bad[0].expected
+    assert s.times.tolist() == [0.0, 3.0]
+    p.write_text("time,r,b\n0,5,6.2\n1,5,6.3\n")
+    _, rep = read_detections(p, DetectionColumns(sensor=None, range="r", bearing="b"),
+                             DetectionUnits(angle="rad"))
+    assert [(b.line, b.reason) for b in rep.bad] == [(3, "bearing outside [-6.28319, 6.28319]")]

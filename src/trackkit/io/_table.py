@@ -8,12 +8,18 @@ text from CSV so that one bad value cannot fail the whole parse), convert every 
 block at once, and build per-record messages only for the bad records. A record with several
 bad fields is counted once, under its first bad field in the file's column order.
 
+CSV files are UTF-8: a byte that is not UTF-8 makes its record bad (reason "not UTF-8 text",
+the byte named), like any other bad value; only a header that is not UTF-8 rejects the file.
+Finite values beyond physical limits (:data:`MAX_DISTANCE`, :data:`MAX_SPEED`,
+:data:`ALTITUDE`, :data:`MAX_SECONDS`, :data:`TIME_SPAN`) are bad records too.
+
 CSV line numbers are physical lines (the header is line 1) as long as no quoted value holds a
 line break; Parquet records are numbered by row from 1.
 """
 
 from __future__ import annotations
 
+import codecs
 import csv
 import os
 from collections import Counter
@@ -49,8 +55,25 @@ TIME_FORMATS = {
 }
 BAD_FIELDS = "wrong number of fields"
 BLANK = "blank line"  # skipped and counted, but never fatal
+NOT_UTF8 = "not UTF-8 text"
 NAT = np.iinfo(np.int64).min  # numpy's NaT: a time not given
 BLOCK_SIZE = 1 << 22  # bytes of CSV parsed at a time: memory is a few blocks, not the file
+
+# Physical limits: a finite value beyond them is a corrupt record, not a measurement (and
+# would overflow the tracker's squares into inf).
+#: m: the largest |x|, |y|, |z| or range of a detection, 100 000 km (beyond geostationary
+#: orbit, 42 164 km from the earth's centre; a quarter of the way to the moon)
+MAX_DISTANCE = 1e8
+#: m/s: the largest speed or vertical rate, Mach 3 (faster than any vessel or aircraft that
+#: reports AIS or ADS-B)
+MAX_SPEED = 1000.0
+#: m: altitudes from below the lowest shore (the Dead Sea, -430 m) to the edge of space
+ALTITUDE = (-1e3, 1e5)
+#: s: the largest |time| relative to an epoch (about 317 years)
+MAX_SECONDS = 1e10
+#: absolute times: from 1900 to 2200 UTC; outside, a clock error, not a recording
+TIME_SPAN = (np.datetime64("1900-01-01", "ns").astype(np.int64),
+             np.datetime64("2200-01-01", "ns").astype(np.int64))
 
 
 @dataclass(frozen=True)
@@ -62,7 +85,9 @@ class Field:
     skipped even with ``on_bad="stop"``, when ``missing_soft``); of an optional field it is
     "not given": nan (numbers), False (bool), counted in ``not_given``. ``unavailable`` is a
     code that the source uses for "not available" (AIS COG 360): read as not given. ``lo,
-    hi`` bound valid numbers (inclusive).
+    hi`` bound valid numbers (inclusive); ``limit`` bounds their magnitude (in the file's
+    units; ``limit_why`` says what it is in words), a physical limit such as
+    :data:`MAX_DISTANCE`.
     """
 
     role: str
@@ -76,6 +101,8 @@ class Field:
     time_format: str = "iso"
     missing: str = "missing value"
     missing_soft: bool = False
+    limit: float | None = None
+    limit_why: str = ""
 
     @property
     def label(self) -> str:
@@ -195,6 +222,13 @@ def _times(arr: pa.Array, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     return ns, np.asarray(pc.is_null(ts).to_numpy(zero_copy_only=False), dtype=bool)
 
 
+def _far_time(v: np.ndarray, fmt: str) -> np.ndarray:
+    """Times beyond :data:`MAX_SECONDS` (relative) or outside :data:`TIME_SPAN`."""
+    if fmt == "seconds":
+        return np.abs(v) > MAX_SECONDS
+    return (v < TIME_SPAN[0]) | (v >= TIME_SPAN[1])
+
+
 def _offset_ns(tz: str) -> int:
     if tz in ("", "Z"):
         return 0
@@ -232,6 +266,77 @@ def _bools(arr: pa.Array) -> tuple[np.ndarray, np.ndarray]:
     return t, ~(t | f)
 
 
+# A byte that is not UTF-8 becomes the code point _MARK + byte (the last private-use code
+# points of plane 16, never in real data) as the file is read: the parser then sees valid
+# text, and the bad byte is one bad value of one record, found and shown as \xNN.
+_MARK = 0x10FF00
+_MARKED = r"[\x{10FF80}-\x{10FFFF}]"
+_SHOW = {_MARK + b: f"\\x{b:02x}" for b in range(0x80, 0x100)}
+READ_SIZE = 1 << 20  # bytes of the file decoded at a time
+
+
+def _mark(err: UnicodeDecodeError) -> tuple[str, int]:
+    return "".join(chr(_MARK + b) for b in err.object[err.start:err.end]), err.end
+
+
+codecs.register_error("trackkit-mark-bytes", _mark)
+
+
+def shown(text: str) -> str:
+    """A value as read, its marked bad bytes written back as ``\\xNN``."""
+    return text.translate(_SHOW)
+
+
+class _MarkedUtf8:
+    """A CSV file as UTF-8 bytes for the parser, every byte that is not UTF-8 marked;
+    ``tell()`` is the position in the file (for the progress), ``marked`` whether any byte
+    so far was bad."""
+
+    def __init__(self, raw) -> None:
+        self.raw, self.buf, self.marked, self.closed = raw, b"", False, False
+        self.decoder = codecs.getincrementaldecoder("utf-8")("trackkit-mark-bytes")
+
+    def read(self, n: int = -1) -> bytes:
+        while n < 0 or len(self.buf) < n:
+            chunk = self.raw.read(READ_SIZE)
+            text = self.decoder.decode(chunk, final=not chunk)
+            if text and not self.marked and max(text) >= chr(_MARK + 0x80):
+                self.marked = True
+            self.buf += text.encode("utf-8")
+            if not chunk:
+                break
+        out, self.buf = (self.buf, b"") if n < 0 else (self.buf[:n], self.buf[n:])
+        return out
+
+    def tell(self) -> int:
+        return self.raw.tell()
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return False
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def _undecodable(arr: pa.Array) -> list:
+    """``(rows, reason, expected)`` entries for the values of a text column holding marked
+    bytes, one per first bad byte."""
+    m = np.asarray(pc.match_substring_regex(arr, _MARKED).fill_null(False)
+                   .to_numpy(zero_copy_only=False), dtype=bool)
+    if not m.any():
+        return []
+    rows = np.flatnonzero(m)
+    by_byte: dict[int, list[int]] = {}
+    for i, v in zip(rows, arr.take(pa.array(rows)).to_pylist(), strict=True):
+        first = next(ord(c) - _MARK for c in v if ord(c) >= _MARK + 0x80)
+        by_byte.setdefault(first, []).append(int(i))
+    return [(np.asarray(r), NOT_UTF8, f"UTF-8 text, not byte 0x{b:02x}")
+            for b, r in sorted(by_byte.items())]
+
+
 def convert(field: Field, raw: pa.Array):
     """Convert one column of a block. Returns ``(values, entries, not_given)`` where
     entries is a list of ``(row indices, reason, expected)`` for the bad values and
@@ -264,14 +369,22 @@ def convert(field: Field, raw: pa.Array):
                       else f"{field.label} outside {field.range_text()}")
             entries.append((np.flatnonzero(out), reason,
                             f"a {field.label} in {field.range_text()}"))
+        if field.limit is not None:
+            big = given & (np.abs(v) > field.limit)
+            entries.append((np.flatnonzero(big), f"|{field.label}| above {field.limit:g}",
+                            f"|{field.label}| at most {field.limit:g} ({field.limit_why})"))
         return np.where(given, v, np.nan), entries, ng | unavail
     if kind == "time":
         v, bad = _times(arr, field.time_format)
         bad &= ~blank
+        far = _far_time(v, field.time_format) & ~blank & ~bad
         # blank (or bad) times are NaT for absolute times, nan for relative ones
-        v = np.where(blank | bad, NAT if v.dtype == np.int64 else np.nan, v)
+        v = np.where(blank | bad | far, NAT if v.dtype == np.int64 else np.nan, v)
         expected = TIME_FORMATS.get(field.time_format, f"a time like {field.time_format!r}")
         entries.append((np.flatnonzero(bad), "bad time", expected))
+        entries.append((np.flatnonzero(far), "time out of range", (
+            f"|time| at most {MAX_SECONDS:g} s" if field.time_format == "seconds" else
+            "a time from 1900 to 2200 UTC")))
         return v, entries, ng
     if kind == "int":
         v, bad = _ints(arr)
@@ -313,7 +426,10 @@ class _Accumulator:
         if len(self.bad) < self.max_listed:
             self.bad.append(rec)
 
-    def add(self, cols: dict[str, pa.Array], lines: np.ndarray) -> None:
+    def add(self, cols: dict[str, pa.Array], lines: np.ndarray,
+            undecodable: dict[str, list] | None = None) -> None:
+        """One block: ``cols`` by role, each record's line, and per role the entries of
+        values that were not UTF-8 (:func:`_undecodable`)."""
         n = len(lines)
         self.rows += n
         values, idx, col, reason, expected, ngs = {}, [], [], [], [], {}
@@ -328,6 +444,8 @@ class _Accumulator:
             expected.extend(["a record"] * int(all_blank.sum()))
         for f in self.fields:
             v, entries, ngs[f.label] = convert(f, cols[f.role])
+            # first, so that a value with a bad byte is named for that, not as a bad number
+            entries = (undecodable or {}).get(f.role, []) + entries
             values[f.role] = v
             for i, r, e in entries:
                 if len(i):
@@ -376,7 +494,8 @@ class _Accumulator:
                 v = "" if f is None else cols[f.role][int(rows[k])].as_py()
                 recs.append(BadRecord(self.path, int(lines[rows[k]]),
                                       "*" if f is None else f.column, reasons[k],
-                                      "" if v is None else str(v), exp[sel[k]], self.unit))
+                                      "" if v is None else shown(str(v)), exp[sel[k]],
+                                      self.unit))
                 if fatal:
                     break
         for r in sorted(recs, key=lambda r: r.line):
@@ -395,7 +514,7 @@ class _Accumulator:
         self.rows += 1
         self.skipped[BAD_FIELDS] += 1
         self.bad_lines.append(np.array([line], dtype=np.int64))
-        self.whole_rows.append(BadRecord(self.path, line, "*", BAD_FIELDS, text[:200],
+        self.whole_rows.append(BadRecord(self.path, line, "*", BAD_FIELDS, shown(text[:200]),
                                          f"{expected} fields, got {actual}", self.unit))
 
     def finish(self) -> Table:
@@ -421,8 +540,16 @@ class _Accumulator:
 
 
 def _header(path: str) -> list[str]:
-    with open(path, encoding="utf-8-sig", newline="") as fh:
-        header = next(csv.reader(fh), None)
+    # the first line only: a bad byte further down is a bad record, not a bad header
+    with open(path, "rb") as fh:
+        first = fh.readline()
+    try:
+        text = first.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise ValueError(f"{path}:1: the header is not UTF-8 text (byte "
+                         f"0x{first[err.start]:02x} at byte {err.start + 1} of the line); "
+                         "expected the column names, saved as UTF-8") from None
+    header = next(csv.reader([text]), None)
     if not header:
         raise ValueError(f"{path}:1: no header line; expected the column names")
     return [h.strip() for h in header]
@@ -460,9 +587,10 @@ def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str
     wanted = sorted({f.column for f in fields}, key=header.index)
     size = os.path.getsize(path)
     next_line = 2
-    with pa.OSFile(path) as fh:
+    with open(path, "rb") as fh:
+        text = _MarkedUtf8(fh)
         reader = pacsv.open_csv(
-            fh,
+            text,
             # single-threaded: the parser then knows the line of a bad row, and memory stays
             # one block
             read_options=pacsv.ReadOptions(use_threads=False,
@@ -483,7 +611,9 @@ def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str
             if n:
                 next_line = int(lines[-1]) + 1
             cols = {f.role: batch.column(f.column) for f in fields}
-            acc.add(cols, lines)
+            bad_bytes = {r: e for r, c in cols.items() if (e := _undecodable(c))} \
+                if text.marked else None
+            acc.add(cols, lines, bad_bytes)
             if progress is not None:
                 progress(min(fh.tell(), size), size)
     if progress is not None:
@@ -503,15 +633,39 @@ def _lines(start: int, n: int, skipped: list[int]) -> np.ndarray:
         k = int(hit.sum())
 
 
+def _corrupt(err: Exception) -> bool:
+    """pyarrow reports corrupt data as ArrowInvalid or as an OSError without an errno (a
+    real I/O failure, such as permission denied, has one)."""
+    return isinstance(err, pa.ArrowException) or (isinstance(err, OSError) and
+                                                   err.errno is None)
+
+
+def _not_parquet(path: str, err: Exception, where: str = "") -> ValueError:
+    return ValueError(f"{path}: not a readable Parquet file{where} ({str(err).strip()}); "
+                      "expected a Parquet file as pyarrow or pandas write it, or a CSV file "
+                      "named .csv")
+
+
+def open_parquet(path: str | os.PathLike):
+    """``pyarrow.parquet.ParquetFile`` of ``path``; a corrupt or truncated file is a
+    ValueError naming it (pyarrow's own message names no file)."""
+    import pyarrow.parquet as pq
+
+    try:
+        return pq.ParquetFile(path)
+    except (pa.ArrowException, OSError) as err:
+        if not _corrupt(err):
+            raise
+        raise _not_parquet(os.fspath(path), err) from None
+
+
 def read_parquet_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str = "skip",
                        progress: Progress | None = None, soft: frozenset[str] = frozenset(),
                        max_listed: int = 100, row_check: RowCheck | None = None,
                        batch_size: int = 1 << 16) -> Table:
     """Stream a Parquet file through the fields; records are numbered by row from 1."""
-    import pyarrow.parquet as pq
-
     path = os.fspath(path)
-    pf = pq.ParquetFile(path)
+    pf = open_parquet(path)
     names = pf.schema_arrow.names
     _check_columns(path, names, fields, "")
     order = {f.role: names.index(f.column) for f in fields}
@@ -520,7 +674,16 @@ def read_parquet_table(path: str | os.PathLike, fields: Sequence[Field], on_bad:
     size = os.path.getsize(path)
     done = 0
     wanted = sorted({f.column for f in fields}, key=names.index)
-    for batch in pf.iter_batches(batch_size=batch_size, columns=wanted):
+    batches = pf.iter_batches(batch_size=batch_size, columns=wanted)
+    while True:
+        try:
+            batch = next(batches)
+        except StopIteration:
+            break
+        except (pa.ArrowException, OSError) as err:  # a corrupt page further in
+            if not _corrupt(err):
+                raise
+            raise _not_parquet(path, err, f" from row {done + 1} on") from None
         n = batch.num_rows
         cols = {f.role: batch.column(f.column) for f in fields}
         acc.add(cols, np.arange(done + 1, done + n + 1, dtype=np.int64))

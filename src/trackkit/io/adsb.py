@@ -10,7 +10,9 @@ position), which are dropped and counted. Rows with no position are skipped (rea
 Altitudes are metres (``geoaltitude``, GNSS height, by default, else ``baroaltitude``; the
 other fills in where one is blank); velocity (m/s over ground) and heading (deg clockwise
 from north, true track) give vx, vy, and vertrate vz. ``onground`` and ``callsign`` are kept
-in ``reports.extra``.
+in ``reports.extra``. A record beyond physical limits is bad: latitude outside [-90, 90],
+longitude outside [-180, 180], speed or vertical rate above 1000 m/s (Mach 3) in magnitude,
+an altitude outside [-1 km, 100 km], a time outside 1900 to 2200 UTC.
 """
 
 from __future__ import annotations
@@ -20,7 +22,15 @@ import os
 import numpy as np
 
 from trackkit.io import _reports
-from trackkit.io._table import NAT, Field, Progress, _header, read_csv_table
+from trackkit.io._table import (
+    ALTITUDE,
+    MAX_SPEED,
+    NAT,
+    Field,
+    Progress,
+    _header,
+    read_csv_table,
+)
 from trackkit.io.records import ReadReport, Reports
 
 __all__ = ["read_opensky_csv"]
@@ -48,15 +58,18 @@ def read_opensky_csv(path: str | os.PathLike, on_bad: str = "skip", *,
         Field("lon", "lon", lo=-180.0, hi=180.0, what="longitude", missing="no position",
               missing_soft=True),
     ]
+    fast = dict(limit=MAX_SPEED, limit_why=f"in m/s; {MAX_SPEED:g} m/s, Mach 3")
     optional = {
         "lastposupdate": Field("pos_time", "lastposupdate", "time", required=False,
                                time_format="unix", what="lastposupdate"),
-        "velocity": Field("speed", "velocity", required=False, lo=0.0, what="speed"),
+        "velocity": Field("speed", "velocity", required=False, lo=0.0, what="speed", **fast),
         "heading": Field("heading", "heading", required=False, lo=0.0, hi=360.0,
                          what="heading"),
-        "vertrate": Field("vertrate", "vertrate", required=False, what="vertrate"),
-        "geoaltitude": Field("geo", "geoaltitude", required=False, what="geoaltitude"),
-        "baroaltitude": Field("baro", "baroaltitude", required=False, what="baroaltitude"),
+        "vertrate": Field("vertrate", "vertrate", required=False, what="vertrate", **fast),
+        "geoaltitude": Field("geo", "geoaltitude", required=False, lo=ALTITUDE[0],
+                             hi=ALTITUDE[1], what="geoaltitude"),
+        "baroaltitude": Field("baro", "baroaltitude", required=False, lo=ALTITUDE[0],
+                              hi=ALTITUDE[1], what="baroaltitude"),
         "onground": Field("onground", "onground", "bool", required=False, what="onground"),
         "callsign": Field("callsign", "callsign", "text", required=False, what="callsign"),
     }

@@ -7,6 +7,8 @@
 
 AIS codes "not available" as COG 360 and SOG 102.3: such values are read as not given (the
 report is kept, its velocity nan; a vessel with SOG 0 and no course has velocity 0).
+Latitude must lie in [-90, 90], longitude in [-180, 180], course in [0, 360] deg, speed in
+[0, 1000] m/s (Mach 3) and the time from 1900 to 2200 UTC: a record beyond is bad.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trackkit.io import _reports
-from trackkit.io._table import TIME_FORMATS, Field, Progress, read_csv_table
+from trackkit.io._table import MAX_SPEED, TIME_FORMATS, Field, Progress, read_csv_table
 from trackkit.io.frames import ANGLE_UNITS, SPEED_UNITS, unit_factor
 from trackkit.io.records import ReadReport, Reports
 
@@ -89,7 +91,9 @@ def read_ais_csv(path: str | os.PathLike, columns: AisColumns | None = None,
                             unavailable=col.course_unavailable))
     if col.speed is not None:
         fields.append(Field("speed", col.speed, required=False, lo=0.0, what="speed",
-                            unavailable=col.speed_unavailable))
+                            unavailable=col.speed_unavailable,
+                            limit=MAX_SPEED / unit_factor(SPEED_UNITS, col.speed_unit, "speed"),
+                            limit_why=f"in {col.speed_unit}; {MAX_SPEED:g} m/s, Mach 3"))
     b = _reports.bounds_check(bounds)
     table = read_csv_table(path, fields, on_bad, progress, soft=frozenset({"outside bounds"}),
                            max_listed=max_listed,

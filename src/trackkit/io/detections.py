@@ -14,6 +14,11 @@ tracker must know about), as :meth:`Scans.to_csv` writes it.
 Polar detections come out as ``[range (m), bearing (rad)]``, bearing nautical (clockwise from
 north, wrapped to (-pi, pi]), the measurement of ``tk.models.RangeBearing``; Cartesian as
 ``[x, y(, z)]`` in metres.
+
+Finite but absurd values are bad records (named and skipped, or fatal with ``on_bad="stop"``):
+``|x|, |y|, |z|`` and range above 1e8 m (100 000 km, beyond geostationary orbit), a bearing
+outside [-360, 360] deg, a relative time beyond 1e10 s (317 years) or an absolute one outside
+1900 to 2200 UTC.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import numpy as np
 
 from trackkit.angles import wrap
 from trackkit.io._table import (
+    MAX_DISTANCE,
     TIME_FORMATS,
     Field,
     Progress,
@@ -130,13 +136,18 @@ def read_detections(path: str | os.PathLike, columns: DetectionColumns | None = 
     if col.sensor is not None:
         fields.append(Field("sensor", col.sensor, "int", what="sensor id"))
     roles = []
+    # physical limits in the file's units (see the module docstring)
+    far = dict(limit=MAX_DISTANCE / unit_factor(DISTANCE_UNITS, un.distance, "distance"),
+               limit_why=f"in {un.distance}; {MAX_DISTANCE:g} m, beyond geostationary orbit")
+    turn = 2 * np.pi / unit_factor(ANGLE_UNITS, un.angle, "angle")
     if col.polar:
-        fields.append(Field("c0", col.range, required=False, lo=0.0, what="range"))
-        fields.append(Field("c1", col.bearing, required=False, what="bearing"))
+        fields.append(Field("c0", col.range, required=False, lo=0.0, what="range", **far))
+        fields.append(Field("c1", col.bearing, required=False, lo=-turn, hi=turn,
+                            what="bearing"))
         roles = ["c0", "c1"]
     else:
         for k, name in enumerate(col.coordinates):
-            fields.append(Field(f"c{k}", name, required=False, what="xyz"[k]))
+            fields.append(Field(f"c{k}", name, required=False, what="xyz"[k], **far))
             roles.append(f"c{k}")
 
     def partial(v: dict) -> list:

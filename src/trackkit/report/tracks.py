@@ -73,6 +73,12 @@ SKIPPED_CSV = "skipped.csv"
 #: (no truth: no gospa.png) is removed, so the directory holds one consistent result
 TRACK_FILES = (TRACKS_PARQUET, TRACKS_CSV, TRACKS_GEOJSON, TRACKS_PNG, GOSPA_PNG, SKIPPED_CSV,
                REPORT_HTML, RESULTS_JSON)
+#: what the report and the command say when no track reached confirmation
+NO_TRACK_CONFIRMED = (
+    "No track was confirmed: the track files hold no confirmed state (tentative ones only, "
+    "if any), the GeoJSON no track, and the scores of confirmed tracks (RMSE, purity, "
+    "delay) are n/a. A track is confirmed after a few hits; track more scans or check the "
+    "detection probability and clutter options.")
 _STATUS = {int(s): s.name.lower() for s in TrackStatus}
 _STATE_NAMES = ("x", "y", "vx", "vy")
 _DPI = 110
@@ -436,6 +442,8 @@ def results_document(rep: TrackReport, metrics: Mapping[str, Any]) -> dict[str, 
 
 
 def _fmt(v: Any) -> str:
+    if v is None:  # a score of no tracks (an RMSE over no assigned track)
+        return "n/a"
     if isinstance(v, float):
         return "n/a" if not math.isfinite(v) else f"{v:.6g}"
     if isinstance(v, dict):
@@ -503,6 +511,8 @@ def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
             ("tracks confirmed", metrics["tracks_confirmed"]),
             ("mean confirmed tracks per scan", metrics["mean_confirmed_per_scan"])]
     parts.append(_table(rows))
+    if metrics["tracks_confirmed"] == 0:
+        parts.append(f"<p>{html.escape(NO_TRACK_CONFIRMED)}</p>")
     g = metrics.get("gospa")
     if g is not None:
         c = g["c"]
