@@ -413,6 +413,46 @@ def test_the_scenario_reference_is_current():
     assert committed == reference(), f"docs/scenario-reference.md is stale; run: {COMMAND}"
 
 
+@pytest.mark.parametrize("text", ["FieldInfo", "typing.", "Annotated", "<class", "_Pydantic"])
+def test_the_reference_states_types_in_words_not_in_a_library_repr(text):
+    committed = (REPO / "docs" / "scenario-reference.md").read_text(encoding="utf-8")
+    lines = [line for line in committed.splitlines() if text in line]
+    assert not lines, f"{text!r} in docs/scenario-reference.md: {lines[0]}"
+
+
+def test_type_words_describe_the_annotation_and_its_constraints():
+    from typing import Annotated, Literal
+
+    from pydantic import Field
+
+    from trackkit.scenario.reference import type_words
+
+    class Inner(BaseModel):
+        """A nested table."""
+
+    nonneg = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    count = Annotated[int, Field(ge=1)]
+    cases = {
+        list[tuple[nonneg, nonneg]]: "list of pairs of finite numbers >= 0",
+        list[tuple[Annotated[int, Field(ge=0)], count]]:
+            "list of pairs (integer >= 0, integer >= 1)",
+        nonneg | None: "optional finite number",
+        Annotated[float, Field(gt=0, le=1)]: "finite number",
+        float: "number",
+        list[list[nonneg]]: "list of lists of finite numbers",
+        tuple[int, int, int]: "triple of integers",
+        dict[str, list[nonneg]]: "table mapping names to lists of finite numbers >= 0",
+        Literal["a", "b"]: "string",
+        list[Literal["a", "b"]]: "list of strings",
+        tuple[Literal["a", "b"], bool]: 'pair (one of "a", "b", boolean)',
+        Inner | None: "optional table ([Inner](#inner))",
+        list[Inner]: "array of tables ([Inner](#inner))",
+        dict[str, Any]: "table mapping names to values",
+    }
+    for tp, words in cases.items():
+        assert type_words(tp) == words, tp
+
+
 def _models(model, seen):
     if model in seen:
         return

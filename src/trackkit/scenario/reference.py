@@ -2,9 +2,10 @@
 
     python -m trackkit.scenario.reference > docs/scenario-reference.md
 
-Every field of every table: its unit (from the name's suffix, or the field's ``unit``), type,
-default, allowed values and description (``Field(description=...)``); then each filter type's
-options from ``trackkit.scenario.options.FILTER_TYPES``. ``tests/test_scenario_schema.py``
+Every field of every table: its unit (from the name's suffix, or the field's ``unit``), type
+(in words, from the annotation and its constraints, never a library's repr), default, allowed
+values and description (``Field(description=...)``); then each filter type's options from
+``trackkit.scenario.options.FILTER_TYPES``. ``tests/test_scenario_schema.py``
 checks that the committed file is current.
 """
 
@@ -67,24 +68,85 @@ def _strip(tp: Any) -> tuple[Any, list[Any], bool]:
             return tp, constraints, optional
 
 
-def _type_name(tp: Any) -> str:
-    tp, _, _ = _strip(tp)
-    origin = typing.get_origin(tp)
-    if isinstance(tp, type) and issubclass(tp, BaseModel):
-        return "table"
+_NOUNS = {float: ("number", "numbers"), int: ("integer", "integers"),
+          bool: ("boolean", "booleans"), str: ("string", "strings")}
+_TUPLES = {2: ("pair", "pairs"), 3: ("triple", "triples")}
+
+
+def _is_model(tp: Any) -> bool:
+    return isinstance(tp, type) and issubclass(tp, BaseModel)
+
+
+def _anchor(model: type[BaseModel]) -> str:
+    return model.__name__.lower()
+
+
+def _finite(tp: Any, constraints: list[Any]) -> bool:
+    """A float refuses inf and nan when the schema says so (``allow_inf_nan=False``, whatever
+    class pydantic keeps that in) or when it is bounded on both sides."""
+    if tp is not float:
+        return False
+    if any(getattr(c, "allow_inf_nan", None) is False for c in constraints):
+        return True
+    lower = any(isinstance(c, (at.Gt, at.Ge)) for c in constraints)
+    return lower and any(isinstance(c, (at.Lt, at.Le)) for c in constraints)
+
+
+def type_words(tp: Any, plural: bool = False, bounds: bool = False,
+               constraints: list[Any] | None = None) -> str:
+    """A field's type in words, from its annotation and constraints alone (never a repr, so
+    the reference reads the same whatever pydantic prints): ``list of pairs of finite numbers
+    >= 0``, ``optional table (MotionSpec)``. ``bounds`` adds the constraints to the words,
+    for the members of a tuple or a table, which the allowed column does not cover;
+    ``constraints`` are those pydantic keeps beside the annotation (``FieldInfo.metadata``)."""
+    tp, more, optional = _strip(tp)
+    words = _words(tp, [*(constraints or []), *more], plural, bounds)
+    return "optional " + words if optional and not plural else words
+
+
+def _words(tp: Any, constraints: list[Any], plural: bool, bounds: bool) -> str:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if _is_model(tp):
+        kind = "tables" if plural else "table"
+        return f"{kind} ([{tp.__name__}](#{_anchor(tp)}))"
     if origin is list:
-        (item,) = typing.get_args(tp)
-        inner, _, _ = _strip(item)
-        if isinstance(inner, type) and issubclass(inner, BaseModel):
-            return "array of tables"
-        name = _type_name(item)
-        return "list of " + {"number": "numbers", "string": "strings", "integer": "integers",
-                             "list of numbers": "lists of numbers"}.get(name, name)
+        inner, _, _ = _strip(args[0])
+        if _is_model(inner):
+            kind = "arrays of tables" if plural else "array of tables"
+            return f"{kind} ([{inner.__name__}](#{_anchor(inner)}))"
+        return ("lists of " if plural else "list of ") + type_words(args[0], True, bounds)
+    if origin is tuple:
+        return _tuple_words(args, plural)
     if origin is dict:
-        return "table"
+        kind = "tables" if plural else "table"
+        return f"{kind} mapping names to {type_words(args[1], True, True)}"
     if origin is Literal:
-        return "string" if all(isinstance(a, str) for a in typing.get_args(tp)) else "integer"
-    return {float: "number", int: "integer", bool: "boolean", str: "string"}.get(tp, str(tp))
+        if not bounds:
+            return _literal_noun(args, plural)
+        return ("each one of " if plural else "one of ") + ", ".join(_value(a) for a in args)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(type_words(a, plural, bounds) for a in args)
+    if tp is Any:
+        return "values" if plural else "any value"
+    if tp not in _NOUNS:  # fail here rather than print a library's repr into the reference
+        raise TypeError(f"the reference has no words for the type {tp!r}: add it to _NOUNS")
+    noun = _NOUNS[tp][1 if plural else 0]
+    words = ("finite " if _finite(tp, constraints) else "") + noun
+    return " ".join([words, *(_bounds(constraints) if bounds else [])])
+
+
+def _literal_noun(args: tuple[Any, ...], plural: bool) -> str:
+    noun = _NOUNS[str if all(isinstance(a, str) for a in args) else int]
+    return noun[1 if plural else 0]
+
+
+def _tuple_words(args: tuple[Any, ...], plural: bool) -> str:
+    parts = [type_words(a, False, True) for a in args]
+    kind = _TUPLES.get(len(parts), (f"tuple of {len(parts)}", f"tuples of {len(parts)}"))
+    kind = kind[1 if plural else 0]
+    if len(set(parts)) == 1:
+        return f"{kind} of {type_words(args[0], True, True)}"
+    return f"{kind} ({', '.join(parts)})"
 
 
 def _bounds(constraints: list[Any], items: str = "items") -> list[str]:
@@ -164,14 +226,15 @@ def _doc(model: type[BaseModel]) -> str:
 
 
 def _model_section(model: type[BaseModel], paths: list[str]) -> list[str]:
-    title = ", ".join(f"`{p}`" for p in paths) if paths != [""] else "Top level"
-    out = [f"## {title}", ""]
+    title = ", ".join(f"`{p}`" for p in paths) if paths != [""] else "the top level"
+    out = [f'<a id="{_anchor(model)}"></a>', "", f"## {model.__name__}: {title}", ""]
     if _doc(model):
         out += [_doc(model), ""]
     out += [_row(["field", "unit", "type", "default", "allowed", "description"]),
             "|---|---|---|---|---|---|"]
     for name, info in model.model_fields.items():
-        out.append(_row([f"`{name}`", unit_of(name, info), _type_name(info.annotation),
+        words = type_words(info.annotation, constraints=list(info.metadata))
+        out.append(_row([f"`{name}`", unit_of(name, info), words,
                          _default(info), _allowed(info), info.description or ""]))
     return out + [""]
 
