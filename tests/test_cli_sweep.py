@@ -216,3 +216,38 @@ def test_the_readme_sweep_command_plans():
         sc = load(words[0]) if words[0] in bundled() else short_bo_cv()  # my.toml: yours
         c = sweep_module.plan_campaign(sc, params, runs=2)
         assert len(c.points) >= 2
+
+
+def test_a_pickled_block_is_refused_unread_and_fresh_recomputes_it(tmp_path):
+    """A campaign directory someone else wrote, one of whose blocks is a pickle (as trackkit
+    wrote them before) that would create a marker file when read: the resumed command stops,
+    naming the file, and the marker is never created; --fresh computes the same files."""
+    import json
+    import pickle
+    import zlib
+
+    from .eval.test_checkpoint import _Plant
+
+    scenario = short_bo_cv_toml(tmp_path / "bo.toml")
+    out, marker = tmp_path / "camp", tmp_path / "ran-code"
+    args = ["sweep", str(scenario), "--param", "sensor.sigma_deg=1,2", "--runs", "2",
+            "--block", "2", "--out", str(out)]
+    assert _invoke(args).exit_code == 0
+    first = deterministic_files(out)
+    point = sorted((out / "points").iterdir())[0]
+    (point / "result.json").unlink()
+    block = point / "block-000000.tkb"
+    key = json.loads(block.read_bytes().split(b"\n")[1])["key"]
+    header = json.dumps({"key": key, "block": 0, "runs": 2}).encode() + b"\n"
+    block.write_bytes(b"trackkit-block 1\n" + header
+                      + zlib.compress(pickle.dumps({"x": _Plant(marker)})))
+    res = _invoke(args)
+    text = " ".join(res.output.split())
+    assert res.exit_code == 1, res.output
+    for words in (f"{point.name}/block-000000.tkb", "older trackkit", "cannot be read safely",
+                  "--fresh"):
+        assert words in text.replace(" /", "/"), res.output
+    assert not marker.exists()
+    res = _invoke([*args, "--fresh"])
+    assert res.exit_code == 0, res.output
+    assert deterministic_files(out) == first and not marker.exists()

@@ -860,6 +860,14 @@ def network(
     remote_python: Annotated[str, typer.Option(
         "--remote-python", help="The Python with trackkit installed on the --launch "
         "machines.")] = "python3",
+    curve: Annotated[bool | None, typer.Option(
+        "--curve/--no-curve", help="Authenticate and encrypt the agents' connections with "
+        "ZeroMQ's CURVE, refusing and counting any other peer (with --agents processes).",
+        show_default="on when --host is not a loopback address")] = None,
+    keys: Annotated[Path | None, typer.Option(
+        "--keys", help="Directory of CURVE certificates (server.key_secret, and "
+        "client.key_secret or agent-N.key_secret) instead of keys made for the run; "
+        "implies --curve.")] = None,
 ) -> None:
     """Run a network scenario (seed 004: agents with bearing sensors that track targets
     together): Monte Carlo runs of the agents beside the centralised reference and the
@@ -890,14 +898,22 @@ def network(
         outages = _outages(kill or [], len(sc.agents), sc.network.duration_s)
         launchers = _launchers(launch or [], len(sc.agents))
         if agents != AgentsMode.processes and (delay != 0.0 or outages or launchers
-                                               or host != "127.0.0.1" or advertise):
-            raise ValueError("--delay, --kill, --host, --advertise and --launch act on "
-                             "agents in their own processes; expected --agents processes "
-                             "with them")
+                                               or host != "127.0.0.1" or advertise
+                                               or curve is not None or keys is not None):
+            raise ValueError("--delay, --kill, --host, --advertise, --launch, --curve and "
+                             "--keys act on agents in their own processes; expected "
+                             "--agents processes with them")
         if loss is not None:
             check_loss(loss, "--loss")
         if not (math.isfinite(delay) and delay >= 0.0):
             raise ValueError(f"--delay {delay!r}; expected simulated seconds >= 0")
+        if curve is False and agents == AgentsMode.processes:
+            from trackkit.network.processes import is_loopback
+
+            if not is_loopback(host):
+                _stderr().print(Text(f"note: --no-curve with --host {host}: any machine that "
+                                     "reaches it can connect and feed the agents bearings or "
+                                     "tracks", style="yellow"), soft_wrap=True)
         name = f"{sc.name}-straight" if straight else str(sc.name)
         target, label = _output_dir(out, name)
         with OutputDir(target, label) as where:
@@ -908,7 +924,8 @@ def network(
                          steering=False if straight else None, agents=str(agents.value),
                          compare_straight=compare_straight, loss=loss, delay=delay,
                          outages=outages, host=host, advertise=advertise,
-                         launch=launchers or None, remote_python=remote_python)
+                         launch=launchers or None, remote_python=remote_python,
+                         curve=curve, keys=keys)
             state.interrupted = "interrupted"
 
 
@@ -1026,6 +1043,9 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
             f"{o['restart_at_s']} s: held its tracks again after "
             + (f"{min(back):.0f}-{max(back):.0f} s" if back else "never")
             + f" ({len(back)} of {len(o['recovered_after_s'])} runs)"), soft_wrap=True)
+    if doc["channel"].get("curve"):
+        console.print(Text(f"CURVE: agents authenticated and encrypted; "
+                           f"{doc['channel']['peers_refused']} peers refused"))
     c = doc.get("courses")
     if c is not None:
         console.print(Text(

@@ -139,6 +139,7 @@ def test_agents_started_by_a_launcher_dial_the_advertised_address():
         np.testing.assert_array_equal(x.mean, y.mean)
         np.testing.assert_array_equal(x.offsets, y.offsets)
     assert got.endpoint.startswith("tcp://0.0.0.0:")
+    assert (got.curve, got.refused) == (True, 0)  # off loopback: CURVE, keys made for the run
     assert _agent_children() == []
     with pytest.raises(ValueError, match="advertise"):
         run_network_processes(*args, host="0.0.0.0", launch={0: ["env"]}, **kw)

@@ -6,7 +6,7 @@ Layout of a campaign directory (``CampaignStore``)::
     campaign.json               what the stored blocks were computed from (``identity``)
     scenario.toml               the base scenario, resolved (for the record)
     points/<id>/point.json      the point's swept values, its seed and its key
-    points/<id>/block-000003.tkb  block 3 of the point (header line + zlib(cloudpickle))
+    points/<id>/block-000003.tkb  block 3 of the point (header line + .npz of its arrays)
     points/<id>/result.json     the point's combined result, once all its blocks are stored
     points/<id>/timings.json    its filters' wall-clock time per run-step (not deterministic)
 
@@ -21,7 +21,12 @@ versions). A store opened with another identity refuses, naming what changed, un
 start afresh. A point is identified by its swept values alone, so adding points (values, or
 design points) to a campaign reuses every point already computed.
 
-The block files are pickles: open only campaign directories you (or your cluster) wrote.
+A block file is a line naming the format, a line of JSON (the block's point key, index, runs
+and the structure of its value) and an ``.npz`` archive of its arrays
+(``trackkit.eval.safestore``): reading it builds numbers, strings, containers, arrays and
+trackkit's block types only, and runs no code of the file's, so a campaign directory from
+someone else is safe to open. Block files of older trackkit versions were pickles, which
+can run code when read; they are refused, never opened.
 """
 
 from __future__ import annotations
@@ -33,11 +38,12 @@ import re
 import shutil
 import sys
 import uuid
-import zlib
 from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
+
+from trackkit.eval import safestore
 
 __all__ = ["CampaignStore", "CampaignMismatch", "CheckpointError", "atomic_write",
            "code_version", "MANIFEST", "POINTS_DIR", "STORE_FORMAT"]
@@ -49,8 +55,10 @@ POINT_JSON = "point.json"
 RESULT_JSON = "result.json"
 TIMINGS_JSON = "timings.json"
 #: the store's own format; a change refuses older directories like a code change
-STORE_FORMAT = 1
-_MAGIC = b"trackkit-block 1\n"
+STORE_FORMAT = 2
+_MAGIC = b"trackkit-block 2\n"
+#: the block files of store format 1: pickles, which can run code when read
+_PICKLED = b"trackkit-block 1\n"
 _BLOCK = re.compile(r"block-(\d{6,})\.tkb")
 _TMP = re.compile(r"\..+\.tmp-[0-9a-f]{12}")
 #: the parts of the package whose code changes a block's numbers are hashed; these are not
@@ -60,6 +68,17 @@ _UNHASHED = ("report", "io", "identify", "network", "cli.py")
 _NAMES = {"format": "store format", "scenario": "scenario", "parameters": "swept parameters",
           "seed": "campaign seed (--seed)", "runs": "runs per point (--runs)",
           "block": "block size (--block)", "code": "code version"}
+
+
+@lru_cache(maxsize=1)
+def _block_types() -> tuple[type, ...]:
+    """The classes a block file may hold (``trackkit.eval.montecarlo.BlockResult`` and what it
+    is made of); a block file naming any other is refused."""
+    from trackkit.eval.metrics import MonteCarloMetrics
+    from trackkit.eval.montecarlo import BearingError, BlockResult, CourseError, SpeedError
+    from trackkit.eval.results import Example
+
+    return (BlockResult, MonteCarloMetrics, Example, SpeedError, CourseError, BearingError)
 
 
 class CampaignMismatch(ValueError):
@@ -187,6 +206,13 @@ class CampaignStore:
                     f"{self.label}: {manifest.name} cannot be read ({err}); it does not "
                     "describe the stored blocks, so they cannot be trusted: re-run with "
                     "--fresh to discard them, or choose another --out") from None
+            if stored.get("format", 1) == 1 and (self.points.is_dir() and
+                                                 any(self.points.iterdir())):
+                raise CampaignMismatch(
+                    f"{manifest}: written by an older trackkit, whose block files are pickles "
+                    "(which can run code when read); they cannot be read safely and were not "
+                    "opened. Re-run with --fresh to discard them and compute the campaign "
+                    "again, or choose another --out")
             changed = _differences(stored, identity)
             if changed:
                 raise CampaignMismatch(
@@ -256,28 +282,31 @@ class CampaignStore:
 
     def save_block(self, pid: str, key: str, block: int, runs: int, result: Any) -> Path:
         """Store block ``block`` (of ``runs`` runs) of point ``pid`` (whose key is ``key``)."""
-        import cloudpickle  # a dask.distributed dependency: pickles the metrics' closures
-
-        header = json.dumps({"key": key, "block": block, "runs": runs}).encode() + b"\n"
-        body = zlib.compress(cloudpickle.dumps(result, protocol=5), 6)
-        return atomic_write(self._block_path(pid, block), _MAGIC + header + body)
+        structure, arrays = safestore.dumps(result, _block_types())
+        header = json.dumps({"key": key, "block": block, "runs": runs}) + "\n" + structure
+        return atomic_write(self._block_path(pid, block),
+                            _MAGIC + header.encode() + b"\n" + arrays)
 
     def load_block(self, pid: str, key: str, block: int) -> Any:
         """Block ``block`` of point ``pid``, checked to be that block of that point."""
-        import pickle
-
         p = self._block_path(pid, block)
         hint = "delete it and re-run the same command to compute that block again"
         try:
             raw = p.read_bytes()
         except OSError as err:
             raise CheckpointError(f"{p}: cannot be read ({err.strerror or err})") from None
+        if raw.startswith(_PICKLED):
+            raise CheckpointError(
+                f"{p}: written by an older trackkit, whose block files are pickles (which can "
+                "run code when read); it cannot be read safely and was not opened. Re-run "
+                "with --fresh to discard the stored blocks and compute them again")
         if not raw.startswith(_MAGIC):
             raise CheckpointError(f"{p}: not a trackkit block file; {hint}")
-        head, _, body = raw[len(_MAGIC):].partition(b"\n")
+        head, _, rest = raw[len(_MAGIC):].partition(b"\n")
+        structure, _, arrays = rest.partition(b"\n")
         try:
             header = json.loads(head)
-            result = pickle.loads(zlib.decompress(body))
+            result = safestore.loads(structure, arrays, _block_types())
         except Exception as err:  # noqa: BLE001 - any damage reads as one message
             raise CheckpointError(f"{p}: damaged ({type(err).__name__}: {err}); {hint}") from None
         if header.get("key") != key or header.get("block") != block:

@@ -67,22 +67,33 @@ def plan_of(scenario: Scenario) -> Plan:
 # --- error groups -------------------------------------------------------------------------
 
 
-def _speed_error(dim: int):
-    def err(truth: Array, mean: Array) -> Array:
+class SpeedError:
+    """Error of the speed ``|v_true| - |v_est|`` (m/s), the velocity at state ``dim``,
+    ``dim + 1``. A class, not a closure, so that a stored block holds data only."""
+
+    def __init__(self, dim: int) -> None:
+        self.dim = dim
+
+    def __call__(self, truth: Array, mean: Array) -> Array:
+        dim = self.dim
         # |v| as np.linalg.norm computes it (sqrt of the sum of squares), without its
         # reduction over a length-2 axis
         vt = np.sqrt(truth[..., dim] * truth[..., dim] + truth[..., dim + 1] * truth[..., dim + 1])
         ve = np.sqrt(mean[..., dim] * mean[..., dim] + mean[..., dim + 1] * mean[..., dim + 1])
         return (vt - ve)[..., None]
-    return err
 
 
-def _course_error(dim: int):
-    def err(truth: Array, mean: Array) -> Array:
+class CourseError:
+    """Error of the course ``atan2(vx, vy)`` (rad, wrapped), the velocity at state ``dim``."""
+
+    def __init__(self, dim: int) -> None:
+        self.dim = dim
+
+    def __call__(self, truth: Array, mean: Array) -> Array:
+        dim = self.dim
         ct = np.arctan2(truth[..., dim], truth[..., dim + 1])
         ce = np.arctan2(mean[..., dim], mean[..., dim + 1])
         return wrap(ct - ce)[..., None]
-    return err
 
 
 class BearingError:
@@ -106,7 +117,7 @@ def groups_for(plan: Plan) -> dict:
         "position": list(range(d)), "velocity": list(range(d, 2 * d)),
         "x": [0], "y": [1], "z": [2], "vx": [d], "vy": [d + 1], "vz": [2 * d - 1],
         "x1": [0], "x2": [1], "x3": [2], "frequency": [2 * d],
-        "speed": _speed_error(d), "course": _course_error(d), "bearing": BearingError(),
+        "speed": SpeedError(d), "course": CourseError(d), "bearing": BearingError(),
     }
     out = {}
     for g in plan.scenario.report.groups:

@@ -50,6 +50,7 @@ from __future__ import annotations
 import time as _time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -229,7 +230,8 @@ class NetworkMonteCarlo:
     the time from the restart until the agent held its tracks again (``--agents
     processes`` with outages; nan if never; K = 0 otherwise); ``seconds (R,)`` (network run) and
     ``wall (R,)`` (run, scores and bound); the channel: ``loss`` (probability), ``delay``
-    (s) and ``outages``.
+    (s) and ``outages``; ``curve`` (agents authenticated and encrypted with CURVE) and
+    ``refused (R,)`` (peers CURVE refused per run; zeros without CURVE).
     """
 
     name: str
@@ -266,6 +268,8 @@ class NetworkMonteCarlo:
     loss: float = 0.0
     delay: float = 0.0
     outages: tuple[tuple[int, float, float | None], ...] = ()
+    curve: bool = False
+    refused: NDArray[np.int64] | None = None
     example: NetworkResult | None = field(default=None, repr=False)
     example_targets: Array | None = field(default=None, repr=False)
 
@@ -345,6 +349,8 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                    advertise: str | None = None,
                    launch: dict[int, Sequence[str]] | None = None,
                    remote_python: str = "python3",
+                   curve: bool | None = None,
+                   keys: str | Path | None = None,
                    ) -> NetworkMonteCarlo:
     """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
     ``runs``, ``seed``, ``steering`` and ``loss`` override the file's; ``progress(done,
@@ -355,7 +361,8 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     which also takes ``delay`` (the channel's delivery delay, simulated s), ``outages``
     (``(agent, kill_at, restart_at or None)``, 0-based agent), ``host`` (the address the
     environment binds), ``advertise``, ``launch`` and ``remote_python`` (agents on other
-    machines: ``run_network_processes``)."""
+    machines: ``run_network_processes``), ``curve`` and ``keys`` (CURVE: on by default off
+    loopback; ``run_network_processes``)."""
     from dataclasses import replace
 
     from trackkit.network.agents import AgentSettings
@@ -363,7 +370,8 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     extra: dict = {}
     if agents == "inprocess":
         runner = run_network
-        if delay != 0.0 or outages or host != "127.0.0.1" or advertise or launch:
+        if (delay != 0.0 or outages or host != "127.0.0.1" or advertise or launch or curve
+                or keys is not None):
             raise ValueError(f"delay = {delay!r}, outages = {list(outages)!r}, host = "
                              f"{host!r}, advertise = {advertise!r}, launch = {launch!r}: a "
                              "channel delay, killing agents, addresses and launchers need "
@@ -373,7 +381,8 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
 
         runner = run_network_processes
         extra = {"delay": delay, "outages": tuple(outages), "host": host,
-                 "advertise": advertise, "launch": launch, "remote_python": remote_python}
+                 "advertise": advertise, "launch": launch, "remote_python": remote_python,
+                 "curve": curve, "keys": keys}
     else:
         raise ValueError(f"agents = {agents!r}; expected 'inprocess' or 'processes'")
 
@@ -395,6 +404,8 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     per_run: list[RunScores] = []
     wall: list[float] = []
     recovered: list[list[float]] = []
+    refused: list[int] = []
+    secured = False
     example = example_targets = None
     for r in range(runs):
         t0 = _time.perf_counter()
@@ -405,6 +416,8 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                      steering=steer, central=scenario.run.central, loss=p_loss, **extra)
         per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m))
         recovered.append(list(getattr(res, "recovered", [])))
+        refused.append(getattr(res, "refused", 0))
+        secured = getattr(res, "curve", False)
         wall.append(_time.perf_counter() - t0)
         if r == 0 and keep_example:
             example, example_targets = res, targets
@@ -440,7 +453,8 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
         late=np.array([s.late for s in per_run], np.int64),
         recovered=np.array(recovered, float).reshape(runs, len(outages)),
         seconds=np.array([s.seconds for s in per_run]), wall=np.array(wall),
-        loss=p_loss, delay=float(delay), outages=tuple(outages),
+        loss=p_loss, delay=float(delay), outages=tuple(outages), curve=secured,
+        refused=np.array(refused, np.int64),
         example=example, example_targets=example_targets,
     )
 

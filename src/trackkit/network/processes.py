@@ -61,6 +61,18 @@ and messages to it are lost. At ``restart_at`` a new process starts with an empt
 initiation stream ``SeedSequence(seed, spawn_key=(run, 3, a, k))`` for its k-th restart) and
 rebuilds its tracks from its own bearings and its neighbours' messages.
 
+**CURVE.** Whenever the environment listens on an address other than loopback (and on
+loopback when asked, ``curve=True``), the ROUTER is a ZeroMQ CURVE server: every connection is
+encrypted and authenticated (Hintjens 2013, ZeroMQ RFC 26 CurveZMQ, RFC 27 ZAP). A ZAP handler
+in the environment admits only the public keys of the run's agents; any other peer (another
+key, or no CURVE) fails its handshake before a message of it reaches the environment, and is
+counted (``ProcessNetworkResult.refused``). The keys are made afresh for every run
+(``zmq.curve_keypair``: the environment's keypair and one per agent) or read from a
+directory of certificates (``keys``: ``server.key_secret`` and ``client.key_secret`` or
+``agent-N.key_secret`` for agent N from 1, as ``zmq.auth.create_certificates`` writes them).
+An agent gets its keys as one JSON line on its standard input (through a ``launch`` prefix
+such as ``ssh`` too), never on its command line, which ``ps`` shows to every user.
+
 **Shutdown.** On success, on error and on KeyboardInterrupt: ``stop`` to every live agent,
 then ``join`` with a timeout, ``terminate``, ``kill``; sockets closed with linger 0 and the
 context terminated. Agents ignore SIGINT (the environment decides when they end) and exit by
@@ -71,6 +83,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import ipaddress
 import json
 import math
 import os
@@ -78,9 +91,11 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time as _time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -111,9 +126,9 @@ from trackkit.network.steering import Steering
 from trackkit.network.tracks import Message
 from trackkit.sim.network import bearings_at, disk_graph
 
-__all__ = ["PROTOCOL_VERSION", "AgentError", "ProcessNetworkResult", "decode",
-           "decode_payload", "encode", "run_network_processes", "settings_from_dict",
-           "settings_to_dict"]
+__all__ = ["PROTOCOL_VERSION", "AgentError", "CurveKeys", "ProcessNetworkResult", "decode",
+           "decode_payload", "encode", "is_loopback", "run_network_processes",
+           "settings_from_dict", "settings_to_dict"]
 
 Array = NDArray[np.float64]
 
@@ -122,6 +137,10 @@ PROTOCOL_VERSION = 1
 
 #: listening addresses that mean "every interface" (an agent cannot dial them)
 _WILDCARD = ("0.0.0.0", "*", "::")
+
+#: the monitor events of a peer whose handshake failed: the peers CURVE refused
+_REFUSED = (zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL
+            | zmq.EVENT_HANDSHAKE_FAILED_AUTH)
 
 
 class AgentError(RuntimeError):
@@ -133,11 +152,14 @@ class ProcessNetworkResult(NetworkResult):
     as attributes: ``endpoint`` (the ROUTER's address, now closed), ``restarts`` (processes
     started after a kill), ``recovered`` (per outage: the simulated time after the restart
     when the agent first held as many confirmed tracks as before the kill, nan if
-    never)."""
+    never), ``curve`` (whether the agents were authenticated and encrypted with CURVE) and
+    ``refused`` (peers whose connection CURVE refused)."""
 
     endpoint: str
     restarts: int
     recovered: list[float]
+    curve: bool
+    refused: int
 
 
 # --------------------------------------------------------------------------------------------
@@ -209,10 +231,12 @@ def settings_from_dict(d: dict[str, Any]) -> AgentSettings:
 
 
 def _agent_main(endpoint: str, index: int, incarnation: int, settings: AgentSettings,
-                entropy: int, spawn_key: tuple[int, ...], idle_timeout_s: float) -> None:
+                entropy: int, spawn_key: tuple[int, ...], idle_timeout_s: float,
+                curve: dict[str, str] | None = None) -> None:
     """An agent process: connect, say hello, answer ``step`` and ``stop`` (module
     docstring). Exits on ``stop``, when its parent process is gone, or when nothing arrives
-    for ``idle_timeout_s``."""
+    for ``idle_timeout_s``. ``curve``: the keys (``CurveKeys.for_agent``) of a CURVE
+    connection."""
     # the environment owns our lifetime (a Ctrl-C is its to handle, and it stops us)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent = os.getppid()
@@ -222,6 +246,10 @@ def _agent_main(endpoint: str, index: int, incarnation: int, settings: AgentSett
     sock = ctx.socket(zmq.DEALER)
     sock.setsockopt(zmq.LINGER, 0)
     sock.setsockopt(zmq.IDENTITY, f"agent-{index}-{incarnation}".encode())
+    if curve is not None:
+        sock.setsockopt(zmq.CURVE_SERVERKEY, curve["server"].encode())
+        sock.setsockopt(zmq.CURVE_PUBLICKEY, curve["public"].encode())
+        sock.setsockopt(zmq.CURVE_SECRETKEY, curve["secret"].encode())
     try:
         sock.connect(endpoint)
         sock.send(encode("hello", index, -math.inf))
@@ -280,6 +308,123 @@ def _agent_step(agent: Agent, d: dict[str, Any]) -> bytes:
 
 
 # --------------------------------------------------------------------------------------------
+# CURVE: who may connect
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` is a loopback address ("localhost", 127.0.0.0/8, ::1), which only
+    this machine can reach."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+@dataclass(frozen=True)
+class CurveKeys:
+    """A run's CURVE keys, Z85 text as ZeroMQ takes them: the environment's keypair and each
+    agent's (index from 0)."""
+
+    server_public: bytes
+    server_secret: bytes
+    agents: tuple[tuple[bytes, bytes], ...]  # (public, secret) per agent
+
+    @classmethod
+    def generate(cls, n_agents: int) -> CurveKeys:
+        """Fresh keys for one run."""
+        pub, sec = zmq.curve_keypair()
+        return cls(pub, sec, tuple(zmq.curve_keypair() for _ in range(n_agents)))
+
+    @classmethod
+    def from_dir(cls, path: str | Path, n_agents: int) -> CurveKeys:
+        """The certificates in directory ``path`` (module docstring): ``server.key_secret``
+        for the environment, ``agent-N.key_secret`` for agent N (from 1) or else
+        ``client.key_secret`` for every agent."""
+        d = Path(path)
+        if not d.is_dir():
+            raise ValueError(f"keys = {str(d)!r}: not a directory; expected one holding "
+                             "server.key_secret and client.key_secret (or agent-N.key_secret)"
+                             " as zmq.auth.create_certificates writes them")
+        server = _certificate(d / "server.key_secret")
+        own = [d / f"agent-{a + 1}.key_secret" for a in range(n_agents)]
+        shared = d / "client.key_secret"
+        return cls(*server, tuple(_certificate(f if f.exists() else shared) for f in own))
+
+    def for_agent(self, a: int) -> bytes:
+        """What agent ``a`` reads on its standard input: one JSON line of its keys."""
+        pub, sec = self.agents[a]
+        return json.dumps({"server": self.server_public.decode(), "public": pub.decode(),
+                           "secret": sec.decode()}).encode() + b"\n"
+
+
+def _certificate(path: Path) -> tuple[bytes, bytes]:
+    """(public, secret) key of a secret certificate file of ``zmq.auth``."""
+    import zmq.auth
+
+    try:
+        pub, sec = zmq.auth.load_certificate(path)
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: cannot be read as a secret certificate ({err}); expected "
+                         "a file zmq.auth.create_certificates writes (NAME.key_secret)") from None
+    if not sec:
+        raise ValueError(f"{path}: holds no secret key; expected the NAME.key_secret file "
+                         "zmq.auth.create_certificates writes, not NAME.key")
+    return pub, sec
+
+
+class _Gatekeeper:
+    """Who may talk to the environment's CURVE ROUTER: a ZAP handler (ZeroMQ RFC 27) that
+    admits the run's agents' public keys alone, and a monitor of the socket that counts every
+    peer whose handshake failed (another key, or no CURVE at all). Both in one thread that
+    blocks in a poll, woken every 0.1 s to see whether it should stop."""
+
+    def __init__(self, ctx: zmq.Context, sock: zmq.Socket, allowed: Sequence[bytes]) -> None:
+        from zmq.utils import z85
+
+        self.allowed = {z85.decode(k) for k in allowed}
+        self.refused = 0
+        self.zap = ctx.socket(zmq.REP)
+        self.zap.setsockopt(zmq.LINGER, 0)
+        self.zap.bind("inproc://zeromq.zap.01")  # where libzmq asks (RFC 27)
+        self.monitor = sock.get_monitor_socket(_REFUSED)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="trackkit-zap", daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        poller = zmq.Poller()
+        poller.register(self.zap, zmq.POLLIN)
+        poller.register(self.monitor, zmq.POLLIN)
+        while not self._stop.is_set():
+            ready = dict(poller.poll(100))
+            if self.zap in ready:
+                self._answer(self.zap.recv_multipart())
+            if self.monitor in ready:
+                self._count()
+        self._count()
+
+    def _answer(self, req: list[bytes]) -> None:
+        # version, request id, domain, address, identity, mechanism, credentials...
+        ok = len(req) >= 7 and req[5] == b"CURVE" and req[6] in self.allowed
+        self.zap.send_multipart([b"1.0", req[1] if len(req) > 1 else b"",
+                                 b"200" if ok else b"400",
+                                 b"OK" if ok else b"not a key of this run", b"", b""])
+
+    def _count(self) -> None:
+        while self.monitor.poll(0):
+            self.monitor.recv_multipart()  # only the refusals are monitored
+            self.refused += 1
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.monitor.close(0)
+        self.zap.close(0)
+
+
+# --------------------------------------------------------------------------------------------
 # the environment
 
 
@@ -316,18 +461,26 @@ class _Environment:
     def __init__(self, host: str, port: int, timeout_s: float, start_timeout_s: float,
                  idle_timeout_s: float, advertise: str | None = None,
                  launch: dict[int, list[str]] | None = None,
-                 remote_python: str = "python3") -> None:
+                 remote_python: str = "python3", keys: CurveKeys | None = None) -> None:
         self.ctx = zmq.Context()
         self.sock = self.ctx.socket(zmq.ROUTER)
         self.sock.setsockopt(zmq.LINGER, 0)
         # a message to an identity that is not connected is an error, not a silent drop
         self.sock.setsockopt(zmq.ROUTER_MANDATORY, 1)
+        self.keys, self.gate = keys, None
+        if keys is not None:  # before the bind: no peer ever meets an open socket
+            self.sock.setsockopt(zmq.CURVE_SERVER, 1)
+            self.sock.setsockopt(zmq.CURVE_SECRETKEY, keys.server_secret)
+            self.sock.setsockopt(zmq.ZAP_DOMAIN, b"trackkit")
+            self.gate = _Gatekeeper(self.ctx, self.sock, [p for p, _ in keys.agents])
         try:
             if port == 0:
                 port = self.sock.bind_to_random_port(f"tcp://{host}")
             else:
                 self.sock.bind(f"tcp://{host}:{port}")
         except zmq.ZMQError as err:
+            if self.gate is not None:
+                self.gate.close()
             self.sock.close(0)
             self.ctx.destroy(0)
             raise ValueError(f"host = {host!r}, port = {port!r}: cannot listen there "
@@ -361,10 +514,15 @@ class _Environment:
                    "--seed", str(seed), "--key", ",".join(str(int(v)) for v in key),
                    "--idle-timeout", repr(float(self.idle_timeout_s)),
                    "--settings", json.dumps(settings_to_dict(s))]
+            if self.keys is not None:
+                cmd.append("--curve")  # the keys follow on its standard input
             err = tempfile.TemporaryFile()
             # its own session: a Ctrl-C in the terminal reaches the environment only
-            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL if self.keys is None else
+                                    subprocess.PIPE, stdout=subprocess.DEVNULL,
                                     stderr=err, start_new_session=True)
+            if self.keys is not None:
+                _hand_keys(proc, self.keys.for_agent(a))
             self.links[a] = _Link(a, ident, proc, err)
             waiting[ident] = a
         deadline = _time.monotonic() + self.start_timeout_s
@@ -440,8 +598,30 @@ class _Environment:
                 link.stderr.close()
             self.links.clear()
         finally:
+            if self.gate is not None:
+                self.gate.close()
             self.sock.close(0)
             self.ctx.destroy(0)
+
+    @property
+    def refused(self) -> int:
+        """Peers CURVE refused so far (0 without CURVE)."""
+        return 0 if self.gate is None else self.gate.refused
+
+
+def _hand_keys(proc: subprocess.Popen, line: bytes) -> None:
+    """Write an agent's keys to its standard input and close it (a process that died at
+    once is noticed while waiting for its ``hello``)."""
+    try:
+        proc.stdin.write(line)
+        proc.stdin.flush()
+    except OSError:
+        pass
+    finally:
+        try:
+            proc.stdin.close()
+        except OSError:
+            pass
 
 
 def run_network_processes(
@@ -473,6 +653,8 @@ def run_network_processes(
     start_timeout_s: float = 120.0,
     idle_timeout_s: float = 300.0,
     on_event: Callable[[float], None] | None = None,
+    curve: bool | None = None,
+    keys: str | Path | None = None,
 ) -> ProcessNetworkResult:
     """Run ``run`` of a network with every agent in its own process (module docstring).
 
@@ -499,6 +681,10 @@ def run_network_processes(
             that hears nothing that long exits by itself.
         on_event: called with the simulated time after every execution (progress; an
             exception it raises ends the run, cleanly).
+        curve: authenticate and encrypt the agents with CURVE (module docstring); None: on
+            whenever ``host`` is not a loopback address. The results are the same bits.
+        keys: a directory of CURVE certificates (module docstring) instead of keys made
+            for the run; implies ``curve``.
     """
     check_loss(loss)
     if not (math.isfinite(delay) and delay >= 0):
@@ -548,7 +734,7 @@ def run_network_processes(
         raise ValueError(f"host = {host!r} with agents launched elsewhere; expected "
                          "advertise = this machine's address as the agents see it")
     env = _Environment(host, port, timeout_s, start_timeout_s, idle_timeout_s, advertise,
-                       launch, remote_python)
+                       launch, remote_python, _curve_keys(curve, keys, host, A))
     try:
         env.start(range(A), w.settings, seed, [(run, 3, a) for a in range(A)])
         for a, e in w.order:
@@ -635,8 +821,26 @@ def run_network_processes(
     out = ProcessNetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered,
                                lost, seconds, fusion, spacing.span, late)
     out.endpoint, out.restarts = env.endpoint, restarts
+    out.curve, out.refused = env.keys is not None, env.refused
     out.recovered = [recovered[a] for a in sorted(kills)]
     return out
+
+
+def _curve_keys(curve: bool | None, keys: str | Path | None, host: str,
+                n_agents: int) -> CurveKeys | None:
+    """The run's CURVE keys, or None without CURVE (``run_network_processes``)."""
+    if keys is not None and curve is False:
+        raise ValueError(f"keys = {str(keys)!r} with curve = False; expected CURVE on (the "
+                         "keys are CURVE certificates) or no keys")
+    if not (curve or keys is not None or (curve is None and not is_loopback(host))):
+        return None
+    if not zmq.has("curve"):
+        raise ValueError(f"CURVE is needed (host = {host!r}, curve = {curve!r}) but this "
+                         f"ZeroMQ (libzmq {zmq.zmq_version()}) was built without it; expected "
+                         "a pyzmq wheel (they bundle libzmq with CURVE)")
+    if keys is not None:
+        return CurveKeys.from_dir(keys, n_agents)
+    return CurveKeys.generate(n_agents)
 
 
 def _main(argv: Sequence[str] | None = None) -> int:
@@ -652,13 +856,17 @@ def _main(argv: Sequence[str] | None = None) -> int:
     ag.add_argument("--key", required=True, help="the SeedSequence spawn key, e.g. 0,3,1")
     ag.add_argument("--idle-timeout", type=float, default=300.0)
     ag.add_argument("--settings", default="{}", help="AgentSettings as JSON")
+    ag.add_argument("--curve", action="store_true",
+                    help="connect with CURVE; the keys are one JSON line on standard input")
     ns = ap.parse_args(argv)
     if ns.command != "agent":
         print(__doc__)
         return 0
     key = tuple(int(v) for v in ns.key.split(","))
+    curve = json.loads(sys.stdin.readline()) if ns.curve else None
     _agent_main(ns.endpoint, ns.index, ns.incarnation,
-                settings_from_dict(json.loads(ns.settings)), ns.seed, key, ns.idle_timeout)
+                settings_from_dict(json.loads(ns.settings)), ns.seed, key, ns.idle_timeout,
+                curve)
     return 0
 
 
