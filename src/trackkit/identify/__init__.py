@@ -12,6 +12,7 @@ coefficients of ``trackkit.models.vessel`` from sea-trial data.
 
 from trackkit.identify.augmented import (
     DEFAULT_Q_BODY,
+    DEFAULT_SUBSTEPS,
     METHODS,
     Identification,
     SampledVessel,
@@ -38,6 +39,7 @@ __all__ = [
     "DEFAULT_NOISE",
     "DEFAULT_PROGRAMME",
     "DEFAULT_Q_BODY",
+    "DEFAULT_SUBSTEPS",
     "METHODS",
     "EQUATIONS",
     "Identification",

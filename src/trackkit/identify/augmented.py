@@ -82,6 +82,7 @@ __all__ = [
     "Identification",
     "SampledVessel",
     "DEFAULT_Q_BODY",
+    "DEFAULT_SUBSTEPS",
     "identify",
     "initial_guess",
     "relative_error",
@@ -91,7 +92,9 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-DEFAULT_Q_BODY = np.array([3e-4, 3e-4, 3e-6])
+DEFAULT_Q_BODY = np.array([2e-5, 2e-5, 2e-7])
+#: Euler sub-steps per sample of the prediction (h = 0.02 s at T = 1 s; the module docstring)
+DEFAULT_SUBSTEPS = 50
 _FILTERS = {"ekf": tk.filters.EKF, "ukf": tk.filters.UKF, "ckf": tk.filters.CKF,
             "srckf": tk.filters.SRCKF}
 #: the identifiers by name: the filters on the augmented state and batch least squares
@@ -124,7 +127,9 @@ class SampledVessel(MotionModel):
     """The augmented model over one sample period ``dt`` in ``substeps = m`` forward-Euler
     steps of ``h = dt / m``, the input interpolated linearly between the samples
     ``s_prev`` and ``s_next`` (each ``(..., 2)``): sub-step j uses the mean of the
-    interpolated input at its ends, ``s_j = s_prev + (j + 1/2) / m (s_next - s_prev)``::
+    interpolated input at its ends, ``s_j = s_prev + (j + 1/2) / m (s_next - s_prev)``; or,
+    given ``s_sub (m + 1, ..., 2)``, the inputs measured at the sub-steps' ends,
+    ``s_j = (s_sub[j] + s_sub[j + 1]) / 2``::
 
         x_{j+1} = x_j + h f(x_j, s_j, theta),   j = 0 .. m - 1;   theta unchanged
 
@@ -140,6 +145,7 @@ class SampledVessel(MotionModel):
     q_body: ArrayLike = 0.0
     q_theta: ArrayLike = 0.0
     substeps: int = 1
+    s_sub: ArrayLike | None = None
     dim_x: int = field(default=3 + N_THETA, init=False)
 
     def __post_init__(self) -> None:
@@ -148,10 +154,18 @@ class SampledVessel(MotionModel):
                              "integer >= 1")
         s0, s1 = np.asarray(self.s_prev, dtype=float), np.asarray(self.s_next, dtype=float)
         m = int(self.substeps)
+        if self.s_sub is not None and m > 1:  # measured inputs at the sub-steps' ends
+            sf = np.asarray(self.s_sub, dtype=float)
+            if sf.ndim < 2 or sf.shape[0] != m + 1:
+                raise ValueError(f"SampledVessel.s_sub has shape {sf.shape}; expected "
+                                 f"({m + 1}, ..., 2), the inputs at the sub-steps' ends")
+            inputs = [0.5 * (sf[j] + sf[j + 1]) for j in range(m)]
+        else:
+            inputs = [s0 + ((j + 0.5) / m) * (s1 - s0) if m > 1 else 0.5 * (s0 + s1)
+                      for j in range(m)]
         # the models of the sub-steps (they check s, norm and the densities)
-        subs = tuple(AugmentedVessel(s0 + ((j + 0.5) / m) * (s1 - s0) if m > 1
-                                     else 0.5 * (s0 + s1), self.norm, self.q_body,
-                                     self.q_theta) for j in range(m))
+        subs = tuple(AugmentedVessel(s_j, self.norm, self.q_body, self.q_theta)
+                     for s_j in inputs)
         object.__setattr__(self, "_subs", subs)
 
     def _inputs(self) -> tuple[Array, ...]:
@@ -223,11 +237,13 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
              starts: ArrayLike | None = None, filter: str | Filter = "ekf",
              theta0: ArrayLike | None = None, theta_sd0: ArrayLike = 1.0,
              sigma_z: ArrayLike = DEFAULT_NOISE.body, q_body: ArrayLike = DEFAULT_Q_BODY,
-             q_theta: ArrayLike = 0.0, substeps: int = 10,
+             q_theta: ArrayLike = 0.0, substeps: int = DEFAULT_SUBSTEPS,
              keep_cov: bool = False) -> Identification:
     """Run the augmented filter over measured body states ``z (..., K, 3)`` (SI; nan where
     missing) and applied inputs ``s (..., K, 2)`` (``[delta, n]``, rad and rpm; or ``(K, 2)``
-    shared by the runs) sampled every ``T`` seconds.
+    shared by the runs) sampled every ``T`` seconds, or ``s (..., (K - 1) m + 1, 2)`` sampled
+    every ``T / m`` at the ends of the ``m = substeps`` sub-steps (each sub-step then takes
+    the mean of its ends instead of the interpolation between samples: see the module).
 
     ``norm`` is the prime system of the coefficients (default: the reference vessel's,
     L = 19.6 m, U0 = 18 kn, n0 = 2000 rpm); ``starts (K,)`` marks trial joins (see the module
@@ -246,16 +262,20 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     if z.ndim < 2 or z.shape[-1] != 3:
         raise ValueError(f"z has shape {z.shape}; expected (..., K, 3) samples of [u, v, r]")
     K = z.shape[-2]
-    if s.ndim < 2 or s.shape[-2:] != (K, 2):
+    if not (isinstance(substeps, int | np.integer) and substeps >= 1):
+        raise ValueError(f"substeps = {substeps!r}; expected an integer >= 1")
+    Kf = (K - 1) * int(substeps) + 1  # the sub-steps' ends
+    if s.ndim < 2 or s.shape[-1] != 2 or s.shape[-2] not in (K, Kf):
         raise ValueError(f"s has shape {s.shape}; expected (..., {K}, 2) inputs [delta, n] "
-                         "at the samples of z")
+                         f"at the samples of z, or (..., {Kf}, 2) at the ends of its "
+                         f"{substeps} sub-steps per sample")
     if not np.all(np.isfinite(s)):
         raise ValueError("s has non-finite entries; expected finite inputs at every sample")
     T = float(T)
     if not (math.isfinite(T) and T > 0):
         raise ValueError(f"T = {T!r}; expected a sample period > 0 s")
-    if not (isinstance(substeps, int | np.integer) and substeps >= 1):
-        raise ValueError(f"substeps = {substeps!r}; expected an integer >= 1")
+    s_fine = s if s.shape[-2] != K else None
+    s = s[..., ::substeps, :] if s_fine is not None else s
     if starts is None:
         starts = np.zeros(K, bool)
     starts = np.asarray(starts)
@@ -281,6 +301,8 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
                          f"theta0 {theta0.shape[:-1]}") from None
     z = np.broadcast_to(z, batch + (K, 3))
     s = np.broadcast_to(s, batch + (K, 2))
+    if s_fine is not None:
+        s_fine = np.broadcast_to(s_fine, batch + (Kf, 2))
     R = np.diag(sigma_z**2)
     Qd = T * np.concatenate([q_body, q_theta])
 
@@ -295,13 +317,17 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
         if substeps == 1:  # the paper's eq. 4, exactly
             return AugmentedVessel(0.5 * (s[..., k - 1, :] + s[..., k, :]), norm, q_body,
                                    q_theta)
-        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps)
+        sub = None if s_fine is None else np.moveaxis(
+            s_fine[..., (k - 1) * substeps:k * substeps + 1, :], -2, 0)
+        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps,
+                             sub)
 
     mean = np.concatenate([z[..., 0, :], np.broadcast_to(theta0, batch + (N_THETA,))], -1)
     cov = np.zeros(batch + (19, 19))
     cov[..., 3:, 3:] = np.diag(sd0**2)
     if f is None:
-        return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov)
+        return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
+                             s_fine)
     sensor = tk.models.Position(dim=3, sigma=sigma_z)
     b = None  # the filter's belief (kept, so that its checks stay cheap)
     for k in range(K):
@@ -333,7 +359,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
 
 def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: int,
                   starts: Array, mean: Array, cov: Array, R: Array, Qd: Array,
-                  keep_cov: bool) -> Identification:
+                  keep_cov: bool, s_fine: Array | None = None) -> Identification:
     """``identify``'s EKF: the equations of ``trackkit.filters.EKF`` on ``SampledVessel``
     with ``F = [[A, B], [0, I]]`` and ``H = [I3 0]`` written out, one compiled pass over the
     runs per sample (``trackkit.identify.fused``), the runs as the last axis and the
@@ -342,6 +368,9 @@ def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: i
     N = math.prod(batch)
     zs = np.ascontiguousarray(z.reshape(N, K, 3).transpose(1, 2, 0))  # (K, 3, N)
     ss = np.ascontiguousarray(s.reshape(N, K, 2).transpose(1, 2, 0))  # (K, 2, N)
+    m = int(substeps)
+    sf = None if s_fine is None else np.ascontiguousarray(
+        s_fine.reshape(N, -1, 2).transpose(1, 2, 0))  # ((K - 1) m + 1, 2, N)
     x = np.ascontiguousarray(mean.reshape(N, 19).T)
     P = fused.pack(cov.reshape(N, 19, 19))
     body_rows = np.unique(fused.TRI[:3])  # the rows of P with a body index
@@ -358,7 +387,8 @@ def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: i
             P[body_rows] = 0.0
             P[R_rows] = R_tri[:, None]
         else:
-            nis[k] = fused.predict_update(x, P, ss[k - 1], ss[k], plan, Qd, zs[k], R)
+            sub = None if sf is None else sf[(k - 1) * m:k * m + 1]
+            nis[k] = fused.predict_update(x, P, ss[k - 1], ss[k], plan, Qd, zs[k], R, sub)
         sd = np.sqrt(P[diagonal])
         theta[k], theta_sd[k] = x[3:], sd[3:]
         body[k], body_sd[k] = x[:3], sd[:3]
