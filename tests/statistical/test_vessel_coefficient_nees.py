@@ -36,7 +36,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from trackkit.eval.vessel_mc import inputs_at_substeps, stable
+from trackkit.eval.vessel_mc import identify_recorded, inputs_at_substeps, stable
 from trackkit.identify import DEFAULT_SUBSTEPS, coefficient_nees, identify, run_seed
 from trackkit.io.navigation import MeasuredInputs, preprocess_sim
 from trackkit.models.vessel import reference_vessel, straight_line_speed
@@ -167,6 +167,24 @@ def test_no_yaw_coefficient_is_biased_by_half_a_standard_deviation(trials):
     +-0.5 (the old default: c1 and c3 beyond it)."""
     z = np.concatenate([(r.theta - th) / r.theta_std[:, -1] for _, th, r in trials["new"]])
     assert np.all(np.abs(z[:, 9:].mean(0)) < 0.5), z[:, 9:].mean(0)
+
+
+def test_the_trials_take_the_path_of_trackkit_identify():
+    """``identify_recorded`` (``trackkit identify LOG``) on a log with 10 Hz inputs is the
+    trials' identification: the inputs at 50 sub-steps, identify's defaults."""
+    theta = reference_vessel().theta[None]
+    z, _, s_sub = _trial(theta, "zigzag", PROGRAMMES["A"][0][1], 99, DEFAULT_SUBSTEPS)
+    tr = seatrials.zigzag(theta, reference_vessel().norm, T=TRUTH_T, substeps=TRUTH_SUBSTEPS,
+                          **PROGRAMMES["A"][0][1])
+    gps, ins = simulate_gnss(tr.t, tr.east, tr.north, tr.psi, tr.u, tr.v, tr.r,
+                             rng=[run_seed(SEED, 0, 99)])
+    meas = preprocess_sim(gps, ins, reference=KHOR_MUSA)
+    one = meas._replace(**{f: getattr(meas, f)[0] for f in ("east", "north", "psi", "u", "v",
+                                                           "r")})
+    log = MeasuredInputs(tr.t, tr.delta[0], tr.n[0] / 60.0, np.arange(tr.t.size), None)
+    rec = identify_recorded(one, log)
+    assert rec.substeps == DEFAULT_SUBSTEPS
+    np.testing.assert_array_equal(rec.theta, identify(z, s_sub, 1.0).theta[0])
 
 
 if __name__ == "__main__":  # the numbers of the module docstring and the docs

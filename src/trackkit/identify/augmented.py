@@ -39,10 +39,10 @@ than ``identify.programme``'s, random hulls, a truth integrated at 0.005 s):
 * ``substeps = 50`` (h = 0.02 s), each taking the mean of the inputs measured at its ends
   (pass ``s`` at ``T / 50``; ``eval.vessel_mc.inputs_at_substeps`` does for a log). The
   nozzle is rate-limited and starts and stops between samples: interpolated between 1 s
-  samples its corners are smoothed, which biases c1 by 10-20%, c2 by 5-8% and c3 by +2-4%
-  (about one reported sd) whatever the noise. With the measured inputs, the Euler error of
-  h = 0.1 s (ten sub-steps) against a yaw time constant of 1.7 s still biases c3 by about
-  one sd; h = 0.02 s leaves 0.2-0.4 sd.
+  samples its corners are smoothed, which biases c1 by -10 to -18%, c2 by -2 to -6% and c3
+  by +0.4 to +2.5% (about one reported sd) whatever the noise. With the measured inputs,
+  the Euler error of h = 0.1 s (ten sub-steps) against a yaw time constant of 1.7 s still
+  biases c3 by about one sd; h = 0.02 s leaves 0.2-0.4 sd.
 * ``sigma_z``: the programme's 0.05 m/s, 0.05 m/s, 0.1 deg/s.
 * ``q_body = (2e-5, 2e-5, 2e-7)`` (m^2/s^3, m^2/s^3, rad^2/s^3), a per-sample standard
   deviation of 0.0045 m/s, 0.0045 m/s and 0.026 deg/s: the model's remaining error. The
@@ -53,10 +53,9 @@ than ``identify.programme``'s, random hulls, a truth integrated at 0.005 s):
 With inputs known only at the samples (``s (..., K, 2)``, as ``identify.programme``
 records them) the interpolation error is the model's largest, and the defaults are those
 before: ten sub-steps (``SUBSTEPS_SAMPLED_INPUTS``) and ``Q_BODY_SAMPLED_INPUTS = (3e-4,
-3e-4, 3e-6)``, which give a NEES mean of 20.8 on the
-programme's near-continuous truth, where a Q matched to the rms of the model's error per
-sample leaves the coefficients overconfident (mean 42;
-``tests/statistical/test_vessel_identification.py``).
+3e-4, 3e-6)``, which give a NEES mean of 20.8 on the programme's near-continuous truth,
+where a Q matched to the rms of the model's error per sample leaves the coefficients
+overconfident (mean 42; ``tests/statistical/test_vessel_identification.py``).
 """
 
 from __future__ import annotations
