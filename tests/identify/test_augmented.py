@@ -10,6 +10,10 @@ import pytest
 
 import trackkit as tk
 from trackkit.identify import (
+    DEFAULT_Q_BODY,
+    DEFAULT_SUBSTEPS,
+    Q_BODY_SAMPLED_INPUTS,
+    SUBSTEPS_SAMPLED_INPUTS,
     SampledVessel,
     coefficient_nees,
     identify,
@@ -69,6 +73,40 @@ def test_substeps_are_euler_steps_with_the_interpolated_input():
     np.testing.assert_allclose(out[:3], body, rtol=1e-14)
     np.testing.assert_array_equal(out[3:], xa[3:])
     assert np.abs(out[:3] - augmented_step(xa, 0.5 * (s0 + s1), 1.0, REF.norm)[:3]).max() > 1e-3
+
+
+def test_substeps_take_the_mean_of_the_inputs_measured_at_their_ends():
+    xa = _xa()
+    s_sub = np.array([[0.0, 1200.0], [0.1, 1300.0], [0.3, 1500.0], [0.3, 1900.0],
+                      [0.35, 2000.0]])
+    body = xa[:3]
+    for j in range(4):
+        body = step(body, 0.5 * (s_sub[j] + s_sub[j + 1]), xa[3:], 0.25, REF.norm)
+    out = SampledVessel(s_sub[0], s_sub[-1], REF.norm, substeps=4, s_sub=s_sub).f(xa, 1.0)
+    np.testing.assert_array_equal(out[:3], body)
+    with pytest.raises(ValueError, match=r"s_sub has shape \(4, 2\); expected \(5, \.\.\., 2\)"):
+        SampledVessel(s_sub[0], s_sub[-1], REF.norm, substeps=4, s_sub=s_sub[:4])
+
+
+def test_the_default_discretisation_follows_the_inputs_given(rec):
+    """Inputs at the samples: ten sub-steps and the larger Q; inputs every T / 50: fifty
+    sub-steps, each with its measured inputs, and the smaller Q."""
+    K = 40
+    z, s, starts = rec.z[:2, :K], rec.s[:2, :K], rec.starts[:K]
+    a = identify(z, s, rec.T, starts=starts)
+    b = identify(z, s, rec.T, starts=starts, substeps=SUBSTEPS_SAMPLED_INPUTS,
+                 q_body=Q_BODY_SAMPLED_INPUTS)
+    np.testing.assert_array_equal(a.theta_history, b.theta_history)
+    t = np.linspace(0.0, K - 1.0, (K - 1) * DEFAULT_SUBSTEPS + 1)
+    s_sub = np.stack([np.stack([np.interp(t, np.arange(K), s[r, :, j]) for j in range(2)], -1)
+                      for r in range(2)])
+    c = identify(z, s_sub, rec.T, starts=starts)
+    d = identify(z, s, rec.T, starts=starts, substeps=DEFAULT_SUBSTEPS, q_body=DEFAULT_Q_BODY)
+    # the interpolated inputs at the sub-steps are the interpolation between the samples
+    np.testing.assert_allclose(c.theta_history, d.theta_history, rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match=r"s has shape \(2, 41, 2\); expected \(\.\.\., 40, 2\) "
+                       r"inputs \[delta, n\] at the samples of z, or \(\.\.\., 1951, 2\)"):
+        identify(z, s_sub[:, :41], rec.T, starts=starts)
 
 
 def test_substepped_jacobian_matches_finite_differences():

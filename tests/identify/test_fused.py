@@ -72,6 +72,32 @@ def test_one_predict_update_is_the_textbook_ekfs(m):
     assert np.all(np.abs(xf - x) > 1e-9 * np.abs(x))
 
 
+def test_with_inputs_at_the_substeps_the_update_is_the_textbook_ekfs():
+    """The inputs measured at the sub-steps' ends (a nozzle that starts and stops between the
+    samples): the kernel's sf path against ``SampledVessel(s_sub=...)``."""
+    x, P, s0, s1, z = _problem(seed=7)
+    m = 5
+    rng = np.random.default_rng(8)
+    sub = s0 + np.linspace(0.0, 1.0, m + 1)[:, None, None] * (s1 - s0)
+    sub[1:-1, :, 0] += rng.uniform(-0.05, 0.05, (m - 1, N))  # not on the line
+    xs, Ps = np.ascontiguousarray(x.T), fused.pack(P)
+    nf = fused.predict_update(xs, Ps, np.ascontiguousarray(s0.T), np.ascontiguousarray(s1.T),
+                              fused.plan(REF.norm, m, 1.0), Qd, np.ascontiguousarray(z.T), R,
+                              np.ascontiguousarray(sub.transpose(0, 2, 1)))
+    model = SampledVessel(s0, s1, REF.norm, q_body=Qd[:3], q_theta=Qd[3:], substeps=m,
+                          s_sub=sub)
+    ekf = tk.filters.EKF()
+    b = ekf.predict(Gaussian(x, P), model, 1.0)
+    b, innov = ekf.update(b, z, tk.models.Position(dim=3, sigma=np.sqrt(np.diag(R))))
+    sd = np.sqrt(np.diagonal(b.cov, axis1=-2, axis2=-1))
+    assert np.all(np.abs(xs.T - b.mean) <= 1e-12 * (np.abs(b.mean) + sd))
+    assert np.all(np.abs(fused.unpack(Ps) - b.cov) <= 1e-12 * sd[:, :, None] * sd[:, None, :])
+    np.testing.assert_allclose(nf, innov.nis, rtol=1e-11)
+    # the measured inputs matter: the interpolated ones give another prediction
+    xi, _, _ = _fused(x, P, s0, s1, z, m)
+    assert np.abs(xi[:, :3] - xs.T[:, :3]).max() > 1e-4
+
+
 def test_the_prediction_is_the_models_euler_step_bit_for_bit():
     # with no measurement the kernel's state is the prediction, and eq. 2 is written once
     # (trackkit.models.vessel.prime_rates), so one Euler step is the same bits

@@ -73,8 +73,9 @@ from trackkit.eval.manoeuvres import (
 )
 from trackkit.identify import (
     DEFAULT_NOISE,
-    DEFAULT_Q_BODY,
+    DEFAULT_SUBSTEPS,
     METHODS,
+    SUBSTEPS_SAMPLED_INPUTS,
     Segment,
     coefficient_nees,
     dead_reckon,
@@ -105,6 +106,7 @@ __all__ = [
     "TrialDemo",
     "VesselResult",
     "identify_recorded",
+    "inputs_at_substeps",
     "model_trials",
     "nees_band",
     "run_vessel",
@@ -538,16 +540,37 @@ class RecordedIdentification:
     missing: int
 
 
+def inputs_at_substeps(inputs: MeasuredInputs, t: Array, T: float, substeps: int) -> Array:
+    """The measured inputs ``[delta (rad), n (rpm)]`` at the ends of the filter's ``m =
+    substeps`` sub-steps of the grid ``t (K,)`` of period ``T``: ``(..., (K - 1) m + 1, 2)``
+    at ``t_0 + j T / m`` (nan outside the
+    record). A rate-limited nozzle starts and stops between grid samples; interpolated
+    between the samples of a 1 s grid it is smoothed, which biases c1 by 10-20%
+    (docs/vessel-comparison.md)."""
+    t_sub = np.minimum(t[0] + (T / substeps) * np.arange((t.size - 1) * substeps + 1), t[-1])
+    nozzle, rev_s = inputs_on_grid(inputs, t_sub)
+    return np.stack([nozzle, 60.0 * rev_s], -1)  # rev/s to rpm, the identifier's unit
+
+
+def _inputs_resolve_substeps(inputs: MeasuredInputs, T: float) -> bool:
+    """Whether the inputs are logged at least every ``T / 5`` (median interval): fine enough
+    to follow the nozzle's starts and stops between grid samples."""
+    return inputs.t.size > 1 and float(np.median(np.diff(inputs.t))) <= T / 5
+
+
 def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: str = "ekf",
-                      substeps: int = 10, sigma_z: Array = DEFAULT_NOISE.body,
-                      q_body: Array = DEFAULT_Q_BODY, norm: Normalisation | None = None,
+                      substeps: int | None = None, sigma_z: Array = DEFAULT_NOISE.body,
+                      q_body: Array | None = None, norm: Normalisation | None = None,
                       length: float | None = None, inputs_name: str = "the inputs"
                       ) -> RecordedIdentification:
     """Identify the 16 coefficients from a pre-processed log ``m`` and its measured
     ``inputs`` (engine speed in rev/s, converted to rpm here), with ``filter`` (one of
     ``identify.METHODS``); the prior is identify's (zero, sd 1), the coefficients in the prime
-    units of ``norm`` (default the reference vessel's). ValueError, naming
-    ``inputs_name``, when the inputs do not cover the log's grid."""
+    units of ``norm`` (default the reference vessel's). Inputs logged at least every T / 5
+    are given to the filter at its sub-steps' ends (``inputs_at_substeps``; identify's
+    defaults: 50 sub-steps), coarser ones at the grid samples only (interpolated; identify's
+    defaults for that: ten sub-steps and a larger Q).
+    ValueError, naming ``inputs_name``, when the inputs do not cover the log's grid."""
     ref = reference_vessel()
     norm = ref.norm if norm is None else norm
     length = ref.design["length"] if length is None else float(length)
@@ -567,18 +590,24 @@ def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: st
         raise ValueError(f"the log gives {t.size} grid samples at T = {T:g} s; expected at "
                          "least 3")
     lo, hi = (float(inputs.t[0]), float(inputs.t[-1])) if inputs.t.size else (math.nan,) * 2
-    nozzle, rev_s = inputs_on_grid(inputs, t)
-    if not (np.all(np.isfinite(nozzle)) and np.all(np.isfinite(rev_s))):
+    fine = _inputs_resolve_substeps(inputs, T) and filter != "ls"
+    if substeps is None:
+        substeps = DEFAULT_SUBSTEPS if fine else SUBSTEPS_SAMPLED_INPUTS
+    s_sub = inputs_at_substeps(inputs, t, T, substeps)
+    if not np.all(np.isfinite(s_sub)):
         raise ValueError(f"{inputs_name} cover t = {lo:.3f} to {hi:.3f} s but the log's grid "
                          f"spans {t[0]:.3f} to {t[-1]:.3f} s (from the log's first record); "
                          "expected nozzle angle and rpm over the whole log")
-    s = np.stack([nozzle, 60.0 * rev_s], -1)  # rev/s to rpm, the identifier's unit
+    s = s_sub[..., ::substeps, :]
+    if not fine:
+        s_sub = s  # interpolated between the samples, with the Q that covers it
     starts = np.zeros(t.size, bool)
     hint = "" if filter == "ekf" else "; the EKF (filter 'ekf') is the most robust here"
     try:
-        with np.errstate(invalid="ignore"):  # a negative variance is reported below
+        with np.errstate(invalid="ignore", over="ignore"):  # reported below
             theta, sd, _, hist, hist_sd, body, _ = _run_filter(
-                filter, z, s, T, norm=norm, starts=starts, theta0=np.zeros(N_THETA),
+                filter, z, s_sub, T, norm=norm, starts=starts,
+                theta0=np.zeros(N_THETA),
                 theta_sd0=1.0, sigma_z=sigma_z, q_body=q_body, q_theta=0.0,
                 substeps=substeps)
     except ValueError as err:  # a numerical failure on data the model does not fit

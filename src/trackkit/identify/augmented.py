@@ -8,6 +8,9 @@ prediction takes ``substeps = m`` forward-Euler steps of ``h = T / m`` (``Sample
     x <- x + h f(x, s_j, theta),   s_j = s_{k-1} + (j + 1/2) / m (s_k - s_{k-1}),
     theta <- theta,   then  x_a <- x_a + w,   w ~ N(0, T diag(q_body, q_theta))
 
+or, with the inputs measured at the sub-steps' ends ``t_{k-1} + j h`` (``s`` given every
+``T / m``), ``s_j = (s(t_{k-1} + j h) + s(t_{k-1} + (j + 1) h)) / 2``
+
 (random-walk coefficients). m = 1 is the paper's eq. 4, one Euler step with the mean input
 ``s_m = (s_{k-1} + s_k) / 2`` (``AugmentedVessel`` itself). The update uses
 ``y_k = H x_a + e_k``, ``H = [I3 0]``, ``e ~ N(0, diag(sigma_z^2))``. Batched over the
@@ -29,25 +32,30 @@ sample of the previous one. The coefficients start at ``theta0`` with standard d
 hull beyond the order of magnitude of prime coefficients (the reference set's are 0.12-1.0).
 ``initial_guess`` gives the alternative of a perturbed reference set.
 
-Defaults for the ``identify.programme`` data at T = 1 s (measured on its near-continuous
-truth, 100 runs; see ``tests/statistical/test_vessel_identification.py``):
+Defaults at T = 1 s, for measured inputs (``docs/vessel-comparison.md``,
+``tests/statistical/test_vessel_coefficient_nees.py``: 105 trials of three programmes other
+than ``identify.programme``'s, random hulls, a truth integrated at 0.005 s):
 
-* ``substeps = 10``. One Euler step per second (the paper's model) against a yaw time
-  constant of about 1.7 s biases c1, c2, c3 by about 14%; ten sub-steps leave 1.7-3.3%.
+* ``substeps = 50`` (h = 0.02 s), each taking the mean of the inputs measured at its ends
+  (pass ``s`` at ``T / 50``; ``eval.vessel_mc.inputs_at_substeps`` does for a log). The
+  nozzle is rate-limited and starts and stops between samples: interpolated between 1 s
+  samples its corners are smoothed, which biases c1 by -10 to -18%, c2 by -2 to -6% and c3
+  by +0.4 to +2.5% (about one reported sd) whatever the noise. With the measured inputs,
+  the Euler error of h = 0.1 s (ten sub-steps) against a yaw time constant of 1.7 s still
+  biases c3 by about one sd; h = 0.02 s leaves 0.2-0.4 sd.
 * ``sigma_z``: the programme's 0.05 m/s, 0.05 m/s, 0.1 deg/s.
-* ``q_body = (3e-4, 3e-4, 3e-6)`` (m^2/s^3, m^2/s^3, rad^2/s^3), a per-sample standard
-  deviation of 0.017 m/s, 0.017 m/s and 0.1 deg/s. The model's own error per sample (true
-  coefficients, ten sub-steps against the truth) has an rms of 0.004 m/s, 0.005 m/s and
-  0.05 deg/s, but it is not white: it comes in bursts where the rate-limited nozzle starts
-  or stops between samples, which the interpolated input misses, and its effect on the
-  coefficients is systematic (c3, the nozzle's yaw effectiveness, ends with an rms error of
-  twice its stated sd). A Q matched to that rms leaves the coefficients' covariance
-  overconfident (16-dimensional NEES mean 42, 6% of runs inside the 95% band); ten times it
-  makes the NEES consistent (mean 21, 95% inside), at the cost of median errors of 3.3%,
-  1.7%, 1.7% instead of 1.7%, 0.8%, 1.1% on c1, c2, c3.
-* ``q_theta = 0``: constant coefficients. A coefficient random walk also covers the model
-  error (1e-6 per s: 91% inside, NEES mean 11) but lets the well-identified coefficients
-  wander (c1 7% instead of 3.3%).
+* ``q_body = (2e-5, 2e-5, 2e-7)`` (m^2/s^3, m^2/s^3, rad^2/s^3), a per-sample standard
+  deviation of 0.0045 m/s, 0.0045 m/s and 0.026 deg/s: the model's remaining error. The
+  coefficient NEES (16 dof) has mean 15.9 over the 105 trials; with 1e-5, 1e-5, 1e-7 17.2
+  (at the 99% band's edge), with 3e-4, 3e-4, 3e-6 (the old default) about 8: conservative.
+* ``q_theta = 0``: constant coefficients.
+
+With inputs known only at the samples (``s (..., K, 2)``, as ``identify.programme``
+records them) the interpolation error is the model's largest, and the defaults are those
+before: ten sub-steps (``SUBSTEPS_SAMPLED_INPUTS``) and ``Q_BODY_SAMPLED_INPUTS = (3e-4,
+3e-4, 3e-6)``, which give a NEES mean of 20.8 on the programme's near-continuous truth,
+where a Q matched to the rms of the model's error per sample leaves the coefficients
+overconfident (mean 42; ``tests/statistical/test_vessel_identification.py``).
 """
 
 from __future__ import annotations
@@ -82,6 +90,9 @@ __all__ = [
     "Identification",
     "SampledVessel",
     "DEFAULT_Q_BODY",
+    "DEFAULT_SUBSTEPS",
+    "Q_BODY_SAMPLED_INPUTS",
+    "SUBSTEPS_SAMPLED_INPUTS",
     "identify",
     "initial_guess",
     "relative_error",
@@ -91,7 +102,13 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-DEFAULT_Q_BODY = np.array([3e-4, 3e-4, 3e-6])
+#: q_body for inputs measured at the sub-steps (``s`` every ``T / m``)
+DEFAULT_Q_BODY = np.array([2e-5, 2e-5, 2e-7])
+#: q_body for inputs known at the samples only: it covers their interpolation's error
+Q_BODY_SAMPLED_INPUTS = np.array([3e-4, 3e-4, 3e-6])
+#: Euler sub-steps per sample of the prediction with the inputs measured at their ends (h =
+#: 0.02 s at T = 1 s), and with the inputs known at the samples only (the module docstring)
+DEFAULT_SUBSTEPS, SUBSTEPS_SAMPLED_INPUTS = 50, 10
 _FILTERS = {"ekf": tk.filters.EKF, "ukf": tk.filters.UKF, "ckf": tk.filters.CKF,
             "srckf": tk.filters.SRCKF}
 #: the identifiers by name: the filters on the augmented state and batch least squares
@@ -124,7 +141,9 @@ class SampledVessel(MotionModel):
     """The augmented model over one sample period ``dt`` in ``substeps = m`` forward-Euler
     steps of ``h = dt / m``, the input interpolated linearly between the samples
     ``s_prev`` and ``s_next`` (each ``(..., 2)``): sub-step j uses the mean of the
-    interpolated input at its ends, ``s_j = s_prev + (j + 1/2) / m (s_next - s_prev)``::
+    interpolated input at its ends, ``s_j = s_prev + (j + 1/2) / m (s_next - s_prev)``; or,
+    given ``s_sub (m + 1, ..., 2)``, the inputs measured at the sub-steps' ends,
+    ``s_j = (s_sub[j] + s_sub[j + 1]) / 2``::
 
         x_{j+1} = x_j + h f(x_j, s_j, theta),   j = 0 .. m - 1;   theta unchanged
 
@@ -140,6 +159,7 @@ class SampledVessel(MotionModel):
     q_body: ArrayLike = 0.0
     q_theta: ArrayLike = 0.0
     substeps: int = 1
+    s_sub: ArrayLike | None = None
     dim_x: int = field(default=3 + N_THETA, init=False)
 
     def __post_init__(self) -> None:
@@ -148,10 +168,18 @@ class SampledVessel(MotionModel):
                              "integer >= 1")
         s0, s1 = np.asarray(self.s_prev, dtype=float), np.asarray(self.s_next, dtype=float)
         m = int(self.substeps)
+        if self.s_sub is not None and m > 1:  # measured inputs at the sub-steps' ends
+            sf = np.asarray(self.s_sub, dtype=float)
+            if sf.ndim < 2 or sf.shape[0] != m + 1:
+                raise ValueError(f"SampledVessel.s_sub has shape {sf.shape}; expected "
+                                 f"({m + 1}, ..., 2), the inputs at the sub-steps' ends")
+            inputs = [0.5 * (sf[j] + sf[j + 1]) for j in range(m)]
+        else:
+            inputs = [s0 + ((j + 0.5) / m) * (s1 - s0) if m > 1 else 0.5 * (s0 + s1)
+                      for j in range(m)]
         # the models of the sub-steps (they check s, norm and the densities)
-        subs = tuple(AugmentedVessel(s0 + ((j + 0.5) / m) * (s1 - s0) if m > 1
-                                     else 0.5 * (s0 + s1), self.norm, self.q_body,
-                                     self.q_theta) for j in range(m))
+        subs = tuple(AugmentedVessel(s_j, self.norm, self.q_body, self.q_theta)
+                     for s_j in inputs)
         object.__setattr__(self, "_subs", subs)
 
     def _inputs(self) -> tuple[Array, ...]:
@@ -222,12 +250,14 @@ def _vector(value: ArrayLike, n: int, name: str, positive: bool = False) -> Arra
 def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None = None,
              starts: ArrayLike | None = None, filter: str | Filter = "ekf",
              theta0: ArrayLike | None = None, theta_sd0: ArrayLike = 1.0,
-             sigma_z: ArrayLike = DEFAULT_NOISE.body, q_body: ArrayLike = DEFAULT_Q_BODY,
-             q_theta: ArrayLike = 0.0, substeps: int = 10,
+             sigma_z: ArrayLike = DEFAULT_NOISE.body, q_body: ArrayLike | None = None,
+             q_theta: ArrayLike = 0.0, substeps: int | None = None,
              keep_cov: bool = False) -> Identification:
     """Run the augmented filter over measured body states ``z (..., K, 3)`` (SI; nan where
     missing) and applied inputs ``s (..., K, 2)`` (``[delta, n]``, rad and rpm; or ``(K, 2)``
-    shared by the runs) sampled every ``T`` seconds.
+    shared by the runs) sampled every ``T`` seconds, or ``s (..., (K - 1) m + 1, 2)`` sampled
+    every ``T / m`` at the ends of the ``m = substeps`` sub-steps (each sub-step then takes
+    the mean of its ends instead of the interpolation between samples: see the module).
 
     ``norm`` is the prime system of the coefficients (default: the reference vessel's,
     L = 19.6 m, U0 = 18 kn, n0 = 2000 rpm); ``starts (K,)`` marks trial joins (see the module
@@ -236,8 +266,11 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     (..., 16)`` and ``theta_sd0`` (scalar or 16) the coefficients' prior mean and standard
     deviation; ``sigma_z`` (3) the measurement standard deviations, ``R = diag(sigma_z^2)``;
     ``q_body`` (3) and ``q_theta`` (16 or scalar) the random-walk densities, ``Q = T
-    diag(q_body, q_theta)`` per sample; ``substeps`` the Euler steps per sample (1: the paper's
-    eq. 4). ``keep_cov`` keeps every sample's 19 x 19 covariance."""
+    diag(q_body, q_theta)`` per sample (default ``DEFAULT_Q_BODY`` for inputs at the
+    sub-steps, ``Q_BODY_SAMPLED_INPUTS`` for inputs at the samples); ``substeps`` the Euler
+    steps per sample (1: the paper's eq. 4; default ``DEFAULT_SUBSTEPS`` with inputs at the
+    sub-steps, ``SUBSTEPS_SAMPLED_INPUTS`` with inputs at the samples). ``keep_cov`` keeps
+    every sample's 19 x 19 covariance."""
     f = _filter(filter)
     norm = reference_vessel().norm if norm is None else norm
     if not isinstance(norm, Normalisation):
@@ -246,16 +279,23 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     if z.ndim < 2 or z.shape[-1] != 3:
         raise ValueError(f"z has shape {z.shape}; expected (..., K, 3) samples of [u, v, r]")
     K = z.shape[-2]
-    if s.ndim < 2 or s.shape[-2:] != (K, 2):
+    if substeps is None:
+        fine = s.ndim >= 2 and s.shape[-2] != K
+        substeps = DEFAULT_SUBSTEPS if fine else SUBSTEPS_SAMPLED_INPUTS
+    if not (isinstance(substeps, int | np.integer) and substeps >= 1):
+        raise ValueError(f"substeps = {substeps!r}; expected an integer >= 1")
+    Kf = (K - 1) * int(substeps) + 1  # the sub-steps' ends
+    if s.ndim < 2 or s.shape[-1] != 2 or s.shape[-2] not in (K, Kf):
         raise ValueError(f"s has shape {s.shape}; expected (..., {K}, 2) inputs [delta, n] "
-                         "at the samples of z")
+                         f"at the samples of z, or (..., {Kf}, 2) at the ends of its "
+                         f"{substeps} sub-steps per sample")
     if not np.all(np.isfinite(s)):
         raise ValueError("s has non-finite entries; expected finite inputs at every sample")
     T = float(T)
     if not (math.isfinite(T) and T > 0):
         raise ValueError(f"T = {T!r}; expected a sample period > 0 s")
-    if not (isinstance(substeps, int | np.integer) and substeps >= 1):
-        raise ValueError(f"substeps = {substeps!r}; expected an integer >= 1")
+    s_fine = s if s.shape[-2] != K else None
+    s = s[..., ::substeps, :] if s_fine is not None else s
     if starts is None:
         starts = np.zeros(K, bool)
     starts = np.asarray(starts)
@@ -272,6 +312,8 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
         raise ValueError(f"theta0 has shape {theta0.shape}; expected finite (..., 16)")
     sd0 = _vector(theta_sd0, N_THETA, "theta_sd0", positive=True)
     sigma_z = _vector(sigma_z, 3, "sigma_z", positive=True)
+    if q_body is None:
+        q_body = Q_BODY_SAMPLED_INPUTS if s_fine is None else DEFAULT_Q_BODY
     q_body = _vector(q_body, 3, "q_body")
     q_theta = _vector(q_theta, N_THETA, "q_theta")
     try:
@@ -281,6 +323,8 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
                          f"theta0 {theta0.shape[:-1]}") from None
     z = np.broadcast_to(z, batch + (K, 3))
     s = np.broadcast_to(s, batch + (K, 2))
+    if s_fine is not None:
+        s_fine = np.broadcast_to(s_fine, batch + (Kf, 2))
     R = np.diag(sigma_z**2)
     Qd = T * np.concatenate([q_body, q_theta])
 
@@ -295,13 +339,17 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
         if substeps == 1:  # the paper's eq. 4, exactly
             return AugmentedVessel(0.5 * (s[..., k - 1, :] + s[..., k, :]), norm, q_body,
                                    q_theta)
-        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps)
+        sub = None if s_fine is None else np.moveaxis(
+            s_fine[..., (k - 1) * substeps:k * substeps + 1, :], -2, 0)
+        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps,
+                             sub)
 
     mean = np.concatenate([z[..., 0, :], np.broadcast_to(theta0, batch + (N_THETA,))], -1)
     cov = np.zeros(batch + (19, 19))
     cov[..., 3:, 3:] = np.diag(sd0**2)
     if f is None:
-        return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov)
+        return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
+                             s_fine)
     sensor = tk.models.Position(dim=3, sigma=sigma_z)
     b = None  # the filter's belief (kept, so that its checks stay cheap)
     for k in range(K):
@@ -333,7 +381,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
 
 def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: int,
                   starts: Array, mean: Array, cov: Array, R: Array, Qd: Array,
-                  keep_cov: bool) -> Identification:
+                  keep_cov: bool, s_fine: Array | None = None) -> Identification:
     """``identify``'s EKF: the equations of ``trackkit.filters.EKF`` on ``SampledVessel``
     with ``F = [[A, B], [0, I]]`` and ``H = [I3 0]`` written out, one compiled pass over the
     runs per sample (``trackkit.identify.fused``), the runs as the last axis and the
@@ -342,6 +390,9 @@ def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: i
     N = math.prod(batch)
     zs = np.ascontiguousarray(z.reshape(N, K, 3).transpose(1, 2, 0))  # (K, 3, N)
     ss = np.ascontiguousarray(s.reshape(N, K, 2).transpose(1, 2, 0))  # (K, 2, N)
+    m = int(substeps)
+    sf = None if s_fine is None else np.ascontiguousarray(
+        s_fine.reshape(N, -1, 2).transpose(1, 2, 0))  # ((K - 1) m + 1, 2, N)
     x = np.ascontiguousarray(mean.reshape(N, 19).T)
     P = fused.pack(cov.reshape(N, 19, 19))
     body_rows = np.unique(fused.TRI[:3])  # the rows of P with a body index
@@ -358,7 +409,8 @@ def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: i
             P[body_rows] = 0.0
             P[R_rows] = R_tri[:, None]
         else:
-            nis[k] = fused.predict_update(x, P, ss[k - 1], ss[k], plan, Qd, zs[k], R)
+            sub = None if sf is None else sf[(k - 1) * m:k * m + 1]
+            nis[k] = fused.predict_update(x, P, ss[k - 1], ss[k], plan, Qd, zs[k], R, sub)
         sd = np.sqrt(P[diagonal])
         theta[k], theta_sd[k] = x[3:], sd[3:]
         body[k], body_sd[k] = x[:3], sd[:3]

@@ -83,7 +83,8 @@ _jacobian = numba.njit(prime_jacobian)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _step(x, P, s0, s1, m, h, scale, DS, pairs, Qd, z, R, nis, chunk):  # pragma: no cover
+def _step(x, P, s0, s1, sf, fine, m, h, scale, DS, pairs, Qd, z, R, nis,
+          chunk):  # pragma: no cover
     n = x.shape[0]
     N = x.shape[1]
     U0, LU, rpm = scale[0], scale[1], scale[2]
@@ -105,8 +106,9 @@ def _step(x, P, s0, s1, m, h, scale, DS, pairs, Qd, z, R, nis, chunk):  # pragma
     for c0 in range(0, N, chunk):
         c1 = min(N, c0 + chunk)
         M = c1 - c0
-        # the model, run by run: m Euler steps of h with the interpolated input (m = 1: the
-        # mean input of eq. 4); body' and the Jacobian's blocks A = A_(m-1) .. A_0 and
+        # the model, run by run: m Euler steps of h with the interpolated input, or the mean
+        # of the measured inputs at each sub-step's ends (m = 1: the mean input of eq. 4);
+        # body' and the Jacobian's blocks A = A_(m-1) .. A_0 and
         # B = sum_j A_(m-1) .. A_(j+1) B_j, with A_j = I + h D J' / scale, B_j = h D Phi
         for k in range(M):
             q = c0 + k
@@ -127,9 +129,13 @@ def _step(x, P, s0, s1, m, h, scale, DS, pairs, Qd, z, R, nis, chunk):  # pragma
                 b0, b1, b2 = b0 + h * (D[0] * f1), b1 + h * (D[1] * f2), b2 + h * (D[2] * f3)
             else:
                 for j in range(m):
-                    f = (j + 0.5) / m
-                    d = s0[0, q] + f * (s1[0, q] - s0[0, q])
-                    e = s0[1, q] + f * (s1[1, q] - s0[1, q])
+                    if fine:  # the inputs measured at the sub-steps' ends
+                        d = 0.5 * (sf[j, 0, q] + sf[j + 1, 0, q])
+                        e = 0.5 * (sf[j, 1, q] + sf[j + 1, 1, q])
+                    else:
+                        f = (j + 0.5) / m
+                        d = s0[0, q] + f * (s1[0, q] - s0[0, q])
+                        e = s0[1, q] + f * (s1[1, q] - s0[1, q])
                     u, v, r, nn = b0 / U0, b1 / U0, b2 * LU, e / rpm
                     J = _jacobian(u, v, r, d, nn, th)
                     t = _terms(u, v, r, d, nn)
@@ -286,6 +292,9 @@ def _step(x, P, s0, s1, m, h, scale, DS, pairs, Qd, z, R, nis, chunk):  # pragma
     return bad
 
 
+_NO_SUB = np.zeros((1, 2, 1))  # the kernel's sf when the inputs are interpolated
+
+
 class Plan(NamedTuple):
     """What the kernel needs of the model, computed once per identification: ``substeps``
     ``m``, ``h = T / m``, ``scale = [U0, L / U0, n0, D1, D2, D3]``, ``DS = D_i / scale_j`` and
@@ -311,17 +320,22 @@ def plan(norm: Normalisation, substeps: int, T: float) -> Plan:
 
 
 def predict_update(x: Array, P: Array, s_prev: Array, s_next: Array, plan: Plan, Qd: Array,
-                   z: Array, R: Array) -> Array:
+                   z: Array, R: Array, s_sub: Array | None = None) -> Array:
     """One predict-update of the augmented EKF for ``N`` runs, in place, runs last: ``x (19,
     N)`` and the packed covariance ``P (190, N)`` (``pack``) become the posterior. The
     prediction takes ``plan.m`` Euler steps from the inputs ``s_prev`` to ``s_next`` (each
-    ``(2, N)``; ``augmented.SampledVessel``; for one step the mean input of eq. 4); ``Qd
+    ``(2, N)``; ``augmented.SampledVessel``; for one step the mean input of eq. 4), or, with
+    ``s_sub (m + 1, 2, N)``, the inputs at the sub-steps' ends (each sub-step their mean); ``Qd
     (19,)`` are the per-sample noise variances, ``z (3, N)`` the measurements (nan where
     missing), ``R (3, 3)``. Returns the NIS ``(N,)`` (nan where missing); raises if an
     innovation covariance is not positive definite."""
     nis = np.empty(x.shape[1])
-    bad = _step(x, P, s_prev, s_next, plan.m, plan.h, plan.scale, plan.DS, plan.pairs, Qd, z,
-                R, nis, CHUNK)
+    fine = s_sub is not None and plan.m > 1
+    if fine and s_sub.shape != (plan.m + 1,) + s_prev.shape:
+        raise ValueError(f"s_sub has shape {s_sub.shape}; expected {(plan.m + 1,) + s_prev.shape}")
+    sf = s_sub if fine else _NO_SUB
+    bad = _step(x, P, s_prev, s_next, sf, fine, plan.m, plan.h, plan.scale, plan.DS,
+                plan.pairs, Qd, z, R, nis, CHUNK)
     if bad:
         raise ValueError("innovation covariance S = P_xx + R is not positive definite in "
                          f"{bad} run(s); expected SPD 3 x 3 matrices")

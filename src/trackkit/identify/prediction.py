@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
-from trackkit.identify.augmented import SampledVessel
+from trackkit.identify.augmented import SUBSTEPS_SAMPLED_INPUTS, SampledVessel
 from trackkit.models.vessel import N_THETA, Normalisation, advance_pose, integrate_pose
 
 __all__ = ["Prediction", "predict", "dead_reckon", "position_error", "rmse"]
@@ -41,7 +41,7 @@ class Prediction(NamedTuple):
 
 def predict(theta: ArrayLike, s: ArrayLike, T: float, x0: ArrayLike, *,
             norm: Normalisation, pose0: ArrayLike = (0.0, 0.0, 0.0),
-            substeps: int = 10) -> Prediction:
+            substeps: int = SUBSTEPS_SAMPLED_INPUTS) -> Prediction:
     """Predict body states and poses for inputs ``s (..., K, 2)`` (rad, rpm) sampled every
     ``T`` seconds from ``x0 (..., 3)`` (SI) and ``pose0 (..., 3)``, with coefficients
     ``theta (..., 16)`` in the prime units of ``norm``. Batch axes lead and broadcast."""

@@ -219,7 +219,8 @@ class IdentificationSpec(_Strict):
                                      "deviation", json_schema_extra=_unit("prime units"))
     q_body: list[float] = Field(
         default_factory=lambda: [3e-4, 3e-4, 3e-6], description="random-walk densities of "
-        "the body states (identify.DEFAULT_Q_BODY)",
+        "the body states (the programme's inputs are known at the samples only, and this Q "
+        "covers their interpolation; identify.DEFAULT_Q_BODY is for measured inputs)",
         json_schema_extra=_unit("m^2/s^3, m^2/s^3, rad^2/s^3"))
     q_theta: NonNegFloat = Field(0.0, description="random-walk density of every coefficient "
                                  "(0: constant)", json_schema_extra=_unit("prime units^2/s"))
