@@ -123,7 +123,7 @@ def test_what_holds_of_the_pf(bo_cv):
 
 @pytest.mark.xfail(strict=True, reason="the best specialist, the MPEKF, is at 1.23 x the "
                    "PCRLB (PF 1.29, RPEKF 1.30; 500 runs, seed 2026), not within 1.15: it is at "
-                   "1.11-1.12 over 900-1 000 s, then every filter (a 20 000-particle PF too) "
+                   "1.10-1.12 over 900-1 000 s, then every filter (a 20 000-particle PF too) "
                    "drifts from the bound along the second leg, the MPEKF to 1.47 at 1 795 s, "
                    "while the bound settles at 317 m: the bound is not tight there")
 def test_the_best_specialist_is_within_1_15_of_the_pcrlb(bo_cv):
