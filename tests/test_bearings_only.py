@@ -17,6 +17,7 @@ from trackkit.filters.bearings_only import (
     RangeBankBelief,
     RangePF,
     cartesian_to_mpc,
+    mpc_from_bearing,
     mpc_from_relative,
     mpc_to_cartesian,
     mpc_transition,
@@ -190,7 +191,7 @@ def test_mpekf_update_is_linear_in_the_bearing_and_estimate_is_the_jacobian_tran
 
 def test_mpekf_first_update_carries_the_prior_into_polar_coordinates():
     """At the first bearing the Cartesian prior is converted at the sensor's pose; for a
-    tight prior the cubature conversion equals the Jacobian one."""
+    tight prior the start from the bearing equals the Jacobian conversion."""
     x = np.array([2e3, 1.2e4, -3.0, 1.0])
     P = np.diag([1.0, 1.0, 1e-4, 1e-4])
     o, vo = np.array([50.0, 10.0]), np.array([2.0, 3.0])
@@ -208,6 +209,63 @@ def test_mpekf_first_update_carries_the_prior_into_polar_coordinates():
     np.testing.assert_allclose(post.mean, y, rtol=1e-6)
     g = MPEKF().estimate(post)
     np.testing.assert_allclose(g.mean, x, rtol=1e-6)
+
+
+def _posterior_range_by_grid(x, P, o, z, var_z):
+    """Mean and deviation of the range, and mean bearing, of ``N(x_p, P_pp)`` times the
+    bearing's likelihood, on a fine polar grid (area ``r dr db``, exact geometry)."""
+    r = np.linspace(1e-3, 2.5e4, 5001)
+    b = z + np.sqrt(var_z) * np.linspace(-9.0, 9.0, 721)
+    R, B = np.meshgrid(r, b, indexing="ij")
+    d = np.stack([o[0] + R * np.sin(B), o[1] + R * np.cos(B)], -1) - x[:2]
+    q = np.einsum("...i,ij,...j->...", d, np.linalg.inv(P[:2, :2]), d)
+    w = R * np.exp(-0.5 * (q - q.min())) * np.exp(-0.5 * (B - z) ** 2 / var_z)
+    w /= w.sum()
+    rbar = (w * R).sum()
+    return rbar, np.sqrt((w * (R - rbar) ** 2).sum()), (w * B).sum()
+
+
+@pytest.mark.parametrize("ahead", [5e3, 1.5e3, -1e3])
+def test_mpc_from_bearing_takes_the_range_given_the_bearing(ahead):
+    """A prior 2 km along the line of sight, 150 m across, its mean 5 km, 1.5 km or -1 km
+    (behind the observer) along it: the start's range ``1 / w`` and its spread ``sqrt(P_ww)
+    / w^2`` are the posterior range's mean and deviation given the first bearing (a fine
+    polar grid of the prior times the likelihood), w > 0 every time, and 1 / r starts
+    uncorrelated with the rest."""
+    o, vo = np.array([100.0, -200.0]), np.array([2.0, -1.0])
+    los = np.deg2rad(35.0)
+    u, up = np.array([np.sin(los), np.cos(los)]), np.array([np.cos(los), -np.sin(los)])
+    P = np.zeros((4, 4))
+    P[:2, :2] = 2000.0**2 * np.outer(u, u) + 150.0**2 * np.outer(up, up)
+    P[2:, 2:] = 4.0 * np.eye(2)
+    P[:2, 2:] = P[2:, :2] = 0.3 * 2000.0 * 2.0 * np.outer(u, u)  # range and velocity
+    x = np.concatenate([o + ahead * u + 80.0 * up, [1.0, -3.0]])
+    z, var_z = los + 0.01, np.deg2rad(1.5) ** 2
+    y, Py = mpc_from_bearing(x, P, z, var_z, o, vo)
+    rbar, sigma_r, bbar = _posterior_range_by_grid(x, P, o, z, var_z)
+    assert y[3] > 0
+    assert 1.0 / y[3] == pytest.approx(rbar, rel=5e-4)
+    assert np.sqrt(Py[3, 3]) / y[3] ** 2 == pytest.approx(sigma_r, rel=5e-4)
+    assert abs(y[0] - bbar) < 0.03 * np.sqrt(var_z)
+    assert np.all(Py[3, :3] == 0) and np.all(Py[:3, 3] == 0)
+    assert np.all(np.linalg.eigvalsh(Py) > 0)
+
+
+def test_mpekf_first_update_reports_the_cartesian_priors_innovation():
+    """The first bearing starts the MPC state (it is in the start, not applied twice); the
+    step's innovation is the one an EKF on the Cartesian prior reports."""
+    x = np.array([-1e3, 6e3, 1.0, -2.0])
+    P = np.diag([1500.0**2, 2500.0**2, 4.0, 4.0])
+    o, vo = np.array([50.0, 10.0]), np.array([2.0, 3.0])
+    sensor = tk.models.Bearing(o, SIGMA, velocity=vo)
+    z = _bearings(x, o) + 0.02
+    post, innov = MPEKF().update(MPEKF().init(tk.Gaussian(x, P)), z, sensor)
+    _, ekf = tk.filters.EKF().update(tk.Gaussian(x, P), z, sensor)
+    np.testing.assert_allclose(innov.residual, ekf.residual, rtol=1e-12)
+    np.testing.assert_allclose(innov.cov, ekf.cov, rtol=1e-12)
+    y, Py = mpc_from_bearing(x, P, z[0], SIGMA**2, o, vo)
+    np.testing.assert_array_equal(post.mean, y)
+    np.testing.assert_array_equal(post.cov, Py)
 
 
 def test_mpekf_batched_rows_equal_single_rows_with_missing_and_per_run_observers():
@@ -575,3 +633,10 @@ def test_range_pf_conditioned_on_the_first_bearing():
         RangePF(prior="bearing", r_max=1e4)
     with pytest.raises(ValueError, match="'gaussian', 'bearing' or 'range'"):
         RangePF(prior="uniform")
+
+
+def test_mpekf_refuses_a_prior_without_a_position_spread():
+    b = MPEKF().init(tk.Gaussian(np.array([0.0, 5e3, 0.0, 0.0]), np.diag([0.0, 0.0, 1.0, 1.0])))
+    with pytest.raises(ValueError, match=r"MPEKF.update prior cov \(its position block\) is "
+                       "not positive definite"):
+        MPEKF().update(b, np.array([0.01]), tk.models.Bearing([0, 0], SIGMA))

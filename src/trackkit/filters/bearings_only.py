@@ -50,7 +50,7 @@ from trackkit.filters.base import (
 from trackkit.filters.imm import combine, mixture_innovation
 from trackkit.filters.kalman import EKF, _condition, _predict
 from trackkit.filters.particle import PF, resample_rows
-from trackkit.linalg import cholesky, gaussian_loglik, mm, mmT, psd_factor, symmetrize
+from trackkit.linalg import gaussian_loglik, mm, mmT, psd_factor, solve_psd, symmetrize
 from trackkit.models.motion import ConstantVelocity
 
 __all__ = [
@@ -63,6 +63,7 @@ __all__ = [
     "MPBelief",
     "mpc_transition",
     "mpc_from_relative",
+    "mpc_from_bearing",
     "mpc_to_cartesian",
     "cartesian_to_mpc",
 ]
@@ -461,20 +462,105 @@ def mpc_transition(y: ArrayLike, dt: ArrayLike, dp: ArrayLike = (0.0, 0.0),
     return yn, J
 
 
-def _cubature(g, x: Array, P: Array, name: str) -> tuple[Array, Array]:
-    """Moments of ``g(x)``, x ~ N(x, P), by the third-degree cubature rule (2n points
-    ``x +- sqrt(n) L_j``, equal weights), with a circular mean and wrapped deviations for
-    the first output component (a bearing)."""
-    n = x.shape[-1]
-    L = cholesky(P, name)
-    cols = np.sqrt(n) * np.moveaxis(L, -1, 0)  # (n, ..., n): column j of L
-    Y = g(np.concatenate([x + cols, x - cols]))  # (2n, ..., 4)
-    b = np.arctan2(np.sin(Y[..., 0]).mean(0), np.cos(Y[..., 0]).mean(0))
-    y = Y.mean(0)
-    y[..., 0] = b
-    D = Y - y
-    D[..., 0] = wrap(D[..., 0])
-    return y, np.einsum("k...i,k...j->...ij", D, D) / (2 * n)
+def _range_given_bearing(d_u: Array, d_c: Array, l_uu: Array, l_uc: Array, l_cc: Array,
+                         var_beta: Array) -> tuple[Array, Array]:
+    """Mean and standard deviation of the range ``r > 0`` given a Gaussian position prior
+    and one bearing, by 64-point Gauss-Legendre quadrature of its density (below).
+
+    In the frame of the bearing's ray (unit vectors u along it, u' across), the prior's
+    mean is ``(d_u, d_c)`` from the observer and its information matrix ``[[l_uu, l_uc],
+    [l_uc, l_cc]]``. A target at range r and bearing ``beta + delta`` is at ``(r, r delta)``
+    (the arc taken straight over the bearing's spread) in an area ``r dr ddelta``, and the
+    bearing's likelihood is ``N(delta; 0, var_beta)``. With ``e = r - d_u``, ``g = l_cc d_c
+    - l_uc e`` and ``k = l_cc r^2 + 1 / var_beta``, the integral over delta leaves
+
+        p(r | beta) ~ r / sqrt(k) exp(-(l_uu e^2 - 2 l_uc e d_c + l_cc d_c^2 - r^2 g^2 / k) / 2)
+
+    which grows like r where the prior is wider across the ray than the bearing (the polar
+    area element) and is the prior's Gaussian along the ray where it is narrower; it is
+    finite and positive for a prior whose mean is near or behind the observer. The rule
+    covers ``[max(0, mu - 10 s), max(mu, 0) + 10 s]`` with ``mu``, ``s`` the prior's range
+    along the ray and its spread there (``mu = d_u + l_uc d_c / l_uu``, ``s^2 = 1 / l_uu``).
+    """
+    mu = d_u + l_uc * d_c / l_uu
+    s = 1.0 / np.sqrt(l_uu)
+    lo = np.maximum(mu - 10.0 * s, 0.0)
+    hi = np.maximum(mu, 0.0) + 10.0 * s
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    r = c[..., None] + h[..., None] * _GL_NODES
+    e = r - d_u[..., None]
+    g = l_cc[..., None] * d_c[..., None] - l_uc[..., None] * e
+    k = l_cc[..., None] * r * r + 1.0 / var_beta[..., None]
+    q = (l_uu[..., None] * e * e - 2.0 * l_uc[..., None] * e * d_c[..., None]
+         + l_cc[..., None] * d_c[..., None] ** 2 - r * r * g * g / k)
+    ell = np.log(r) - 0.5 * np.log(k) - 0.5 * q
+    wts = _GL_WEIGHTS * np.exp(ell - ell.max(-1, keepdims=True))
+    wts = wts / wts.sum(-1, keepdims=True)
+    rbar = (wts * r).sum(-1)
+    return rbar, np.sqrt((wts * (r - rbar[..., None]) ** 2).sum(-1))
+
+
+def mpc_from_bearing(x: ArrayLike, P: ArrayLike, beta: ArrayLike, var_beta: ArrayLike,
+                     origin: ArrayLike = (0.0, 0.0), velocity: ArrayLike = (0.0, 0.0),
+                     name: str = "mpc_from_bearing prior cov") -> tuple[Array, Array]:
+    """The MPC prior ``(y, P_y)`` of a Cartesian prior ``N(x, P)`` given a first bearing
+    ``beta`` (nautical, variance ``var_beta``) from an observer at ``origin`` moving at
+    ``velocity``, the bearing's information included: Aidala and Hammel (1983) start the
+    filter from the first bearing and a range guess, ``1 / r`` with deviation ``sigma_r /
+    r^2``; here the guess and its spread are the prior's given that bearing.
+
+    In the frame of the bearing's ray (``u = (sin beta, cos beta)``, ``u' = du/dbeta``),
+    ``d = x_p - origin`` has coordinates ``(d_u, d_c)`` and ``P_pp^-1`` entries ``l_uu,
+    l_uc, l_cc``. The range given the bearing has mean ``rbar`` and deviation ``sigma_r``
+    (:func:`_range_given_bearing`); the bearing given that range is
+
+        var_b = 1 / (1 / var_beta + rbar^2 l_cc),  b = beta + var_b rbar (l_cc d_c - l_uc
+        (rbar - d_u))
+
+    (the prior's cross-range at ``rbar`` fused with the measured bearing). The target is then
+    at ``p = origin + rbar u(b)`` with covariance ``C_p = sigma_r^2 u u^T + rbar^2 var_b u'
+    u'^T`` (at b), its velocity the prior's given the position, ``v = x_v + G (p - x_p)``,
+    ``G = P_vp P_pp^-1``, with covariance ``P_vv - G P_pv + G C_p G^T`` and ``Cov(v, p) =
+    G C_p``; ``y`` and ``P_y`` are :func:`cartesian_to_mpc` of that Gaussian, linearised at
+    its mean, except that ``1 / r`` is left uncorrelated with the rest. The linearisation's
+    ``Cov(beta_dot, 1 / r) = (v_c / r) sigma_w^2`` (``v_c`` the relative velocity across the
+    line of sight) is the first-order term of a product of two factors each uncertain by
+    tens of percent: with it every bearing-rate
+    update moves ``1 / r``, and a run whose prior range is short sweeps it through zero on
+    the first leg; without it ``1 / r`` stays where the prior put it until the observer
+    manoeuvres and the bearings see the range.
+
+    The prior itself converted (by a linearisation at its mean, or the cubature rule's
+    points 2 sigma either side of it) puts ``1 / r`` of a range near zero, or behind the
+    observer, into the inverse range's mean and spread when the prior is wide in range.
+    """
+    x, P = np.asarray(x, dtype=float), np.asarray(P, dtype=float)
+    beta, var_beta = np.asarray(beta, dtype=float), np.asarray(var_beta, dtype=float)
+    o = np.asarray(origin, dtype=float)
+    u, up = _unit(beta)
+    Lam = solve_psd(P[..., :2, :2], np.broadcast_to(np.eye(2), P[..., :2, :2].shape),
+                    f"{name} (its position block)")
+    d = x[..., :2] - o
+    Lu, Lup = (Lam @ u[..., None])[..., 0], (Lam @ up[..., None])[..., 0]
+    l_uu, l_uc, l_cc = (u * Lu).sum(-1), (u * Lup).sum(-1), (up * Lup).sum(-1)
+    d_u, d_c = (d * u).sum(-1), (d * up).sum(-1)
+    rbar, sigma_r = _range_given_bearing(d_u, d_c, l_uu, l_uc, l_cc, var_beta)
+    var_b = 1.0 / (1.0 / var_beta + rbar * rbar * l_cc)
+    u, up = _unit(beta + var_b * rbar * (l_cc * d_c - l_uc * (rbar - d_u)))
+    Cp = (sigma_r**2)[..., None, None] * u[..., :, None] * u[..., None, :] + (
+        (rbar * rbar * var_b)[..., None, None] * up[..., :, None] * up[..., None, :])
+    G = P[..., 2:, :2] @ Lam
+    p = o + rbar[..., None] * u
+    GC = G @ Cp
+    Xs = np.concatenate([p, x[..., 2:] + ((p - x[..., :2])[..., None, :] @ G.mT)[..., 0, :]],
+                        -1)
+    Ps = np.concatenate([np.concatenate([Cp, GC.mT], -1), np.concatenate(
+        [GC, P[..., 2:, 2:] - G @ P[..., :2, 2:] + GC @ G.mT], -1)], -2)
+    y, J = cartesian_to_mpc(Xs, o, velocity)
+    Py = symmetrize(mm(mm(J, Ps), J.mT))
+    # 1 / r apart from the rest (a block-diagonal part of a covariance is one)
+    Py[..., 3, :3] = Py[..., :3, 3] = 0.0
+    return y, Py
 
 
 # --------------------------------------------------------------------------------------------
@@ -511,6 +597,18 @@ def _rows(mask: Array, *arrays: Array) -> list[Array]:
     return [np.broadcast_to(a, mask.shape + a.shape[mask.ndim:])[mask] for a in arrays]
 
 
+def _first_innovation(x: Array, P: Array, o: Array, z: Array, R: Array, sign: float,
+                      offset: float, sensor) -> tuple[Array, Array]:
+    """Residual and covariance of a bearing against a Cartesian prior, linearised at its
+    mean: ``beta = atan2(dx, dy)``, ``H = sign [dy, -dx, 0, 0] / rho^2``."""
+    dx, dy = x[..., 0] - o[..., 0], x[..., 1] - o[..., 1]
+    rho2 = dx * dx + dy * dy
+    zero = np.zeros_like(dx)
+    H = sign * np.stack([dy / rho2, -dx / rho2, zero, zero], -1)[..., None, :]
+    r = sensor.residual(z, (sign * np.arctan2(dx, dy) + offset)[..., None])
+    return r, symmetrize(mm(mm(H, P), H.mT) + R)
+
+
 class MPEKF(Filter):
     """Modified-polar-coordinates EKF (Aidala and Hammel 1983) for a constant-velocity
     target seen by one bearing sensor.
@@ -524,11 +622,14 @@ class MPEKF(Filter):
     the mean, linearised in the covariance), then the bearing update is linear, ``H = [1, 0,
     0, 0]`` (``-1`` for a "math" sensor), with the Joseph form.
 
-    Before a row's first bearing it carries the Cartesian prior (a KF prediction); at the
-    first bearing that Gaussian is carried into MPC at the sensor's pose by the cubature
-    rule (``1 / r`` is far from linear over a wide range prior, and a mean through the
-    Jacobian would be biased). ``estimate`` converts back: ``p = o + u / w``,
-    ``v = v_o + (r_dot/r u + beta_dot u') / w`` with its Jacobian for the covariance.
+    Before a row's first bearing it carries the Cartesian prior (a KF prediction). The
+    first bearing starts the MPC state (:func:`mpc_from_bearing`): the bearing from it and
+    the prior's cross-range, the inverse range ``1 / rbar`` with deviation ``sigma_r /
+    rbar^2`` from the prior's range given that bearing (positive even for a prior whose
+    mean is near or behind the observer), uncorrelated with the rest until a manoeuvre
+    makes it observable; the rates from the prior's velocity there. That step's innovation
+    is the Cartesian prior's, as an EKF reports it. ``estimate`` converts back: ``p = o + u
+    / w``, ``v = v_o + (r_dot/r u + beta_dot u') / w`` with its Jacobian for the covariance.
 
     The sensor must carry the observer's ``velocity`` (``trackkit.models.Bearing(...,
     velocity=...)``; the scenario engine sets it): a sensor without one says the observer is
@@ -614,19 +715,25 @@ class MPEKF(Filter):
             yn[..., 0] = wrap(yn[..., 0])
             y[polar], P[polar] = yn, Pn
         first = ~polar if miss is None else ~polar & ~np.broadcast_to(miss, batch)
-        if first.any():
-            xc, Pc, of, vf = _rows(first, y, P, o, vo)
-            y[first], P[first] = _cubature(
-                lambda X: cartesian_to_mpc(X, of, vf)[0], xc, Pc, f"{where} prior cov")
+        offset = 0.0 if sign > 0 else 0.5 * np.pi
+        R = np.broadcast_to(np.asarray(sensor.noise, dtype=float), batch + (1, 1))
+        if first.any():  # the Cartesian prior's bearing innovation, as an EKF reports it
+            xc, Pc, of, vf, zf, Rf = _rows(first, y, P, o, vo, z, R)
+            cart = _first_innovation(xc, Pc, of, zf, Rf, sign, offset, sensor)
+            start = mpc_from_bearing(xc, Pc, sign * (zf[..., 0] - offset), Rf[..., 0, 0],
+                                     of, vf, f"{where} prior cov")
         now_polar = polar | first
         origin = np.where(now_polar[..., None], o, b.origin)
         velocity = np.where(now_polar[..., None], vo, b.velocity)
         H = np.array([[sign, 0.0, 0.0, 0.0]])
-        zhat = sign * y[..., :1] + (0.0 if sign > 0 else 0.5 * np.pi)
+        zhat = sign * y[..., :1] + offset
         r = sensor.residual(z, zhat)
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
-        yn, Pn, S = _condition(y, P, r, H, sensor.noise)
+        yn, Pn, S = _condition(y, P, r, H, R)
+        if first.any():  # those rows start from their first bearing, which is in them
+            r, S = r.copy(), S.copy()
+            (yn[first], Pn[first]), (r[first], S[first]) = start, cart
         yn[..., 0] = wrap(yn[..., 0])
         post, innov = keep_prior_where_missing(miss, (y, P), output(yn, Pn, symmetric=True),
                                                Innovation(r, S))
