@@ -867,6 +867,7 @@ def network(
             p = Path(scenario)
             if p.suffix == ".toml" or p.exists():
                 if p.is_file():  # (a missing or unreadable file: load_network says so)
+                    _parse_toml(p)
                     raise ValueError(f"{scenario}: not a network scenario (it has no "
                                      "[[agents]] tables); run it with `trackkit run "
                                      f"{scenario}`, or see `trackkit show net-baseline` "
@@ -903,6 +904,14 @@ def network(
                          outages=outages, host=host, advertise=advertise,
                          launch=launchers or None, remote_python=remote_python)
             state.interrupted = "interrupted"
+
+
+def _parse_toml(path: Path) -> None:
+    """Raise the reader's error in words (not UTF-8, not valid TOML, with line and column)
+    before a file is called the wrong kind of scenario for lacking a table."""
+    from trackkit.scenario import read_scenario
+
+    read_scenario(path, None)
 
 
 def _outages(specs: list[str], n_agents: int, duration: float
@@ -1549,6 +1558,8 @@ class VesselFilter(StrEnum):
     ls = "ls"
 
 
+#: the NMEA sentences the identifier reads
+NMEA_TYPES = "GGA RMC VTG HDT THS ROT"
 #: the NMEA log suffixes; any other log is the CSV form (.csv)
 NMEA_SUFFIXES = (".nmea", ".log", ".txt")
 #: a log shorter than this cannot show converged coefficients (the paper: 500 s)
@@ -1574,12 +1585,17 @@ def _identify_kind(what: str) -> str:
             raise ValueError(f"{what}: {why}; expected a GPS/INS log (NMEA 0183 "
                              f"{', '.join(NMEA_SUFFIXES)} or CSV .csv)")
         return "log"
+    if p.is_dir():
+        raise ValueError(f"{what}: is a directory; expected a GPS/INS log file (NMEA 0183 "
+                         f"{', '.join(NMEA_SUFFIXES)} or CSV .csv) with --inputs, or a vessel "
+                         "scenario (.toml or a bundled name)")
     if suffix == ".toml" or p.exists():
         if suffix != ".toml" and p.is_file():
             raise ValueError(f"{what}: unknown log type {suffix or '(no suffix)'!r}; expected "
                              f"an NMEA 0183 log ({', '.join(NMEA_SUFFIXES)}), the CSV form "
                              "(.csv) or a vessel scenario (.toml)")
         if p.is_file() and not is_vessel(what):
+            _parse_toml(p)
             raise ValueError(f"{what}: not a vessel scenario (it has no [vessel] table); see "
                              "`trackkit show vessel-turning` for a vessel scenario's fields")
         return "scenario"  # (a missing or unreadable .toml: load_vessel says so)
@@ -1683,6 +1699,19 @@ def _stop_hint(err: ValueError, columns: str) -> ValueError:
         " (pass a column mapping)", f"; expected the columns {columns}"))
 
 
+def _check_log_usable(log: Path, nav: Any, read: Any, expected: str) -> None:
+    """A log with no usable position is named as the culprit (before its inputs, which
+    cannot be read against the times of a log without any)."""
+    if read.rows_kept and nav.t_pos.size:
+        return
+    why = ", ".join(f"{n} {r}" for r, n in sorted(read.skipped.items(), key=lambda kv: -kv[1]))
+    first = f"; first: {read.bad[0]}" if read.bad else ""
+    kept = (f"{read.rows_kept} kept but none gives a position (GGA or RMC)" if read.rows_kept
+            else f"none usable ({why or 'empty'}){first}")
+    raise ValueError(f"{log}: no usable GPS/INS record: {read.rows_read} lines read, {kept}; "
+                     f"expected {expected}")
+
+
 def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: float,
                   on_bad: str) -> None:
     """Read, pre-process and identify a recorded log; write its report; print the
@@ -1702,6 +1731,9 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
                 nav, read = read_nmea(log, on_bad)
         except ValueError as err:
             raise _stop_hint(err, ", ".join(NAV_CSV_COLUMNS)) from None
+        _check_log_usable(log, nav, read, (
+            f"the columns {', '.join(NAV_CSV_COLUMNS)}" if log.suffix.lower() == ".csv" else
+            f"NMEA 0183 sentences ({NMEA_TYPES}) with valid checksums"))
         fmt = "iso" if nav.epoch is not None else "seconds"  # a log without a date: both
         try:
             ins, iread = read_inputs_csv(inputs, on_bad, epoch=nav.epoch, time_format=fmt)
