@@ -58,3 +58,90 @@ def test_a_toml_syntax_error_is_reported_with_its_line_and_column(command, tmp_p
     assert_user_error(ran, 2, str(f), "not valid TOML", "line 1, column 21")
     assert "not a network scenario" not in ran.text and "not a vessel" not in ran.text
     assert not (tmp_path / "out").exists()
+
+
+# --- messages in the user's words -------------------------------------------------------------
+
+
+def test_a_second_kill_of_one_agent_is_named_by_the_options_given(tmp_path):
+    out = tmp_path / "out"
+    ran = trackkit("network", "net-baseline", "--agents", "processes", "--kill", "2@100",
+                   "--kill", "2@300:400", "--out", str(out))
+    assert_user_error(ran, 2, "--kill '2@100' and --kill '2@300:400'", "agent 2 is killed twice")
+    assert "outages[" not in ran.text and not out.exists()
+    late = trackkit("network", "net-baseline", "--agents", "processes", "--kill", "2@1e9",
+                    "--out", str(out))
+    assert_user_error(late, 2, "--kill '2@1e9'", "kill at 1e+09 s, no restart")
+    assert "None" not in late.text and not out.exists()
+
+
+def test_out_of_memory_names_the_options_of_the_command_that_ran():
+    import click
+
+    from trackkit import cli
+
+    def advice(command: str) -> str:
+        with click.Context(click.Command(command), info_name=command):
+            return cli._describe(MemoryError())[0]
+
+    assert "--max-scans" in advice("track") and "--runs" not in advice("track")
+    assert "--runs" in advice("run") and "--runs" in advice("network")
+
+
+def test_help_cites_papers_wraps_paragraphs_and_shows_no_type_for_flags():
+    for args in ([], ["network"], ["identify"], ["track"], ["run"], ["sweep"]):
+        ran = trackkit(*args, "--help", env={"COLUMNS": "80"})
+        assert ran.code == 0, ran.text
+        for internal in ("seed 0", "issue ", "<bool>"):
+            assert internal not in ran.out, (args, internal, ran.out)
+    top = trackkit("--help", env={"COLUMNS": "100"}).out
+    assert "Jalalipoor and Kardehi Moghaddam 2021" in top and "Zolfagharnasab and Seif" in top
+    assert "--version" in top and "--help" in top
+    # the command's description is one paragraph that rich fills to the width: every line
+    # but its last is nearly full (a hard line break would leave a short one)
+    track = trackkit("track", "--help", env={"COLUMNS": "80"}).out.splitlines()
+    start = next(i for i, line in enumerate(track) if "Track recorded data" in line)
+    end = next(i for i in range(start, len(track)) if not track[i].strip())
+    assert end - start >= 3
+    assert all(len(line.rstrip()) >= 65 for line in track[start:end - 1]), track[start:end]
+
+
+def test_version_prints_the_installed_package_version():
+    from importlib.metadata import version
+
+    ran = trackkit("--version")
+    assert ran.code == 0 and ran.out.strip() == f"trackkit {version('trackkit')}", ran.text
+
+
+def test_ctrl_c_with_workers_says_interrupted_once_and_leaves_no_process(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1"}
+    env.pop("TRACKKIT_DEBUG", None)
+    p = subprocess.Popen([sys.executable, "-m", "trackkit.cli", "run", "--runs", "100000",
+                          "--workers", "2", "--out", str(out)], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (out / ".trackkit.lock").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(8.0)  # the local cluster's workers are up and computing
+    os.killpg(p.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
+    _, err = p.communicate(timeout=120)
+    time.sleep(2.0)
+    try:
+        os.killpg(p.pid, 0)
+        left = subprocess.run(["ps", "-o", "pid,args", "-g", str(p.pid)], capture_output=True,
+                              text=True).stdout
+        os.killpg(p.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        left = ""
+    assert p.returncode == 130, err
+    assert err.count("interrupted") == 1, err
+    assert "nanny" not in err.lower() and "distributed." not in err, err
+    assert "Traceback" not in err and not left, left
+    assert not out.exists() or not any(out.iterdir())

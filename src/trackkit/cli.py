@@ -81,8 +81,30 @@ LOCK_FILE = ".trackkit.lock"
 #: a lock file without a readable pid younger than this may be one being written right now
 _LOCK_GRACE_S = 10.0
 
+class _FlagsWithoutType:
+    """Help without a ``<bool>`` type beside a flag (``--help``, ``--straight``): a flag
+    takes no value."""
+
+    def get_params(self, ctx: click.Context) -> list[Any]:
+        params = super().get_params(ctx)  # type: ignore[misc]
+        for p in params:
+            if getattr(p, "is_bool_flag", False) and not p.secondary_opts and (
+                    p.metavar is None):
+                p.metavar = ""
+        return params
+
+
+class _Group(_FlagsWithoutType, typer.core.TyperGroup):
+    pass
+
+
+class _Command(_FlagsWithoutType, typer.core.TyperCommand):
+    pass
+
+
 app = typer.Typer(
     name="trackkit",
+    cls=_Group,
     help="Target tracking comparisons: Monte Carlo runs, PCRLB, tables, plots and reports.",
     no_args_is_help=True,
     add_completion=False,
@@ -114,9 +136,9 @@ def _load(name_or_path: str) -> Any:
     from trackkit.scenario.network import is_network, load_network
     from trackkit.scenario.vessel import is_vessel, load_vessel
 
-    if is_network(name_or_path):  # [[agents]]: a seed-004 network (trackkit network)
+    if is_network(name_or_path):  # [[agents]]: an agent network (trackkit network)
         return load_network(name_or_path)
-    if is_vessel(name_or_path):  # a [vessel] table: seed 003's identification (identify)
+    if is_vessel(name_or_path):  # a [vessel] table: a vessel's identification (identify)
         return load_vessel(name_or_path)
     if is_multitarget(name_or_path):  # a [scene] table: the multi-target tracker comparison
         return load_multitarget(name_or_path)
@@ -193,13 +215,25 @@ def _describe(err: BaseException) -> tuple[str, int]:
     if isinstance(err, ValueError):
         return str(err), 2
     if isinstance(err, MemoryError):
-        return ("out of memory; try fewer runs (--runs) or a smaller run.block in the "
-                "scenario"), 1
+        return f"out of memory; try {_smaller_job()}", 1
     if isinstance(err, OSError):
         where = f": {err.filename}" if getattr(err, "filename", None) else ""
         return f"{err.strerror or err}{where}", 1
     return (f"unexpected {type(err).__name__}: {err} (this is a trackkit bug; "
             "TRACKKIT_DEBUG=1 shows the traceback)"), 1
+
+
+def _smaller_job() -> str:
+    """How the running command's options make a smaller job (each names options it has)."""
+    ctx = click.get_current_context(silent=True)
+    command = ctx.info_name if ctx is not None else None
+    if command == "track":
+        return "fewer scans (--max-scans N or --until SECONDS)"
+    if command == "identify":
+        return "a shorter log, or fewer runs (--runs) of a vessel scenario"
+    if command == "network":
+        return "fewer runs (--runs)"
+    return "fewer runs (--runs) or a smaller run.block in the scenario"
 
 
 @contextmanager
@@ -529,10 +563,10 @@ def run(
     with _user_errors() as state:
         sc = _load(scenario or _default_name())
         if _is_network(sc):
-            raise ValueError(f"{scenario} is a network scenario (seed 004); run it with "
+            raise ValueError(f"{scenario} is a network scenario; run it with "
                              f"`trackkit network {scenario}`")
         if _is_vessel(sc):
-            raise ValueError(f"{scenario} is a vessel scenario (seed 003); run it with "
+            raise ValueError(f"{scenario} is a vessel scenario; run it with "
                              f"`trackkit identify {scenario}`")
         target, label = _output_dir(out, str(sc.name))
         total = runs or getattr(getattr(sc, "run", None), "runs", None) or 1
@@ -854,9 +888,10 @@ def network(
         "--remote-python", help="The Python with trackkit installed on the --launch "
         "machines.")] = "python3",
 ) -> None:
-    """Run a network scenario (seed 004: agents with bearing sensors that track targets
-    together): Monte Carlo runs of the agents beside the centralised reference and the
-    PCRLB; write results.json, timings.json, plots and report.html.
+    """Run a network scenario (agents with bearing sensors that track targets together,
+    after Jalalipoor and Kardehi Moghaddam 2021): Monte Carlo runs of the agents beside the
+    centralised reference and the PCRLB; write results.json, timings.json, plots and
+    report.html.
 
     The same scenario and seed give byte-identical results.json on one machine."""
     with _user_errors() as state:
@@ -919,6 +954,7 @@ def _outages(specs: list[str], n_agents: int, duration: float
     """``--kill AGENT@T[:RESTART]`` (agent from 1, simulated s) as ``run_network_processes``
     outages (agent from 0)."""
     out: list[tuple[int, float, float | None]] = []
+    given: dict[int, str] = {}
     for spec in specs:
         agent, _, when = spec.partition("@")
         at, _, rest = when.partition(":")
@@ -931,8 +967,14 @@ def _outages(specs: list[str], n_agents: int, duration: float
         if not 1 <= a <= n_agents:
             raise ValueError(f"--kill {spec!r}: agent {a}; expected 1 to {n_agents}")
         if not 0.0 <= k < duration or (r is not None and not k < r):
-            raise ValueError(f"--kill {spec!r}: kill at {k:g} s, restart at {r}; expected "
+            back = "no restart" if r is None else f"restart at {r:g} s"
+            raise ValueError(f"--kill {spec!r}: kill at {k:g} s, {back}; expected "
                              f"0 <= T < {duration:g} s and RESTART > T")
+        if a in given:
+            raise ValueError(f"--kill {given[a]!r} and --kill {spec!r}: agent {a} is killed "
+                             "twice; expected one --kill per agent (AGENT@T:RESTART kills and "
+                             "restarts it once)")
+        given[a] = spec
         out.append((a - 1, k, r))
     return out
 
@@ -1024,8 +1066,10 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
     for o in doc["channel"]["outages"]:
         back = [x for x in o["recovered_after_s"] if x is not None]
         console.print(Text(
-            f"agent {o['agent']} killed at {o['kill_at_s']:g} s, restarted at "
-            f"{o['restart_at_s']} s: held its tracks again after "
+            f"agent {o['agent']} killed at {o['kill_at_s']:g} s, "
+            + ("not restarted" if o["restart_at_s"] is None
+               else f"restarted at {o['restart_at_s']:g} s")
+            + ": held its tracks again after "
             + (f"{min(back):.0f}-{max(back):.0f} s" if back else "never")
             + f" ({len(back)} of {len(o['recovered_after_s'])} runs)"), soft_wrap=True)
     c = doc.get("courses")
@@ -1047,7 +1091,7 @@ def _print_summary(result: Any, paths: dict[str, Path]) -> None:
 
     console = Console()
     console.print(rich_table(result, width=console.width))
-    # the error windows, seed 000's tables, the gap table: if present
+    # the error windows, the matching tables (J1-J4), the gap table: if present
     for table in matching_rich_tables(result, width=console.width):
         console.print(table)
     for note in getattr(result, "notes", []) or []:
@@ -1547,7 +1591,7 @@ def _print_track_summary(read: Any, job: SimpleNamespace, paths: dict[str, Path]
         console.print(Text(f"report: {html}", style="green"), soft_wrap=True)
 
 
-# --- trackkit identify: seed 003's vessel model from a GPS/INS log or a vessel scenario -------
+# --- trackkit identify: a vessel's model from a GPS/INS log or a vessel scenario ------------
 
 
 class VesselFilter(StrEnum):
@@ -1643,11 +1687,12 @@ def identify(
         "--out", "-o", help="Output directory (created if missing).",
         show_default="trackkit-out/identify-STEM, or trackkit-out/SCENARIO")] = None,
 ) -> None:
-    """Identify seed 003's 16-coefficient manoeuvring model (augmented EKF on u, v, r): from
-    a recorded GPS/INS log and its inputs, or by running a vessel scenario (simulated sea
-    trials, Monte Carlo). Prints the coefficients with their standard deviations and writes
-    results.json, convergence, track, heading and trial plots and report.html; the
-    identified model's 20 deg turn and 10/10 and 20/20 zig-zags with the IMO table."""
+    """Identify a vessel's 16-coefficient manoeuvring model (Zolfagharnasab and Seif 2025;
+    augmented EKF on u, v, r): from a recorded GPS/INS log and its inputs, or by running a
+    vessel scenario (simulated sea trials, Monte Carlo). Prints the coefficients with their
+    standard deviations and writes results.json, convergence, track, heading and trial plots
+    and report.html; the identified model's 20 deg turn and 10/10 and 20/20 zig-zags with
+    the IMO table."""
     with _user_errors() as state:
         kind = _identify_kind(what)
         if kind == "scenario":
@@ -1907,6 +1952,39 @@ def _print_vessel_summary(paths: dict[str, Path], notes: list[str]) -> None:
 
 
 # --- the entry point --------------------------------------------------------------------------
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            v = version("trackkit")
+        except PackageNotFoundError:  # run from a source tree without installing
+            from trackkit import __version__ as v
+        typer.echo(f"trackkit {v}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _options(version: Annotated[bool, typer.Option(
+        "--version", callback=_print_version, is_eager=True,
+        help="Print trackkit's version and exit.")] = False) -> None:
+    pass
+
+
+def _paragraphs(doc: str) -> str:
+    """A docstring's paragraphs each on one line, so that rich wraps them to the terminal
+    (typer's rich help keeps the hard line breaks of the source)."""
+    import inspect
+
+    return "\n\n".join(" ".join(p.split()) for p in inspect.cleandoc(doc).split("\n\n"))
+
+
+for _info in app.registered_commands:
+    if _info.cls in (None, typer.core.TyperCommand):  # typer fills in its default
+        _info.cls = _Command
+    _info.help = _paragraphs(_info.help or _info.callback.__doc__ or "")
 
 
 def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
