@@ -76,12 +76,12 @@ def test_a_second_kill_of_one_agent_is_named_by_the_options_given(tmp_path):
 
 
 def test_out_of_memory_names_the_options_of_the_command_that_ran():
-    import click
+    import typer
 
     from trackkit import cli
 
     def advice(command: str) -> str:
-        with click.Context(click.Command(command), info_name=command):
+        with typer.Context(typer.core.TyperCommand(command), info_name=command):
             return cli._describe(MemoryError())[0]
 
     assert "--max-scans" in advice("track") and "--runs" not in advice("track")
@@ -145,3 +145,86 @@ def test_ctrl_c_with_workers_says_interrupted_once_and_leaves_no_process(tmp_pat
     assert "nanny" not in err.lower() and "distributed." not in err, err
     assert "Traceback" not in err and not left, left
     assert not out.exists() or not any(out.iterdir())
+
+
+# --- output directories: one command's files, listed in manifest.json -------------------------
+
+
+def _names(out: Path) -> set[str]:
+    return {p.name for p in out.iterdir()}
+
+
+def _check_manifest(out: Path, command: str) -> dict:
+    """manifest.json names the command and lists exactly the other files, with their sizes
+    and sha256."""
+    import hashlib
+    import json
+    from importlib.metadata import version
+
+    doc = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    assert doc["command"] == command and doc["trackkit"] == version("trackkit")
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", doc["time"])
+    listed = {f["name"]: f for f in doc["files"]}
+    assert set(listed) == _names(out) - {"manifest.json"}
+    for name, f in listed.items():
+        data = (out / name).read_bytes()
+        assert f["bytes"] == len(data) and f["sha256"] == hashlib.sha256(data).hexdigest()
+    return doc
+
+
+def test_run_lists_its_files_and_removes_its_own_stale_ones(tmp_path):
+    out = tmp_path / "out"
+    first = trackkit("run", "radar-crossing", "--runs", "1", "--out", str(out))
+    assert first.code == 0, first.text
+    assert {"xy.png", "gospa.png"} <= _names(out)
+    (out / "notes.txt").write_text("mine", encoding="utf-8")  # the user's: kept
+    ran = trackkit("run", "cv-position", "--runs", "2", "--out", str(out))
+    assert ran.code == 0, ran.text
+    names = _names(out)
+    # the multi-target run's figures were listed by its manifest and not written again
+    assert "xy.png" not in names and "gospa.png" not in names and "notes.txt" in names
+    (out / "notes.txt").unlink()
+    doc = _check_manifest(out, "run")
+    assert doc["arguments"]["scenario"] == "cv-position" and doc["arguments"]["runs"] == 2
+    assert {"results.json", "rmse.png", "report.html"} <= names
+
+
+def test_another_commands_directory_is_refused_and_left_as_it_was(tmp_path):
+    out = tmp_path / "out"
+    assert trackkit("run", "cv-position", "--runs", "2", "--out", str(out)).code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    ran = trackkit("network", "net-baseline", "--runs", "1", "--out", str(out))
+    assert_user_error(ran, 2, f"--out {out}", "`trackkit run`", "`trackkit network`",
+                      "another --out")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_files_no_manifest_lists_are_not_overwritten(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "results.json").write_text("{}", encoding="utf-8")  # someone else's
+    ran = trackkit("run", "cv-position", "--runs", "2", "--out", str(out))
+    assert_user_error(ran, 2, f"--out {out}", "results.json", "no trackkit manifest.json",
+                      "would overwrite")
+    assert _names(out) == {"results.json"}
+    assert (out / "results.json").read_text(encoding="utf-8") == "{}"
+
+
+def test_a_scenario_file_gets_its_own_default_directory(tmp_path):
+    import os
+
+    import trackkit as tk
+
+    text = trackkit("show", "cv-position").out
+    (tmp_path / "my.toml").write_text(text, encoding="utf-8")
+    # in another directory, the trackkit under test is still the one imported here
+    src = str(Path(tk.__file__).resolve().parents[1])
+    env = {"PYTHONPATH": os.pathsep.join([src, *filter(None, [os.environ.get("PYTHONPATH")])])}
+    bundled = trackkit("run", "cv-position", "--runs", "2", cwd=tmp_path, env=env)
+    assert bundled.code == 0, bundled.text
+    mine = trackkit("run", "my.toml", "--runs", "2", cwd=tmp_path, env=env)
+    assert mine.code == 0, mine.text
+    assert _names(tmp_path / "trackkit-out") == {"cv-position", "my"}
+    _check_manifest(tmp_path / "trackkit-out" / "my", "run")
+    assert _check_manifest(tmp_path / "trackkit-out" / "cv-position", "run")[
+        "arguments"]["scenario"] == "cv-position"

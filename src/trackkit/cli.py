@@ -223,9 +223,18 @@ def _describe(err: BaseException) -> tuple[str, int]:
             "TRACKKIT_DEBUG=1 shows the traceback)"), 1
 
 
+def _current_context() -> Any:
+    """The running command's context (typer keeps its own copy of click), or None."""
+    try:
+        from typer._click.globals import get_current_context
+    except ImportError:  # a typer that uses click itself
+        get_current_context = click.get_current_context
+    return get_current_context(silent=True)
+
+
 def _smaller_job() -> str:
     """How the running command's options make a smaller job (each names options it has)."""
-    ctx = click.get_current_context(silent=True)
+    ctx = _current_context()
     command = ctx.info_name if ctx is not None else None
     if command == "track":
         return "fewer scans (--max-scans N or --until SECONDS)"
@@ -305,7 +314,9 @@ class OutputDir:
     path that cannot be written fails before the Monte Carlo, and two runs cannot write into
     one directory. The lock file ``LOCK_FILE`` is created with O_EXCL and holds the pid; a
     lock whose process has died is taken over (``note`` says so). On exit the lock is
-    released, and after a failure the directories this run created are removed if empty."""
+    released, and after a failure the directories this run created are removed if empty.
+    Inside a command, the directory is also checked and its writes listed in manifest.json
+    (``report.files.command_output``)."""
 
     def __init__(self, path: Path, label: str) -> None:
         self.path = path
@@ -314,18 +325,29 @@ class OutputDir:
         self.created: list[Path] = []
         self.note: str | None = None
         self._locked = False
+        self._manifest: Any = None
 
     def __enter__(self) -> OutputDir:
         self.created = self._create()
         try:
             self.note = self._acquire()
+            run = _command_run(self.path)
+            if run is not None:
+                from trackkit.report.files import command_output
+
+                self._manifest = command_output(self.path, self.label, run)
+                self._manifest.__enter__()
         except BaseException:
+            self._release()
             self._remove_created()
             raise
         return self
 
     def __exit__(self, kind: type[BaseException] | None, err: BaseException | None,
                  tb: TracebackType | None) -> None:
+        if self._manifest is not None:
+            self._manifest.__exit__(kind, err, tb)
+            self._manifest = None
         self._release()
         if kind is not None:
             self._remove_created()
@@ -399,6 +421,66 @@ class OutputDir:
                 d.rmdir()
             except OSError:  # not empty or gone: leave it
                 return
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, StrEnum):
+        return value.value
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def _may_write(command: str, path: Path) -> tuple[str, ...]:
+    """The report files a command may write into its output directory."""
+    from trackkit.report.files import TRACKKIT_FILES
+
+    if command == "run":
+        from trackkit.report.tracking_report import TRACKING_FILES
+
+        return (*TRACKKIT_FILES, *TRACKING_FILES)
+    if command == "network":
+        from trackkit.report.network_report import NETWORK_FILES
+
+        return NETWORK_FILES
+    if command == "identify":
+        from trackkit.report.vessel_report import VESSEL_FILES
+
+        return VESSEL_FILES
+    if command == "track":
+        from trackkit.report.tracks import TRACK_FILES
+
+        return TRACK_FILES
+    if command == "sweep":
+        from trackkit.report.sweep_report import sweep_outputs
+
+        return tuple(sweep_outputs(path))
+    return ()
+
+
+def _command_run(path: Path) -> Any:
+    """The running command as ``report.files.CommandRun`` (its name, its arguments, the
+    files it may write), or None outside a command."""
+    ctx = _current_context()
+    if ctx is None or not ctx.info_name:
+        return None
+    from trackkit.report.files import CommandRun
+
+    return CommandRun(ctx.info_name, {k: _jsonable(v) for k, v in ctx.params.items()},
+                      _may_write(ctx.info_name, path))
+
+
+def _default_dir(scenario: str | None, sc: Any) -> str:
+    """The default output directory's name: a scenario file's stem (my.toml -> my), a
+    bundled scenario's name."""
+    p = Path(scenario) if scenario else None
+    if p is not None and (p.suffix == ".toml" or p.is_file()):
+        return p.stem
+    return str(sc.name)
 
 
 def _output_dir(out: Path | None, name: str) -> tuple[Path, str]:
@@ -568,7 +650,7 @@ def run(
         if _is_vessel(sc):
             raise ValueError(f"{scenario} is a vessel scenario; run it with "
                              f"`trackkit identify {scenario}`")
-        target, label = _output_dir(out, str(sc.name))
+        target, label = _output_dir(out, _default_dir(scenario, sc))
         total = runs or getattr(getattr(sc, "run", None), "runs", None) or 1
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
@@ -762,7 +844,7 @@ def sweep(
         with _stderr().status("checking every point of the sweep"):
             campaign = plan_campaign(sc, params, design.value if design else None, points,
                                      runs, seed, block)
-        target, label = _output_dir(out, f"{sc.name}-sweep")
+        target, label = _output_dir(out, f"{_default_dir(scenario, sc)}-sweep")
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was stored in {target}"
             if where.note:
@@ -927,7 +1009,7 @@ def network(
             check_loss(loss, "--loss")
         if not (math.isfinite(delay) and delay >= 0.0):
             raise ValueError(f"--delay {delay!r}; expected simulated seconds >= 0")
-        name = f"{sc.name}-straight" if straight else str(sc.name)
+        name = _default_dir(scenario, sc) + ("-straight" if straight else "")
         target, label = _output_dir(out, name)
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
@@ -1704,7 +1786,7 @@ def identify(
                                  "vessel scenario, which simulates its sensors (its period is "
                                  "identification.period_s)")
             sc = load_vessel(what)
-            target, label = _output_dir(out, str(sc.name))
+            target, label = _output_dir(out, _default_dir(what, sc))
             with OutputDir(target, label) as where:
                 state.interrupted = f"interrupted; nothing was written to {target}"
                 if where.note:
