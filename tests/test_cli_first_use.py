@@ -165,7 +165,8 @@ def _check_manifest(out: Path, command: str) -> dict:
     assert doc["command"] == command and doc["trackkit"] == version("trackkit")
     assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", doc["time"])
     listed = {f["name"]: f for f in doc["files"]}
-    assert set(listed) == _names(out) - {"manifest.json"}
+    kept = {k.rstrip("/") for k in doc["kept"]}
+    assert set(listed) | kept == _names(out) - {"manifest.json"} and not set(listed) & kept
     for name, f in listed.items():
         data = (out / name).read_bytes()
         assert f["bytes"] == len(data) and f["sha256"] == hashlib.sha256(data).hexdigest()
@@ -183,8 +184,8 @@ def test_run_lists_its_files_and_removes_its_own_stale_ones(tmp_path):
     names = _names(out)
     # the multi-target run's figures were listed by its manifest and not written again
     assert "xy.png" not in names and "gospa.png" not in names and "notes.txt" in names
-    (out / "notes.txt").unlink()
     doc = _check_manifest(out, "run")
+    assert doc["kept"] == ["notes.txt"]
     assert doc["arguments"]["scenario"] == "cv-position" and doc["arguments"]["runs"] == 2
     assert {"results.json", "rmse.png", "report.html"} <= names
 
@@ -228,3 +229,63 @@ def test_a_scenario_file_gets_its_own_default_directory(tmp_path):
     _check_manifest(tmp_path / "trackkit-out" / "my", "run")
     assert _check_manifest(tmp_path / "trackkit-out" / "cv-position", "run")[
         "arguments"]["scenario"] == "cv-position"
+
+
+# --- terminal tables: no number cut at 80 columns or in a pipe --------------------------------
+
+
+def _fits_80(ran) -> None:
+    """The tables (everything before the notes and the paths written) fit 80 columns and
+    cut nothing."""
+    assert ran.code == 0, ran.text
+    tables = re.split(r"^(?:note:|wrote |messages:)", ran.out, maxsplit=1, flags=re.M)[0]
+    assert "…" not in tables, ran.out
+    assert max(len(line.rstrip()) for line in tables.splitlines()) <= 80, ran.out
+
+
+def test_run_tables_keep_every_number_at_80_columns_in_a_pipe(tmp_path):
+    import json
+
+    out = tmp_path / "out"
+    ran = trackkit("run", "--runs", "2", "--out", str(out), env={"COLUMNS": "80"})
+    _fits_80(ran)
+    doc = json.loads((out / "results.json").read_text(encoding="utf-8"))
+    for name in doc["filters"]:
+        assert f" {name} " in ran.out
+    # the IEKF's ANEES is large: printed whole, with its exponent
+    anees = doc["filters"]["IEKF"]["anees"]
+    assert f"{anees:.3g}" in ran.out or f"{anees:.4g}" in ran.out, ran.out
+
+
+def test_a_network_table_folds_instead_of_cutting(tmp_path):
+    ran = trackkit("network", "net-baseline", "--runs", "1", "--out", str(tmp_path / "n"),
+                   env={"COLUMNS": "80"})
+    _fits_80(ran)
+    # every agent's per-target values whole, on one line
+    assert len(re.findall(r"\d\.\d\d / \d\.\d\d / \d\.\d\d", ran.out)) == 3 * 2
+    assert len(re.findall(r" \d+ / \d+ / \d+ ", ran.out)) == 3 * 3
+    _check_manifest(tmp_path / "n", "network")
+
+
+def test_the_sweep_summary_shows_the_swept_values_not_a_hash(tmp_path):
+    import json
+
+    from tests.eval.test_sweep import short_bo_cv_toml
+
+    scenario = short_bo_cv_toml(tmp_path / "short.toml")
+    out = tmp_path / "sweep"
+    ran = trackkit("sweep", str(scenario), "--param", "sensor.sigma_deg=1,2", "--param",
+                   "filters.*.motion.q=x0.5,x2", "--runs", "2", "--out", str(out),
+                   env={"COLUMNS": "80"})
+    _fits_80(ran)
+    doc = json.loads((out / "sweep.json").read_text(encoding="utf-8"))
+    for point in doc["points"]:
+        assert point["id"][:6] not in ran.out  # no point hash
+    head = next(line for line in ran.out.splitlines() if "sigma_deg" in line)
+    assert head.split()[:3] == ["sigma_deg", "q", "filter"]
+    rows = [line.split() for line in ran.out.splitlines() if line.strip()[:4] in ("1.0 ", "2.0 ")]
+    assert {(r[0], r[1]) for r in rows} == {("1.0", "x0.5"), ("1.0", "x2"), ("2.0", "x0.5"),
+                                            ("2.0", "x2")}
+    assert "q = filters.*.motion.q" in ran.out
+    # the report files are this write's; the stored blocks are kept beside them
+    assert {"campaign.json", "points/"} <= set(_check_manifest(out, "sweep")["kept"])

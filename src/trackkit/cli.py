@@ -673,7 +673,6 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     """A multi-target scenario: every tracker on the same simulated scans (Monte Carlo),
     GOSPA, OSPA and the track counts; the report written into ``out``."""
     import numpy as np
-    from rich.markup import escape
 
     from trackkit.eval.tracking_run import run_multitarget
     from trackkit.report.tracking_report import write_tracking_report
@@ -694,17 +693,16 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     headers = ["tracker", "GOSPA [m]", "OSPA [m]",
                f"confirmed within {sc.report.confirm_within_scans:g} scans",
                "false tracks / 100 scans", "breaks", "ID switches", "RMSE [m]"]
-    table = Table(*(escape(h) for h in headers),  # "[m]" is a unit, not rich markup
-                  title=f"{sc.name}: {result.runs} runs, seed {result.seed}, c = {result.c:g} m",
-                  title_justify="left")
     scans = result.runs * result.times.size
+    rows = []
     for name, r in result.trackers.items():
         s = r.summary
-        table.add_row(name, f"{r.mean_gospa:.1f}", f"{float(np.mean(r.ospa)):.1f}",
-                      f"{100 * s['confirmed_within_fraction']:.1f}%",
-                      f"{100 * s['false_tracks'] / scans:.2f}", str(s["breaks"]),
-                      str(s["id_switches"]), f"{s['rmse']:.1f}")
-    console.print(table)
+        rows.append([name, f"{r.mean_gospa:.1f}", f"{float(np.mean(r.ospa)):.1f}",
+                     f"{100 * s['confirmed_within_fraction']:.1f}%",
+                     f"{100 * s['false_tracks'] / scans:.2f}", str(s["breaks"]),
+                     str(s["id_switches"]), f"{s['rmse']:.1f}"])
+    console.print(_number_table(headers, rows, f"{sc.name}: {result.runs} runs, seed "
+                                f"{result.seed}, c = {result.c:g} m", console))
     for note in sc.notes:
         console.print(Text(f"note: {note}", style="yellow"))
     html = paths.get("html")
@@ -878,32 +876,36 @@ def sweep(
 
 
 def _print_sweep_summary(campaign: Any, docs: list[dict], paths: dict[str, Path]) -> None:
-    from rich.markup import escape
-
-    from trackkit.report.tables import display_unit
+    from trackkit.report.tables import Summary, display_unit, summary_rich_table
 
     console = Console()
     g = campaign.base.report.groups[0]
     unit, factor = display_unit(docs[0]["units"].get(g, "") if docs else "")
-    table = Table("point", *(escape(p.path) for p in campaign.params), "filter",
-                  escape(f"{g} RMSE [{unit}]"), "RMSE / PCRLB", "ANEES", "diverged",
-                  title=f"{campaign.base.name}: {len(campaign.points)} points x "
-                  f"{campaign.runs} runs, seed {campaign.seed}", title_justify="left")
+    paths_ = [p.path for p in campaign.params]
+    # each swept value under its field's last name (the full paths in the caption)
+    short = [q.rsplit(".", 1)[-1] for q in paths_]
+    names = short if len(set(short)) == len(short) else paths_
 
     def num(v: Any, scale: float = 1.0) -> str:
         return "n/a" if v is None else f"{v * scale:.4g}"
 
+    cells: list[list[str]] = []
     shown, limit = 0, 40
     for d in docs:
         for name, f in d["filters"].items():
             if shown == limit:
                 break
             shown += 1
-            table.add_row(d["point"], *(escape(str(d["values"][p.path]))
-                                        for p in campaign.params), name,
-                          num(f["rmse"].get(g), factor), num(f["rmse_pcrlb"].get(g)),
-                          num(f["anees"]), f"{f['diverged'] / d['runs']:.1%}")
-    console.print(table)
+            cells.append([*(str(d["values"][q]) for q in paths_), name,
+                         num(f["rmse"].get(g), factor), num(f["rmse_pcrlb"].get(g)),
+                         num(f["anees"]), f"{f['diverged'] / d['runs']:.1%}"])
+    caption = ", ".join(f"{n} = {q}" for n, q in zip(names, paths_, strict=True)
+                        if n != q)
+    table = Summary([*names, "filter", f"{g} RMSE [{unit}]", "RMSE / PCRLB", "ANEES",
+                     "diverged"], cells, caption,
+                    title=f"{campaign.base.name}: {len(campaign.points)} points x "
+                    f"{campaign.runs} runs, seed {campaign.seed}")
+    console.print(summary_rich_table(table, console.width))
     rows = sum(len(d["filters"]) for d in docs)
     if rows > shown:
         console.print(Text(f"... {rows - shown} more rows in {paths['csv']}", style="dim"))
@@ -1116,9 +1118,16 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
     _print_network_summary(paths)
 
 
-def _print_network_summary(paths: dict[str, Path]) -> None:
-    from rich.markup import escape
+def _number_table(headers: list[str], rows: list[list[str]], title: str, console: Console
+                  ) -> Any:
+    """A summary table whose numbers are never cut at the console's width (folded instead;
+    ``report.tables.summary_rich_table``)."""
+    from trackkit.report.tables import Summary, summary_rich_table
 
+    return summary_rich_table(Summary(headers, rows, "", title=title), console.width)
+
+
+def _print_network_summary(paths: dict[str, Path]) -> None:
     doc = json.loads(paths["results"].read_text(encoding="utf-8"))
     w = doc["windows"]["last"]
     mode = "steering" if doc["steering"] else "straight courses"
@@ -1129,19 +1138,17 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
     def per_target(v: list, spec: str) -> str:
         return " / ".join("-" if x is None else format(x, spec) for x in v)
 
-    table = Table(*(escape(h) for h in headers),  # "[m]" is a unit, not rich markup
-                  title=f"{doc['scenario']}: {doc['runs']} runs, seed {doc['seed']}, {mode} "
-                  "(per target: 1 / 2 / ...)", title_justify="left")
-    for e in doc["per_agent"]:
-        table.add_row(str(e["agent"]), f"{100 * e['all_held_final_fraction']:.0f}%",
-                      "-" if e["gospa_mean"] is None else f"{e['gospa_mean']:.0f}",
-                      per_target(e["rmse_pos_last"], ".0f"),
-                      per_target(e["central_rmse_pos_last"], ".0f"),
-                      per_target(e["pcrlb_pos_last"], ".0f"),
-                      per_target(e["ratio_to_central_pos_last"], ".2f"),
-                      per_target(e["ratio_to_pcrlb_pos_last"], ".2f"))
+    rows = [[str(e["agent"]), f"{100 * e['all_held_final_fraction']:.0f}%",
+             "-" if e["gospa_mean"] is None else f"{e['gospa_mean']:.0f}",
+             per_target(e["rmse_pos_last"], ".0f"),
+             per_target(e["central_rmse_pos_last"], ".0f"),
+             per_target(e["pcrlb_pos_last"], ".0f"),
+             per_target(e["ratio_to_central_pos_last"], ".2f"),
+             per_target(e["ratio_to_pcrlb_pos_last"], ".2f")] for e in doc["per_agent"]]
     console = Console()
-    console.print(table)
+    console.print(_number_table(headers, rows, f"{doc['scenario']}: {doc['runs']} runs, "
+                                f"seed {doc['seed']}, {mode} (per target: 1 / 2 / ...)",
+                                console))
     m = doc["messages"]
     console.print(Text(f"messages: {m['sent']} sent, {m['delivered']} delivered, "
                        f"{m['lost']} lost, {m['late']} late"))

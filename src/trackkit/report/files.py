@@ -358,13 +358,23 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _write_manifest(folder: Path, run: CommandRun, written: dict[str, Path]) -> Path:
+def _write_manifest(folder: Path, run: CommandRun, written: dict[str, Path],
+                    kept: Iterable[str]) -> Path:
+    """``manifest.json``: the files of this write, and (``kept``) the other entries the
+    directory keeps beside them (a campaign's stored blocks, a user's own files)."""
     files = [{"name": p.name, "bytes": p.stat().st_size, "sha256": _sha256(p)}
              for p in sorted(written.values(), key=lambda p: p.name)]
     doc = {"command": run.command, "arguments": run.arguments, "trackkit": _version(),
            "time": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
-           "files": files}
+           "files": files, "kept": sorted(kept)}
     return _write_json(doc, folder / MANIFEST_JSON)
+
+
+def _kept(out: Path, written: Iterable[str], removed: Iterable[str]) -> list[str]:
+    """The entries of ``out`` a write leaves beside its files (directories end in /)."""
+    gone = {*written, *removed, MANIFEST_JSON, INCOMPLETE, RESULTS_JSON}
+    return [p.name + ("/" if p.is_dir() else "") for p in out.iterdir()
+            if p.name not in gone and not p.name.startswith(".")]
 
 
 def _move_into_place(tmp: Path, out: Path, written: dict[str, Path],
@@ -428,7 +438,8 @@ def write_atomically(out_dir: str | Path, write_all: Callable[[Path], dict[str, 
             run = held[1]
             names = {p.name for p in written.values()}
             owned = {*owned, *_check_directory(out, str(out_dir), run, names)}
-            written["manifest"] = _write_manifest(tmp, run, written)
+            written["manifest"] = _write_manifest(tmp, run, written,
+                                                  _kept(out, names, set(owned) - names))
         return _move_into_place(tmp, out, written, owned)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
