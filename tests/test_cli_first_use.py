@@ -289,3 +289,73 @@ def test_the_sweep_summary_shows_the_swept_values_not_a_hash(tmp_path):
     assert "q = filters.*.motion.q" in ran.out
     # the report files are this write's; the stored blocks are kept beside them
     assert {"campaign.json", "points/"} <= set(_check_manifest(out, "sweep")["kept"])
+
+
+# --- saying what a long command is doing ------------------------------------------------------
+
+
+def test_identify_says_what_it_is_doing_on_stderr(tmp_path):
+    out = tmp_path / "out"
+    ran = trackkit("identify", str(LOG), "--inputs", str(INPUTS), "--out", str(out))
+    assert ran.code == 0, ran.text
+    stages = [line for line in ran.err.splitlines() if line.endswith(" ...")]
+    assert [s.split()[0] for s in stages] == ["reading", "identifying", "writing"] or [
+        s.split()[0] for s in stages] == ["reading", "compiling", "writing"], ran.err
+    assert str(LOG) in stages[0] and str(INPUTS) in stages[0]
+    assert "16 coefficients with ekf (167 samples)" in stages[1]
+    assert str(out) in stages[2]
+    _check_manifest(out, "identify")
+
+
+def test_identify_says_it_compiles_the_filter_the_first_time(tmp_path):
+    """An empty numba cache: the command says it compiles (about half a minute), and a
+    Ctrl-C then stops it at once, in one line, leaving nothing behind."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1",
+           "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    env.pop("TRACKKIT_DEBUG", None)
+    p = subprocess.Popen([sys.executable, "-m", "trackkit.cli", "identify", str(LOG),
+                          "--inputs", str(INPUTS), "--out", str(out)], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=env)
+    lines = []
+    for line in p.stderr:
+        lines.append(line)
+        if line.startswith("compiling") or line.startswith("writing"):
+            break
+    p.send_signal(signal.SIGINT)
+    _, rest = p.communicate(timeout=120)
+    err = "".join(lines) + rest
+    assert lines[-1].startswith("compiling the ekf filter (the first run only"), err
+    assert "identifying the 16 coefficients" in lines[-1]
+    assert p.returncode == 130 and err.count("interrupted") == 1, err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_network_says_how_many_runs_before_it_starts(tmp_path):
+    f = tmp_path / "tiny.toml"
+    from tests.test_network_scenarios import TINY
+
+    f.write_text(TINY, encoding="utf-8")  # its run.runs = 2
+    ran = trackkit("network", str(f), "--out", str(tmp_path / "o"))
+    assert ran.code == 0, ran.text
+    first = ran.err.splitlines()[0]
+    assert first.startswith("net-tiny: 2 Monte Carlo runs (the scenario's run.runs; --runs N "
+                            "for fewer), agents in this process -> "), ran.err
+    assert "2/2 runs" in ran.err
+    _check_manifest(tmp_path / "o", "network")
+
+
+def test_an_agent_killed_without_restart_is_said_so(tmp_path):
+    f = tmp_path / "tiny.toml"
+    from tests.test_network_scenarios import TINY
+
+    f.write_text(TINY, encoding="utf-8")
+    ran = trackkit("network", str(f), "--runs", "1", "--agents", "processes", "--kill",
+                   "2@20", "--out", str(tmp_path / "o"))
+    assert ran.code == 0, ran.text
+    assert "agent 2 killed at 20 s, not restarted" in ran.out and "None" not in ran.out

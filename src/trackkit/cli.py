@@ -1097,6 +1097,13 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
 
     compare = kwargs.pop("compare_straight", False)
     total = kwargs.get("runs") or sc.run.runs
+    given = "--runs" if kwargs.get("runs") else "the scenario's run.runs; --runs N for fewer"
+    where = ("in their own processes" if kwargs.get("agents") == "processes"
+             else "in this process")
+    _stderr().print(Text(
+        f"{sc.name}: {total} Monte Carlo run{'' if total == 1 else 's'} ({given})"
+        + (", then the same runs on straight courses" if compare else "")
+        + f", agents {where} -> {out}", style="bold"), soft_wrap=True)
     with _progress_bar(_stderr()) as bar:
 
         def monte_carlo(label: str, **more: Any):
@@ -1825,6 +1832,29 @@ def identify(
             state.interrupted = "interrupted"
 
 
+@contextmanager
+def _stage(what: str) -> Iterator[None]:
+    """Say on stderr what the command is doing, as a line (seen in a pipe or a log too) and,
+    on a terminal, a spinner while it lasts."""
+    console = _stderr()
+    console.print(Text(f"{what} ...", style="dim"), soft_wrap=True)
+    with console.status(what):
+        yield
+
+
+def _filter_compiled(filt: str) -> bool:
+    """Whether the identifier's compiled step is in numba's cache already (the EKF's fused
+    step is compiled on its first run and cached beside its module)."""
+    if filt != "ekf":
+        return True
+    try:
+        from trackkit.identify import fused
+
+        return Path(fused._step._cache._cache_file._index_path).is_file()
+    except AttributeError:  # another numba: do not guess
+        return True
+
+
 def _stop_hint(err: ValueError, columns: str) -> ValueError:
     """A reader's message in the command's words (its options, not the function's)."""
     return ValueError(str(err).replace(
@@ -1857,7 +1887,7 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
 
     console = Console()
     notes: list[str] = []
-    with _stderr().status(f"reading {log}"):
+    with _stage(f"reading {log} and {inputs}"):
         try:
             if log.suffix.lower() == ".csv":
                 nav, read = read_nav_csv(log, on_bad)
@@ -1896,7 +1926,11 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
                      + ", ".join(f"{g.stream} {g.start:.1f}-{g.end:.1f} s" for g in m.gaps[:5])
                      + ("..." if len(m.gaps) > 5 else "") + "): no measurement there, the "
                      "filter predicts across")
-    with _stderr().status(f"identifying with {filt}"):
+    doing = f"identifying the 16 coefficients with {filt} ({m.t.size} samples)"
+    if not _filter_compiled(filt):
+        doing = (f"compiling the {filt} filter (the first run only: about half a minute; "
+                 f"later runs reuse it), then {doing}")
+    with _stage(doing):
         rec = identify_recorded(m, ins, filter=filt, inputs_name=f"--inputs {inputs}")
     span = rec.t[-1] - rec.t[0]
     if span < _CONVERGED_AFTER_S:
@@ -1910,7 +1944,7 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
     if rec.dropped:
         notes.append(f"the first {rec.dropped} grid sample(s) lack a measurement and were "
                      "left out")
-    with _stderr().status("writing the report"):
+    with _stage(f"writing the report to {out}"):
         paths = write_recorded_report(rec, out, title=log.name, notes=notes, log_read=read,
                                       inputs_read=iread)
     _print_recorded_summary(paths, log, notes)
