@@ -113,19 +113,34 @@ def test_version_prints_the_installed_package_version():
     assert ran.code == 0 and ran.out.strip() == f"trackkit {version('trackkit')}", ran.text
 
 
-def test_ctrl_c_with_workers_says_interrupted_once_and_leaves_no_process(tmp_path):
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_ctrl_c_with_workers_says_interrupted_once_and_leaves_no_process(command, tmp_path):
+    """Ctrl-C in a terminal reaches the whole process group, the Dask workers too: the
+    command says "interrupted" once, no worker or nanny speaks, nothing is left running.
+    ``run`` goes through the installed ``trackkit`` script when there is one (its worker
+    processes import the script again)."""
     import os
     import signal
     import subprocess
     import sys
     import time
 
+    from tests.eval.test_sweep import short_bo_cv_toml
+
     out = tmp_path / "out"
     env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1"}
     env.pop("TRACKKIT_DEBUG", None)
-    p = subprocess.Popen([sys.executable, "-m", "trackkit.cli", "run", "--runs", "100000",
-                          "--workers", "2", "--out", str(out)], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+    script = Path(sys.executable).with_name("trackkit")
+    start = [str(script)] if script.is_file() else [sys.executable, "-m", "trackkit.cli"]
+    if command == "run":
+        args = [*start, "run", "--runs", "100000", "--workers", "2", "--out", str(out)]
+    else:
+        scenario = short_bo_cv_toml(tmp_path / "short.toml")
+        args = [sys.executable, "-m", "trackkit.cli", "sweep", str(scenario), "--param",
+                "sensor.sigma_deg=1,2,3,4", "--runs", "2000", "--workers", "2", "--out",
+                str(out)]
+    p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=env, start_new_session=True)
     deadline = time.monotonic() + 120
     while not (out / ".trackkit.lock").exists() and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -143,8 +158,11 @@ def test_ctrl_c_with_workers_says_interrupted_once_and_leaves_no_process(tmp_pat
     assert p.returncode == 130, err
     assert err.count("interrupted") == 1, err
     assert "nanny" not in err.lower() and "distributed." not in err, err
-    assert "Traceback" not in err and not left, left
-    assert not out.exists() or not any(out.iterdir())
+    assert "Traceback" not in err and "WARNING" not in err and not left, left
+    if command == "run":
+        assert not out.exists() or not any(out.iterdir())
+    else:
+        assert "run the same command again to resume" in err
 
 
 # --- output directories: one command's files, listed in manifest.json -------------------------

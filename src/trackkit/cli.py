@@ -39,6 +39,10 @@ def _interrupted_while_starting(signum: int, frame: object) -> None:
 
 
 def _started_as_command() -> bool:
+    from multiprocessing import parent_process
+
+    if parent_process() is not None:  # a worker process started by the command: not it
+        return False
     return __name__ == "__main__" or os.path.basename(sys.argv[0] or "").startswith("trackkit")
 
 
