@@ -75,17 +75,46 @@ def test_a_second_kill_of_one_agent_is_named_by_the_options_given(tmp_path):
     assert "None" not in late.text and not out.exists()
 
 
-def test_out_of_memory_names_the_options_of_the_command_that_ran():
-    import typer
+AIS = ("Time,MMSI,Latitude_degrees,Longitude_degrees,COG_degrees,SOG_knots\n"
+       "2016-01-12 13:02:11,1,50.8,-1.1,10,5\n2016-01-12 13:02:41,1,50.801,-1.1,10,5\n"
+       "2016-01-12 13:03:11,1,50.802,-1.1,10,5\n2016-01-12 13:02:11,2,50.81,-1.12,10,5\n"
+       "2016-01-12 13:03:11,2,50.812,-1.12,10,5\n")
 
-    from trackkit import cli
 
-    def advice(command: str) -> str:
-        with typer.Context(typer.core.TyperCommand(command), info_name=command):
-            return cli._describe(MemoryError())[0]
+def test_out_of_memory_names_the_options_of_the_command_that_ran(tmp_path):
+    """A billion false plots per scan under a 3 GB address-space limit: track runs out of
+    memory and says which of its own options make the job smaller (it has no --runs)."""
+    import os
+    import resource
+    import subprocess
+    import sys
 
-    assert "--max-scans" in advice("track") and "--runs" not in advice("track")
-    assert "--runs" in advice("run") and "--runs" in advice("network")
+    ais = tmp_path / "ais.csv"
+    ais.write_text(AIS, encoding="ascii")
+    out = tmp_path / "out"
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+
+    env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1"}
+    env.pop("TRACKKIT_DEBUG", None)
+    p = subprocess.run([sys.executable, "-m", "trackkit.cli", "track", str(ais), "--as-radar",
+                        "--clutter", "1e9", "--out", str(out)], preexec_fn=limit, env=env,
+                       capture_output=True, text=True, timeout=120)
+    from tests.cli_helpers import Ran
+
+    ran = Ran(p.returncode, p.stdout, p.stderr)
+    assert_user_error(ran, 1, "out of memory", "--max-scans", "--until")
+    assert "--runs" not in ran.text and not out.exists()
+
+
+def test_track_lists_its_files_in_the_manifest(tmp_path):
+    ais = tmp_path / "ais.csv"
+    ais.write_text(AIS, encoding="ascii")
+    ran = trackkit("track", str(ais), "--as-radar", "--out", str(tmp_path / "out"))
+    assert ran.code == 0, ran.text
+    doc = _check_manifest(tmp_path / "out", "track")
+    assert doc["arguments"]["as_radar"] is True and doc["arguments"]["file"] == str(ais)
 
 
 def test_help_cites_papers_wraps_paragraphs_and_shows_no_type_for_flags():

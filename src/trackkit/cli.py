@@ -20,7 +20,11 @@ unexpected failure); 2 bad input (a scenario error, a bad option value, an outpu
 that cannot be created or written, or one that another run is writing into); 130
 interrupted (Ctrl-C). Every failure is one message in words, no traceback
 (``TRACKKIT_DEBUG=1`` keeps the traceback). The output directory is created, proven writable
-and locked before anything is computed; report files appear only when complete.
+and locked before anything is computed; report files appear only when complete, listed in its
+``manifest.json`` (which command wrote them, with what arguments). A directory holding another
+command's output, or files no manifest lists that the command would overwrite, is refused. The
+default directory is ``trackkit-out/NAME``: a scenario file's name without ``.toml``, else the
+bundled scenario's name.
 """
 
 from __future__ import annotations
@@ -629,7 +633,7 @@ def run(
         show_default="the scenario's run.seed")] = None,
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Output directory (created if missing).",
-        show_default="trackkit-out/SCENARIO")] = None,
+        show_default="trackkit-out/SCENARIO; for a file, its name without .toml")] = None,
     workers: Annotated[int | None, typer.Option(
         "--workers", "-w", callback=_at_least(1), help="Local Dask workers (at least 1).",
         show_default="none: in this process")] = None,
