@@ -43,7 +43,7 @@ def test_the_fixture_log_writes_its_report_and_prints_the_table(tmp_path):
     ran = trackkit("identify", str(LOG), "--inputs", str(INPUTS), "--out", str(out))
     assert ran.code == 0, ran.text
     assert _files(out) == {"convergence.png", "track.png", "heading.png", "trials.png",
-                           "report.html", "results.json"}
+                           "report.html", "results.json", "manifest.json"}
     lines = ran.out.splitlines()
     for name in COEFFICIENT_NAMES:  # one row per coefficient, with its std
         assert any(line.strip("│ ").startswith(f"{name} ") for line in lines), name
@@ -140,7 +140,7 @@ def test_bundled_scenarios_at_a_small_run_count(name, runs, files, tmp_path):
     out = tmp_path / name
     ran = _run("identify", name, "--runs", runs, "--out", str(out))
     assert ran.code == 0, ran.text
-    assert _files(out) == files
+    assert _files(out) == files | {"manifest.json"}
     doc = json.loads((out / "results.json").read_text(encoding="utf-8"))
     assert doc["runs"] == int(runs) and doc["scenario"] == name and doc["samples"] == 657
     assert "a1" in ran.out and "c3" in ran.out and "median error" in ran.out

@@ -377,7 +377,7 @@ def test_cli_network_straight_default_directory(tmp_path):
     f.write_text(TINY.replace("steering = false", "steering = true"), encoding="utf-8")
     ran = trackkit("network", str(f), "--runs", "1", "--straight", cwd=tmp_path)
     assert ran.code == 0, ran.text
-    doc = json.loads((tmp_path / "trackkit-out" / "net-tiny-straight" / "results.json")
+    doc = json.loads((tmp_path / "trackkit-out" / "tiny-straight" / "results.json")
                      .read_text())
     assert doc["steering"] is False
 

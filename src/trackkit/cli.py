@@ -20,7 +20,11 @@ unexpected failure); 2 bad input (a scenario error, a bad option value, an outpu
 that cannot be created or written, or one that another run is writing into); 130
 interrupted (Ctrl-C). Every failure is one message in words, no traceback
 (``TRACKKIT_DEBUG=1`` keeps the traceback). The output directory is created, proven writable
-and locked before anything is computed; report files appear only when complete.
+and locked before anything is computed; report files appear only when complete, listed in its
+``manifest.json`` (which command wrote them, with what arguments). A directory holding another
+command's output, or files no manifest lists that the command would overwrite, is refused. The
+default directory is ``trackkit-out/NAME``: a scenario file's name without ``.toml``, else the
+bundled scenario's name.
 """
 
 from __future__ import annotations
@@ -39,6 +43,10 @@ def _interrupted_while_starting(signum: int, frame: object) -> None:
 
 
 def _started_as_command() -> bool:
+    from multiprocessing import parent_process
+
+    if parent_process() is not None:  # a worker process started by the command: not it
+        return False
     return __name__ == "__main__" or os.path.basename(sys.argv[0] or "").startswith("trackkit")
 
 
@@ -81,8 +89,30 @@ LOCK_FILE = ".trackkit.lock"
 #: a lock file without a readable pid younger than this may be one being written right now
 _LOCK_GRACE_S = 10.0
 
+class _FlagsWithoutType:
+    """Help without a ``<bool>`` type beside a flag (``--help``, ``--straight``): a flag
+    takes no value."""
+
+    def get_params(self, ctx: click.Context) -> list[Any]:
+        params = super().get_params(ctx)  # type: ignore[misc]
+        for p in params:
+            if getattr(p, "is_bool_flag", False) and not p.secondary_opts and (
+                    p.metavar is None):
+                p.metavar = ""
+        return params
+
+
+class _Group(_FlagsWithoutType, typer.core.TyperGroup):
+    pass
+
+
+class _Command(_FlagsWithoutType, typer.core.TyperCommand):
+    pass
+
+
 app = typer.Typer(
     name="trackkit",
+    cls=_Group,
     help="Target tracking comparisons: Monte Carlo runs, PCRLB, tables, plots and reports.",
     no_args_is_help=True,
     add_completion=False,
@@ -114,9 +144,9 @@ def _load(name_or_path: str) -> Any:
     from trackkit.scenario.network import is_network, load_network
     from trackkit.scenario.vessel import is_vessel, load_vessel
 
-    if is_network(name_or_path):  # [[agents]]: a seed-004 network (trackkit network)
+    if is_network(name_or_path):  # [[agents]]: an agent network (trackkit network)
         return load_network(name_or_path)
-    if is_vessel(name_or_path):  # a [vessel] table: seed 003's identification (identify)
+    if is_vessel(name_or_path):  # a [vessel] table: a vessel's identification (identify)
         return load_vessel(name_or_path)
     if is_multitarget(name_or_path):  # a [scene] table: the multi-target tracker comparison
         return load_multitarget(name_or_path)
@@ -193,13 +223,34 @@ def _describe(err: BaseException) -> tuple[str, int]:
     if isinstance(err, ValueError):
         return str(err), 2
     if isinstance(err, MemoryError):
-        return ("out of memory; try fewer runs (--runs) or a smaller run.block in the "
-                "scenario"), 1
+        return f"out of memory; try {_smaller_job()}", 1
     if isinstance(err, OSError):
         where = f": {err.filename}" if getattr(err, "filename", None) else ""
         return f"{err.strerror or err}{where}", 1
     return (f"unexpected {type(err).__name__}: {err} (this is a trackkit bug; "
             "TRACKKIT_DEBUG=1 shows the traceback)"), 1
+
+
+def _current_context() -> Any:
+    """The running command's context (typer keeps its own copy of click), or None."""
+    try:
+        from typer._click.globals import get_current_context
+    except ImportError:  # a typer that uses click itself
+        get_current_context = click.get_current_context
+    return get_current_context(silent=True)
+
+
+def _smaller_job() -> str:
+    """How the running command's options make a smaller job (each names options it has)."""
+    ctx = _current_context()
+    command = ctx.info_name if ctx is not None else None
+    if command == "track":
+        return "fewer scans (--max-scans N or --until SECONDS)"
+    if command == "identify":
+        return "a shorter log, or fewer runs (--runs) of a vessel scenario"
+    if command == "network":
+        return "fewer runs (--runs)"
+    return "fewer runs (--runs) or a smaller run.block in the scenario"
 
 
 @contextmanager
@@ -271,7 +322,9 @@ class OutputDir:
     path that cannot be written fails before the Monte Carlo, and two runs cannot write into
     one directory. The lock file ``LOCK_FILE`` is created with O_EXCL and holds the pid; a
     lock whose process has died is taken over (``note`` says so). On exit the lock is
-    released, and after a failure the directories this run created are removed if empty."""
+    released, and after a failure the directories this run created are removed if empty.
+    Inside a command, the directory is also checked and its writes listed in manifest.json
+    (``report.files.command_output``)."""
 
     def __init__(self, path: Path, label: str) -> None:
         self.path = path
@@ -280,18 +333,29 @@ class OutputDir:
         self.created: list[Path] = []
         self.note: str | None = None
         self._locked = False
+        self._manifest: Any = None
 
     def __enter__(self) -> OutputDir:
         self.created = self._create()
         try:
             self.note = self._acquire()
+            run = _command_run(self.path)
+            if run is not None:
+                from trackkit.report.files import command_output
+
+                self._manifest = command_output(self.path, self.label, run)
+                self._manifest.__enter__()
         except BaseException:
+            self._release()
             self._remove_created()
             raise
         return self
 
     def __exit__(self, kind: type[BaseException] | None, err: BaseException | None,
                  tb: TracebackType | None) -> None:
+        if self._manifest is not None:
+            self._manifest.__exit__(kind, err, tb)
+            self._manifest = None
         self._release()
         if kind is not None:
             self._remove_created()
@@ -365,6 +429,66 @@ class OutputDir:
                 d.rmdir()
             except OSError:  # not empty or gone: leave it
                 return
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, StrEnum):
+        return value.value
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def _may_write(command: str, path: Path) -> tuple[str, ...]:
+    """The report files a command may write into its output directory."""
+    from trackkit.report.files import TRACKKIT_FILES
+
+    if command == "run":
+        from trackkit.report.tracking_report import TRACKING_FILES
+
+        return (*TRACKKIT_FILES, *TRACKING_FILES)
+    if command == "network":
+        from trackkit.report.network_report import NETWORK_FILES
+
+        return NETWORK_FILES
+    if command == "identify":
+        from trackkit.report.vessel_report import VESSEL_FILES
+
+        return VESSEL_FILES
+    if command == "track":
+        from trackkit.report.tracks import TRACK_FILES
+
+        return TRACK_FILES
+    if command == "sweep":
+        from trackkit.report.sweep_report import sweep_outputs
+
+        return tuple(sweep_outputs(path))
+    return ()
+
+
+def _command_run(path: Path) -> Any:
+    """The running command as ``report.files.CommandRun`` (its name, its arguments, the
+    files it may write), or None outside a command."""
+    ctx = _current_context()
+    if ctx is None or not ctx.info_name:
+        return None
+    from trackkit.report.files import CommandRun
+
+    return CommandRun(ctx.info_name, {k: _jsonable(v) for k, v in ctx.params.items()},
+                      _may_write(ctx.info_name, path))
+
+
+def _default_dir(scenario: str | None, sc: Any) -> str:
+    """The default output directory's name: a scenario file's stem (my.toml -> my), a
+    bundled scenario's name."""
+    p = Path(scenario) if scenario else None
+    if p is not None and (p.suffix == ".toml" or p.is_file()):
+        return p.stem
+    return str(sc.name)
 
 
 def _output_dir(out: Path | None, name: str) -> tuple[Path, str]:
@@ -516,7 +640,7 @@ def run(
         show_default="the scenario's run.seed")] = None,
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Output directory (created if missing).",
-        show_default="trackkit-out/SCENARIO")] = None,
+        show_default="trackkit-out/SCENARIO; for a file, its name without .toml")] = None,
     workers: Annotated[int | None, typer.Option(
         "--workers", "-w", callback=_at_least(1), help="Local Dask workers (at least 1).",
         show_default="none: in this process")] = None,
@@ -536,12 +660,12 @@ def run(
     with _user_errors() as state:
         sc = _load(scenario or _default_name())
         if _is_network(sc):
-            raise ValueError(f"{scenario} is a network scenario (seed 004); run it with "
+            raise ValueError(f"{scenario} is a network scenario; run it with "
                              f"`trackkit network {scenario}`")
         if _is_vessel(sc):
-            raise ValueError(f"{scenario} is a vessel scenario (seed 003); run it with "
+            raise ValueError(f"{scenario} is a vessel scenario; run it with "
                              f"`trackkit identify {scenario}`")
-        target, label = _output_dir(out, str(sc.name))
+        target, label = _output_dir(out, _default_dir(scenario, sc))
         total = runs or getattr(getattr(sc, "run", None), "runs", None) or 1
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
@@ -564,7 +688,6 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     """A multi-target scenario: every tracker on the same simulated scans (Monte Carlo),
     GOSPA, OSPA and the track counts; the report written into ``out``."""
     import numpy as np
-    from rich.markup import escape
 
     from trackkit.eval.tracking_run import run_multitarget
     from trackkit.report.tracking_report import write_tracking_report
@@ -585,17 +708,16 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     headers = ["tracker", "GOSPA [m]", "OSPA [m]",
                f"confirmed within {sc.report.confirm_within_scans:g} scans",
                "false tracks / 100 scans", "breaks", "ID switches", "RMSE [m]"]
-    table = Table(*(escape(h) for h in headers),  # "[m]" is a unit, not rich markup
-                  title=f"{sc.name}: {result.runs} runs, seed {result.seed}, c = {result.c:g} m",
-                  title_justify="left")
     scans = result.runs * result.times.size
+    rows = []
     for name, r in result.trackers.items():
         s = r.summary
-        table.add_row(name, f"{r.mean_gospa:.1f}", f"{float(np.mean(r.ospa)):.1f}",
-                      f"{100 * s['confirmed_within_fraction']:.1f}%",
-                      f"{100 * s['false_tracks'] / scans:.2f}", str(s["breaks"]),
-                      str(s["id_switches"]), f"{s['rmse']:.1f}")
-    console.print(table)
+        rows.append([name, f"{r.mean_gospa:.1f}", f"{float(np.mean(r.ospa)):.1f}",
+                     f"{100 * s['confirmed_within_fraction']:.1f}%",
+                     f"{100 * s['false_tracks'] / scans:.2f}", str(s["breaks"]),
+                     str(s["id_switches"]), f"{s['rmse']:.1f}"])
+    console.print(_number_table(headers, rows, f"{sc.name}: {result.runs} runs, seed "
+                                f"{result.seed}, c = {result.c:g} m", console))
     for note in sc.notes:
         console.print(Text(f"note: {note}", style="yellow"))
     html = paths.get("html")
@@ -735,7 +857,7 @@ def sweep(
         with _stderr().status("checking every point of the sweep"):
             campaign = plan_campaign(sc, params, design.value if design else None, points,
                                      runs, seed, block)
-        target, label = _output_dir(out, f"{sc.name}-sweep")
+        target, label = _output_dir(out, f"{_default_dir(scenario, sc)}-sweep")
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was stored in {target}"
             if where.note:
@@ -769,32 +891,36 @@ def sweep(
 
 
 def _print_sweep_summary(campaign: Any, docs: list[dict], paths: dict[str, Path]) -> None:
-    from rich.markup import escape
-
-    from trackkit.report.tables import display_unit
+    from trackkit.report.tables import Summary, display_unit, summary_rich_table
 
     console = Console()
     g = campaign.base.report.groups[0]
     unit, factor = display_unit(docs[0]["units"].get(g, "") if docs else "")
-    table = Table("point", *(escape(p.path) for p in campaign.params), "filter",
-                  escape(f"{g} RMSE [{unit}]"), "RMSE / PCRLB", "ANEES", "diverged",
-                  title=f"{campaign.base.name}: {len(campaign.points)} points x "
-                  f"{campaign.runs} runs, seed {campaign.seed}", title_justify="left")
+    paths_ = [p.path for p in campaign.params]
+    # each swept value under its field's last name (the full paths in the caption)
+    short = [q.rsplit(".", 1)[-1] for q in paths_]
+    names = short if len(set(short)) == len(short) else paths_
 
     def num(v: Any, scale: float = 1.0) -> str:
         return "n/a" if v is None else f"{v * scale:.4g}"
 
+    cells: list[list[str]] = []
     shown, limit = 0, 40
     for d in docs:
         for name, f in d["filters"].items():
             if shown == limit:
                 break
             shown += 1
-            table.add_row(d["point"], *(escape(str(d["values"][p.path]))
-                                        for p in campaign.params), name,
-                          num(f["rmse"].get(g), factor), num(f["rmse_pcrlb"].get(g)),
-                          num(f["anees"]), f"{f['diverged'] / d['runs']:.1%}")
-    console.print(table)
+            cells.append([*(str(d["values"][q]) for q in paths_), name,
+                         num(f["rmse"].get(g), factor), num(f["rmse_pcrlb"].get(g)),
+                         num(f["anees"]), f"{f['diverged'] / d['runs']:.1%}"])
+    caption = ", ".join(f"{n} = {q}" for n, q in zip(names, paths_, strict=True)
+                        if n != q)
+    table = Summary([*names, "filter", f"{g} RMSE [{unit}]", "RMSE / PCRLB", "ANEES",
+                     "diverged"], cells, caption,
+                    title=f"{campaign.base.name}: {len(campaign.points)} points x "
+                    f"{campaign.runs} runs, seed {campaign.seed}")
+    console.print(summary_rich_table(table, console.width))
     rows = sum(len(d["filters"]) for d in docs)
     if rows > shown:
         console.print(Text(f"... {rows - shown} more rows in {paths['csv']}", style="dim"))
@@ -869,9 +995,10 @@ def network(
         "client.key_secret or agent-N.key_secret) instead of keys made for the run; "
         "implies --curve.")] = None,
 ) -> None:
-    """Run a network scenario (seed 004: agents with bearing sensors that track targets
-    together): Monte Carlo runs of the agents beside the centralised reference and the
-    PCRLB; write results.json, timings.json, plots and report.html.
+    """Run a network scenario (agents with bearing sensors that track targets together,
+    after Jalalipoor and Kardehi Moghaddam 2021): Monte Carlo runs of the agents beside the
+    centralised reference and the PCRLB; write results.json, timings.json, plots and
+    report.html.
 
     The same scenario and seed give byte-identical results.json on one machine."""
     with _user_errors() as state:
@@ -882,6 +1009,7 @@ def network(
             p = Path(scenario)
             if p.suffix == ".toml" or p.exists():
                 if p.is_file():  # (a missing or unreadable file: load_network says so)
+                    _parse_toml(p)
                     raise ValueError(f"{scenario}: not a network scenario (it has no "
                                      "[[agents]] tables); run it with `trackkit run "
                                      f"{scenario}`, or see `trackkit show net-baseline` "
@@ -914,7 +1042,7 @@ def network(
                 _stderr().print(Text(f"note: --no-curve with --host {host}: any machine that "
                                      "reaches it can connect and feed the agents bearings or "
                                      "tracks", style="yellow"), soft_wrap=True)
-        name = f"{sc.name}-straight" if straight else str(sc.name)
+        name = _default_dir(scenario, sc) + ("-straight" if straight else "")
         target, label = _output_dir(out, name)
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
@@ -929,11 +1057,20 @@ def network(
             state.interrupted = "interrupted"
 
 
+def _parse_toml(path: Path) -> None:
+    """Raise the reader's error in words (not UTF-8, not valid TOML, with line and column)
+    before a file is called the wrong kind of scenario for lacking a table."""
+    from trackkit.scenario import read_scenario
+
+    read_scenario(path, None)
+
+
 def _outages(specs: list[str], n_agents: int, duration: float
              ) -> list[tuple[int, float, float | None]]:
     """``--kill AGENT@T[:RESTART]`` (agent from 1, simulated s) as ``run_network_processes``
     outages (agent from 0)."""
     out: list[tuple[int, float, float | None]] = []
+    given: dict[int, str] = {}
     for spec in specs:
         agent, _, when = spec.partition("@")
         at, _, rest = when.partition(":")
@@ -946,8 +1083,14 @@ def _outages(specs: list[str], n_agents: int, duration: float
         if not 1 <= a <= n_agents:
             raise ValueError(f"--kill {spec!r}: agent {a}; expected 1 to {n_agents}")
         if not 0.0 <= k < duration or (r is not None and not k < r):
-            raise ValueError(f"--kill {spec!r}: kill at {k:g} s, restart at {r}; expected "
+            back = "no restart" if r is None else f"restart at {r:g} s"
+            raise ValueError(f"--kill {spec!r}: kill at {k:g} s, {back}; expected "
                              f"0 <= T < {duration:g} s and RESTART > T")
+        if a in given:
+            raise ValueError(f"--kill {given[a]!r} and --kill {spec!r}: agent {a} is killed "
+                             "twice; expected one --kill per agent (AGENT@T:RESTART kills and "
+                             "restarts it once)")
+        given[a] = spec
         out.append((a - 1, k, r))
     return out
 
@@ -986,6 +1129,13 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
 
     compare = kwargs.pop("compare_straight", False)
     total = kwargs.get("runs") or sc.run.runs
+    given = "--runs" if kwargs.get("runs") else "the scenario's run.runs; --runs N for fewer"
+    where = ("in their own processes" if kwargs.get("agents") == "processes"
+             else "in this process")
+    _stderr().print(Text(
+        f"{sc.name}: {total} Monte Carlo run{'' if total == 1 else 's'} ({given})"
+        + (", then the same runs on straight courses" if compare else "")
+        + f", agents {where} -> {out}", style="bold"), soft_wrap=True)
     with _progress_bar(_stderr()) as bar:
 
         def monte_carlo(label: str, **more: Any):
@@ -1007,9 +1157,16 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
     _print_network_summary(paths)
 
 
-def _print_network_summary(paths: dict[str, Path]) -> None:
-    from rich.markup import escape
+def _number_table(headers: list[str], rows: list[list[str]], title: str, console: Console
+                  ) -> Any:
+    """A summary table whose numbers are never cut at the console's width (folded instead;
+    ``report.tables.summary_rich_table``)."""
+    from trackkit.report.tables import Summary, summary_rich_table
 
+    return summary_rich_table(Summary(headers, rows, "", title=title), console.width)
+
+
+def _print_network_summary(paths: dict[str, Path]) -> None:
     doc = json.loads(paths["results"].read_text(encoding="utf-8"))
     w = doc["windows"]["last"]
     mode = "steering" if doc["steering"] else "straight courses"
@@ -1020,27 +1177,27 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
     def per_target(v: list, spec: str) -> str:
         return " / ".join("-" if x is None else format(x, spec) for x in v)
 
-    table = Table(*(escape(h) for h in headers),  # "[m]" is a unit, not rich markup
-                  title=f"{doc['scenario']}: {doc['runs']} runs, seed {doc['seed']}, {mode} "
-                  "(per target: 1 / 2 / ...)", title_justify="left")
-    for e in doc["per_agent"]:
-        table.add_row(str(e["agent"]), f"{100 * e['all_held_final_fraction']:.0f}%",
-                      "-" if e["gospa_mean"] is None else f"{e['gospa_mean']:.0f}",
-                      per_target(e["rmse_pos_last"], ".0f"),
-                      per_target(e["central_rmse_pos_last"], ".0f"),
-                      per_target(e["pcrlb_pos_last"], ".0f"),
-                      per_target(e["ratio_to_central_pos_last"], ".2f"),
-                      per_target(e["ratio_to_pcrlb_pos_last"], ".2f"))
+    rows = [[str(e["agent"]), f"{100 * e['all_held_final_fraction']:.0f}%",
+             "-" if e["gospa_mean"] is None else f"{e['gospa_mean']:.0f}",
+             per_target(e["rmse_pos_last"], ".0f"),
+             per_target(e["central_rmse_pos_last"], ".0f"),
+             per_target(e["pcrlb_pos_last"], ".0f"),
+             per_target(e["ratio_to_central_pos_last"], ".2f"),
+             per_target(e["ratio_to_pcrlb_pos_last"], ".2f")] for e in doc["per_agent"]]
     console = Console()
-    console.print(table)
+    console.print(_number_table(headers, rows, f"{doc['scenario']}: {doc['runs']} runs, "
+                                f"seed {doc['seed']}, {mode} (per target: 1 / 2 / ...)",
+                                console))
     m = doc["messages"]
     console.print(Text(f"messages: {m['sent']} sent, {m['delivered']} delivered, "
                        f"{m['lost']} lost, {m['late']} late"))
     for o in doc["channel"]["outages"]:
         back = [x for x in o["recovered_after_s"] if x is not None]
         console.print(Text(
-            f"agent {o['agent']} killed at {o['kill_at_s']:g} s, restarted at "
-            f"{o['restart_at_s']} s: held its tracks again after "
+            f"agent {o['agent']} killed at {o['kill_at_s']:g} s, "
+            + ("not restarted" if o["restart_at_s"] is None
+               else f"restarted at {o['restart_at_s']:g} s")
+            + ": held its tracks again after "
             + (f"{min(back):.0f}-{max(back):.0f} s" if back else "never")
             + f" ({len(back)} of {len(o['recovered_after_s'])} runs)"), soft_wrap=True)
     if doc["channel"].get("curve"):
@@ -1065,7 +1222,7 @@ def _print_summary(result: Any, paths: dict[str, Path]) -> None:
 
     console = Console()
     console.print(rich_table(result, width=console.width))
-    # the error windows, seed 000's tables, the gap table: if present
+    # the error windows, the matching tables (J1-J4), the gap table: if present
     for table in matching_rich_tables(result, width=console.width):
         console.print(table)
     for note in getattr(result, "notes", []) or []:
@@ -1583,7 +1740,7 @@ def _print_track_summary(read: Any, job: SimpleNamespace, paths: dict[str, Path]
         console.print(Text(f"report: {html}", style="green"), soft_wrap=True)
 
 
-# --- trackkit identify: seed 003's vessel model from a GPS/INS log or a vessel scenario -------
+# --- trackkit identify: a vessel's model from a GPS/INS log or a vessel scenario ------------
 
 
 class VesselFilter(StrEnum):
@@ -1594,6 +1751,8 @@ class VesselFilter(StrEnum):
     ls = "ls"
 
 
+#: the NMEA sentences the identifier reads
+NMEA_TYPES = "GGA RMC VTG HDT THS ROT"
 #: the NMEA log suffixes; any other log is the CSV form (.csv)
 NMEA_SUFFIXES = (".nmea", ".log", ".txt")
 #: a log shorter than this cannot show converged coefficients (the paper: 500 s)
@@ -1619,12 +1778,17 @@ def _identify_kind(what: str) -> str:
             raise ValueError(f"{what}: {why}; expected a GPS/INS log (NMEA 0183 "
                              f"{', '.join(NMEA_SUFFIXES)} or CSV .csv)")
         return "log"
+    if p.is_dir():
+        raise ValueError(f"{what}: is a directory; expected a GPS/INS log file (NMEA 0183 "
+                         f"{', '.join(NMEA_SUFFIXES)} or CSV .csv) with --inputs, or a vessel "
+                         "scenario (.toml or a bundled name)")
     if suffix == ".toml" or p.exists():
         if suffix != ".toml" and p.is_file():
             raise ValueError(f"{what}: unknown log type {suffix or '(no suffix)'!r}; expected "
                              f"an NMEA 0183 log ({', '.join(NMEA_SUFFIXES)}), the CSV form "
                              "(.csv) or a vessel scenario (.toml)")
         if p.is_file() and not is_vessel(what):
+            _parse_toml(p)
             raise ValueError(f"{what}: not a vessel scenario (it has no [vessel] table); see "
                              "`trackkit show vessel-turning` for a vessel scenario's fields")
         return "scenario"  # (a missing or unreadable .toml: load_vessel says so)
@@ -1672,11 +1836,12 @@ def identify(
         "--out", "-o", help="Output directory (created if missing).",
         show_default="trackkit-out/identify-STEM, or trackkit-out/SCENARIO")] = None,
 ) -> None:
-    """Identify seed 003's 16-coefficient manoeuvring model (augmented EKF on u, v, r): from
-    a recorded GPS/INS log and its inputs, or by running a vessel scenario (simulated sea
-    trials, Monte Carlo). Prints the coefficients with their standard deviations and writes
-    results.json, convergence, track, heading and trial plots and report.html; the
-    identified model's 20 deg turn and 10/10 and 20/20 zig-zags with the IMO table."""
+    """Identify a vessel's 16-coefficient manoeuvring model (Zolfagharnasab and Seif 2025;
+    augmented EKF on u, v, r): from a recorded GPS/INS log and its inputs, or by running a
+    vessel scenario (simulated sea trials, Monte Carlo). Prints the coefficients with their
+    standard deviations and writes results.json, convergence, track, heading and trial plots
+    and report.html; the identified model's 20 deg turn and 10/10 and 20/20 zig-zags with
+    the IMO table."""
     with _user_errors() as state:
         kind = _identify_kind(what)
         if kind == "scenario":
@@ -1688,7 +1853,7 @@ def identify(
                                  "vessel scenario, which simulates its sensors (its period is "
                                  "identification.period_s)")
             sc = load_vessel(what)
-            target, label = _output_dir(out, str(sc.name))
+            target, label = _output_dir(out, _default_dir(what, sc))
             with OutputDir(target, label) as where:
                 state.interrupted = f"interrupted; nothing was written to {target}"
                 if where.note:
@@ -1720,12 +1885,48 @@ def identify(
             state.interrupted = "interrupted"
 
 
+@contextmanager
+def _stage(what: str) -> Iterator[None]:
+    """Say on stderr what the command is doing, as a line (seen in a pipe or a log too) and,
+    on a terminal, a spinner while it lasts."""
+    console = _stderr()
+    console.print(Text(f"{what} ...", style="dim"), soft_wrap=True)
+    with console.status(what):
+        yield
+
+
+def _filter_compiled(filt: str) -> bool:
+    """Whether the identifier's compiled step is in numba's cache already (the EKF's fused
+    step is compiled on its first run and cached beside its module)."""
+    if filt != "ekf":
+        return True
+    try:
+        from trackkit.identify import fused
+
+        return Path(fused._step._cache._cache_file._index_path).is_file()
+    except AttributeError:  # another numba: do not guess
+        return True
+
+
 def _stop_hint(err: ValueError, columns: str) -> ValueError:
     """A reader's message in the command's words (its options, not the function's)."""
     return ValueError(str(err).replace(
         "[on_bad='stop'; pass on_bad='skip' to skip bad records]",
         "[--on-bad stop; pass --on-bad skip to skip bad records]").replace(
         " (pass a column mapping)", f"; expected the columns {columns}"))
+
+
+def _check_log_usable(log: Path, nav: Any, read: Any, expected: str) -> None:
+    """A log with no usable position is named as the culprit (before its inputs, which
+    cannot be read against the times of a log without any)."""
+    if read.rows_kept and nav.t_pos.size:
+        return
+    why = ", ".join(f"{n} {r}" for r, n in sorted(read.skipped.items(), key=lambda kv: -kv[1]))
+    first = f"; first: {read.bad[0]}" if read.bad else ""
+    kept = (f"{read.rows_kept} kept but none gives a position (GGA or RMC)" if read.rows_kept
+            else f"none usable ({why or 'empty'}){first}")
+    raise ValueError(f"{log}: no usable GPS/INS record: {read.rows_read} lines read, {kept}; "
+                     f"expected {expected}")
 
 
 def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: float,
@@ -1739,7 +1940,7 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
 
     console = Console()
     notes: list[str] = []
-    with _stderr().status(f"reading {log}"):
+    with _stage(f"reading {log} and {inputs}"):
         try:
             if log.suffix.lower() == ".csv":
                 nav, read = read_nav_csv(log, on_bad)
@@ -1747,6 +1948,9 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
                 nav, read = read_nmea(log, on_bad)
         except ValueError as err:
             raise _stop_hint(err, ", ".join(NAV_CSV_COLUMNS)) from None
+        _check_log_usable(log, nav, read, (
+            f"the columns {', '.join(NAV_CSV_COLUMNS)}" if log.suffix.lower() == ".csv" else
+            f"NMEA 0183 sentences ({NMEA_TYPES}) with valid checksums"))
         fmt = "iso" if nav.epoch is not None else "seconds"  # a log without a date: both
         try:
             ins, iread = read_inputs_csv(inputs, on_bad, epoch=nav.epoch, time_format=fmt)
@@ -1775,7 +1979,11 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
                      + ", ".join(f"{g.stream} {g.start:.1f}-{g.end:.1f} s" for g in m.gaps[:5])
                      + ("..." if len(m.gaps) > 5 else "") + "): no measurement there, the "
                      "filter predicts across")
-    with _stderr().status(f"identifying with {filt}"):
+    doing = f"identifying the 16 coefficients with {filt} ({m.t.size} samples)"
+    if not _filter_compiled(filt):
+        doing = (f"compiling the {filt} filter (the first run only: about half a minute; "
+                 f"later runs reuse it), then {doing}")
+    with _stage(doing):
         rec = identify_recorded(m, ins, filter=filt, inputs_name=f"--inputs {inputs}")
     span = rec.t[-1] - rec.t[0]
     if span < _CONVERGED_AFTER_S:
@@ -1789,7 +1997,7 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
     if rec.dropped:
         notes.append(f"the first {rec.dropped} grid sample(s) lack a measurement and were "
                      "left out")
-    with _stderr().status("writing the report"):
+    with _stage(f"writing the report to {out}"):
         paths = write_recorded_report(rec, out, title=log.name, notes=notes, log_read=read,
                                       inputs_read=iread)
     _print_recorded_summary(paths, log, notes)
@@ -1920,6 +2128,39 @@ def _print_vessel_summary(paths: dict[str, Path], notes: list[str]) -> None:
 
 
 # --- the entry point --------------------------------------------------------------------------
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            v = version("trackkit")
+        except PackageNotFoundError:  # run from a source tree without installing
+            from trackkit import __version__ as v
+        typer.echo(f"trackkit {v}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _options(version: Annotated[bool, typer.Option(
+        "--version", callback=_print_version, is_eager=True,
+        help="Print trackkit's version and exit.")] = False) -> None:
+    pass
+
+
+def _paragraphs(doc: str) -> str:
+    """A docstring's paragraphs each on one line, so that rich wraps them to the terminal
+    (typer's rich help keeps the hard line breaks of the source)."""
+    import inspect
+
+    return "\n\n".join(" ".join(p.split()) for p in inspect.cleandoc(doc).split("\n\n"))
+
+
+for _info in app.registered_commands:
+    if _info.cls in (None, typer.core.TyperCommand):  # typer fills in its default
+        _info.cls = _Command
+    _info.help = _paragraphs(_info.help or _info.callback.__doc__ or "")
 
 
 def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,

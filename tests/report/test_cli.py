@@ -116,7 +116,7 @@ def test_run_writes_everything(fake, tmp_path):
     assert {k: v for k, v in kwargs.items() if "progress" not in k} == {
         "runs": 4, "seed": 3, "workers": 2, "scheduler": "tcp://h:8786",
         "max_seconds": 7200.0}
-    assert {p.name for p in out.iterdir()} == ALL_FILES
+    assert {p.name for p in out.iterdir()} == ALL_FILES | {"manifest.json"}
     doc = json.loads((out / "results.json").read_text())
     check_results_json(doc)
     assert doc["runs"] == 4 and doc["seed"] == 3
@@ -204,7 +204,7 @@ def test_output_directory_is_created_and_locked_while_the_engine_runs(fake, tmp_
     res = runner.invoke(cli.app, ["run", "--runs", "2", "--out", str(fake.out)])
     assert res.exit_code == 0, res.output
     assert fake.during == [[cli.LOCK_FILE]]  # created and locked before any compute
-    assert {p.name for p in fake.out.iterdir()} == ALL_FILES  # lock released
+    assert {p.name for p in fake.out.iterdir()} == ALL_FILES | {"manifest.json"}  # no lock
 
 
 def test_second_run_into_a_locked_directory_refuses(fake, tmp_path):
@@ -235,7 +235,7 @@ def test_stale_lock_is_taken_over_and_said(fake, tmp_path):
     assert res.exit_code == 0, res.output
     assert "took over the stale lock" in res.stderr and f"pid {pid}, no longer running" in (
         res.stderr)
-    assert {p.name for p in out.iterdir()} == ALL_FILES
+    assert {p.name for p in out.iterdir()} == ALL_FILES | {"manifest.json"}
 
 
 @pytest.mark.parametrize("failure, code, words", [

@@ -9,6 +9,8 @@ fails rather than reporting a partial result.
 
 from __future__ import annotations
 
+import logging
+import signal
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -60,8 +62,13 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
     if scheduler:
         client = Client(scheduler)
     else:
-        cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        # silence_logs: the scheduler's, nannies' and workers' own log lines (a heartbeat
+        # that finds the scheduler gone while a Ctrl-C stops the cluster) are not the
+        # user's business; a failed task reaches the client as its exception
+        with _workers_ignore_ctrl_c():
+            cluster = LocalCluster(n_workers=int(workers), threads_per_worker=1,
+                                   processes=True, dashboard_address=None,
+                                   silence_logs=logging.CRITICAL)
         client = Client(cluster)
     try:
         yield client
@@ -69,6 +76,22 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+@contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Start local worker processes with Ctrl-C ignored (the disposition they inherit): a
+    terminal sends it to the whole process group, and this process, which handles it, stops
+    the cluster; a worker that took it too would die with a traceback and its nanny warn."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: the signal is not ours to change
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _report_from_worker(key: str) -> Callable[[float], None]:

@@ -7,16 +7,29 @@ do not), ``metrics.parquet`` (per-step metrics of every filter), the PNG figures
 nothing is ever written outside it); only when every file is complete are they moved into
 place, ``results.json`` last, under an ``INCOMPLETE`` marker that is removed at the end. A
 failure leaves ``out_dir`` as it was (and removes it again if this call created it).
+
+A command (``trackkit run``, ``sweep``, ``network``, ``identify``, ``track``) declares itself
+with :func:`command_output` while it holds its output directory: the directory is checked
+before anything is computed (another command's output, or files no manifest lists that the
+command would overwrite, are refused), and every write also writes ``manifest.json``: the
+command, its arguments, the trackkit version, the time and each file written with its size
+and sha256. Files the same command wrote last time (its manifest lists them) and did not
+write again are removed, so the directory holds one command's files and says which.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
 import shutil
 import uuid
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +46,7 @@ __all__ = [
     "RESULTS_JSON", "TIMINGS_JSON", "METRICS_PARQUET", "REPORT_HTML", "INCOMPLETE",
     "TRACKKIT_FILES", "results_document", "timings_document", "write_results_json",
     "write_timings_json", "metrics_table", "write_metrics_parquet", "write_report",
+    "MANIFEST_JSON", "CommandRun", "command_output", "read_manifest",
 ]
 
 RESULTS_JSON = "results.json"
@@ -40,6 +54,7 @@ TIMINGS_JSON = "timings.json"
 METRICS_PARQUET = "metrics.parquet"
 REPORT_HTML = "report.html"
 INCOMPLETE = "INCOMPLETE"
+MANIFEST_JSON = "manifest.json"
 TRACKKIT_FILES = (METRICS_PARQUET, *plots.PLOT_FILES.values(), REPORT_HTML, TIMINGS_JSON,
                   RESULTS_JSON)
 #: the units of the quantities that are the same for every scenario (the error groups' units
@@ -247,6 +262,121 @@ def _write_all(result: MonteCarloResult, folder: Path) -> dict[str, Path]:
     return written
 
 
+# --- which command wrote a directory: manifest.json ------------------------------------------
+
+
+@dataclass(frozen=True)
+class CommandRun:
+    """The command writing an output directory: its name (``run``), its arguments as given
+    (JSON values) and the file names it may write there (for the check before computing)."""
+
+    command: str
+    arguments: dict[str, Any] = field(default_factory=dict)
+    may_write: Collection[str] = ()
+
+
+_RUN: ContextVar[tuple[Path, CommandRun] | None] = ContextVar("trackkit_command_run",
+                                                               default=None)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("trackkit")
+    except PackageNotFoundError:  # a source tree that is not installed
+        from trackkit import __version__
+
+        return __version__
+
+
+def read_manifest(out_dir: str | Path, label: str | None = None) -> dict | None:
+    """The ``manifest.json`` of ``out_dir`` (None without one); a ValueError in words when it
+    cannot be read."""
+    path = Path(out_dir) / MANIFEST_JSON
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        names = [f["name"] for f in doc["files"]]
+        if not isinstance(doc["command"], str) or not all(isinstance(n, str) for n in names):
+            raise TypeError("command or file names are not text")
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"{label or out_dir}: {path} cannot be read ({err}); it is not a "
+                         "trackkit manifest: choose another --out, or delete it") from None
+    return doc
+
+
+def _listed(doc: dict | None) -> set[str]:
+    """The plain file names a manifest lists (never a path out of the directory)."""
+    names = {f["name"] for f in doc["files"]} if doc else set()
+    return {n for n in names if n and Path(n).name == n and not n.startswith(".")}
+
+
+def _check_directory(out: Path, label: str, run: CommandRun, writes: Iterable[str]) -> set[str]:
+    """Refuse (ValueError) a directory holding another command's output, or files no
+    manifest lists that ``writes`` would replace; returns the names the same command's
+    manifest lists."""
+    doc = read_manifest(out, label)
+    again = f"trackkit {run.command}"
+    if doc is not None and doc["command"] != run.command:
+        raise ValueError(
+            f"{label} holds the output of `trackkit {doc['command']}` (its {MANIFEST_JSON}, "
+            f"written {doc.get('time', 'at an unknown time')}); `{again}` does not write "
+            "into another command's directory: choose another --out")
+    listed = _listed(doc)
+    clash = sorted(n for n in set(writes) - listed if (out / n).exists())
+    if clash:
+        shown = ", ".join(clash[:5]) + (f" and {len(clash) - 5} more" if len(clash) > 5 else "")
+        raise ValueError(
+            f"{label} holds {shown}, which no trackkit {MANIFEST_JSON} there lists (files of "
+            f"an earlier trackkit version, or not trackkit's); `{again}` would overwrite them: "
+            "choose another --out, or move them away")
+    return listed
+
+
+@contextmanager
+def command_output(out_dir: str | Path, label: str, run: CommandRun) -> Iterator[None]:
+    """While inside, ``run`` is the command writing ``out_dir``: checked now (before any
+    computing; see :func:`_check_directory`), and every :func:`write_atomically` into it
+    writes ``manifest.json`` and removes the files of the command's previous manifest that
+    it did not write again."""
+    out = Path(out_dir).resolve()
+    _check_directory(out, label, run, run.may_write)
+    token = _RUN.set((out, run))
+    try:
+        yield
+    finally:
+        _RUN.reset(token)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _write_manifest(folder: Path, run: CommandRun, written: dict[str, Path],
+                    kept: Iterable[str]) -> Path:
+    """``manifest.json``: the files of this write, and (``kept``) the other entries the
+    directory keeps beside them (a campaign's stored blocks, a user's own files)."""
+    files = [{"name": p.name, "bytes": p.stat().st_size, "sha256": _sha256(p)}
+             for p in sorted(written.values(), key=lambda p: p.name)]
+    doc = {"command": run.command, "arguments": run.arguments, "trackkit": _version(),
+           "time": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
+           "files": files, "kept": sorted(kept)}
+    return _write_json(doc, folder / MANIFEST_JSON)
+
+
+def _kept(out: Path, written: Iterable[str], removed: Iterable[str]) -> list[str]:
+    """The entries of ``out`` a write leaves beside its files (directories end in /)."""
+    gone = {*written, *removed, MANIFEST_JSON, INCOMPLETE, RESULTS_JSON}
+    return [p.name + ("/" if p.is_dir() else "") for p in out.iterdir()
+            if p.name not in gone and not p.name.startswith(".")]
+
+
 def _move_into_place(tmp: Path, out: Path, written: dict[str, Path],
                      owned: Iterable[str]) -> dict[str, Path]:
     marker = out / INCOMPLETE
@@ -255,7 +385,8 @@ def _move_into_place(tmp: Path, out: Path, written: dict[str, Path],
                       "consistent result.\n", encoding="utf-8")
     (out / RESULTS_JSON).unlink(missing_ok=True)
     final: dict[str, Path] = {}
-    for key, p in sorted(written.items(), key=lambda kv: kv[1].name == RESULTS_JSON):
+    last = {RESULTS_JSON: 1, MANIFEST_JSON: 2}  # the manifest only once all files are there
+    for key, p in sorted(written.items(), key=lambda kv: last.get(kv[1].name, 0)):
         final[key] = out / p.name
         os.replace(p, final[key])
     new = {p.name for p in final.values()}
@@ -299,9 +430,17 @@ def write_atomically(out_dir: str | Path, write_all: Callable[[Path], dict[str, 
         raise ValueError(f"output directory {str(out_dir)!r} exists and is not a directory")
     created = _make_dirs(out)
     tmp = out / f".trackkit-tmp.{uuid.uuid4().hex[:12]}"
+    held = _RUN.get()
     try:
         tmp.mkdir()
-        return _move_into_place(tmp, out, write_all(tmp), owned)
+        written = write_all(tmp)
+        if held is not None and held[0] == out:  # a command's directory: checked, listed
+            run = held[1]
+            names = {p.name for p in written.values()}
+            owned = {*owned, *_check_directory(out, str(out_dir), run, names)}
+            written["manifest"] = _write_manifest(tmp, run, written,
+                                                  _kept(out, names, set(owned) - names))
+        return _move_into_place(tmp, out, written, owned)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_if_empty(created)

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from rich import box
+from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 
@@ -170,20 +171,90 @@ def fit_rich_table(s: Summary, width: int | None = None, plain_rows: int | None 
             for i in range(n, len(s.rows)):
                 table.rows[i].style = "italic"
         return table
-    return _transposed(s, n, s.title or None)
+    return _transposed(s, n, s.title or None, width)
 
 
-def _transposed(s: Summary, plain_rows: int, title: str | None) -> Table:
+def _transposed(s: Summary, plain_rows: int, title: str | None, width: int | None = None
+                ) -> Table | Group:
     """``s`` with one column per row and one row per metric (rows from ``plain_rows`` on
-    italic): the form that fits a narrow terminal."""
-    table = Table(title=title, caption=s.caption, header_style="bold", box=box.SIMPLE_HEAD)
-    table.add_column("metric", justify="left")
-    for i, row in enumerate(s.rows):
-        table.add_column(Text(row[0]), justify="right",
-                         style="italic" if i >= plain_rows else None)
-    for j, h in enumerate(s.headers[1:], start=1):
-        table.add_row(Text(h.replace("\n", " ")), *(Text(row[j]) for row in s.rows))
-    return table
+    italic): the form that fits a narrow terminal (folded into several tables when even
+    this is wider than ``width``)."""
+    columns = [("metric", None)] + [(row[0], "italic" if i >= plain_rows else None)
+                                    for i, row in enumerate(s.rows)]
+    rows = [([h.replace("\n", " "), *(row[j] for row in s.rows)], None, False)
+            for j, h in enumerate(s.headers[1:], start=1)]
+    return _number_table(title, s.caption, columns, rows, width)
+
+
+#: the narrowest the label column is made before the number columns are folded
+_LABEL_MIN = 14
+
+
+def _number_width(header: str, cells: list[str]) -> int:
+    """A number column's width: its longest cell, or its header's longest word."""
+    return max([len(c) for c in cells] + [len(w) for w in header.split()] + [1])
+
+
+def _folds(widths: list[int], label: int, width: int | None) -> list[list[int]]:
+    """The number columns (indices from 1) of each table the columns fold into: as many as
+    fit beside the label column in ``width`` (a column takes its width and 3 characters
+    of padding and rule)."""
+    if width is None:
+        return [list(range(1, len(widths) + 1))]
+    room = width - min(label, _LABEL_MIN) - 5
+    out: list[list[int]] = [[]]
+    used = 0
+    for j, w in enumerate(widths, start=1):
+        if out[-1] and used + w + 3 > room:
+            out.append([])
+            used = 0
+        out[-1].append(j)
+        used += w + 3
+    # as many tables, their columns shared out evenly when they fit so
+    per = -(-len(widths) // len(out))
+    even = [list(range(1 + i, min(i + per, len(widths)) + 1))
+            for i in range(0, len(widths), per)]
+    if len(even) == len(out) and all(sum(widths[j - 1] + 3 for j in f) <= room for f in even):
+        return even
+    return out
+
+
+def _number_table(title: str | None, caption: str | None,
+                  columns: list[tuple[str, str | None]],
+                  rows: list[tuple[list[str], str | None, bool]], width: int | None = None
+                  ) -> Table | Group:
+    """A table of a label column and number columns that never cuts a number: each number
+    column is at least as wide as its longest cell (its header wraps at spaces); when they
+    do not fit in ``width`` beside the labels, the table folds into several, each with the
+    label column. ``columns``: (header, style); ``rows``: (cells, style, end of section)."""
+    widths = [_number_width(h, [r[0][j] for r in rows]) for j, (h, _) in enumerate(columns)]
+    folds = _folds(widths[1:], widths[0], width)
+    fixed: dict[int, int | None] = {j: None for fold in folds for j in fold}
+    if width is not None:  # rich's own squeeze can push a column below its numbers
+        room = width - min(widths[0], _LABEL_MIN) - 5
+        for fold in folds:
+            spare = room - sum(widths[j] + 3 for j in fold)
+            for j in fold:  # a header on one line where there is room for it
+                natural = max([widths[j]] + [len(x) for x in columns[j][0].split("\n")])
+                fixed[j] = widths[j] + min(max(spare, 0), natural - widths[j])
+                spare -= fixed[j] - widths[j]
+    tables = []
+    for k, fold in enumerate(folds):
+        table = Table(title=title if k == 0 else None,
+                      caption=caption if len(folds) == 1 else None,
+                      header_style="bold", box=box.SIMPLE_HEAD)
+        table.add_column(Text(columns[0][0]), justify="left", overflow="fold",
+                         min_width=min(widths[0], _LABEL_MIN), style=columns[0][1])
+        for j in fold:
+            table.add_column(Text(columns[j][0], overflow="fold"), justify="right",
+                             min_width=widths[j], width=fixed[j], style=columns[j][1])
+        for cells, style, end in rows:
+            table.add_row(Text(cells[0]), *(Text(cells[j]) for j in fold), style=style,
+                          end_section=end)
+        tables.append(table)
+    if len(tables) == 1:
+        return tables[0]
+    return Group(*tables, *([Text(caption, style="dim")] if caption else []))
 
 
 def ranks(result: MonteCarloResult) -> dict[str, int]:
@@ -219,7 +290,7 @@ def _natural_width(s: Summary) -> int:
     return sum(max(map(len, c)) + 3 for c in cols)
 
 
-def rich_table(result: MonteCarloResult, width: int | None = None) -> Table:
+def rich_table(result: MonteCarloResult, width: int | None = None) -> Table | Group:
     """The summary as a ``rich`` table: one row per filter and a PCRLB row; when ``width``
     (the console width) is given and the table would not fit, transposed (one column per
     filter and a PCRLB column, one row per metric)."""
@@ -227,14 +298,11 @@ def rich_table(result: MonteCarloResult, width: int | None = None) -> Table:
     n_filters = len(result.filters)
     title = f"trackkit: {result.scenario}"
     if width is not None and _natural_width(s) > width:
-        return _transposed(s, n_filters, title)
-    table = Table(title=title, caption=s.caption, header_style="bold", box=box.SIMPLE_HEAD)
-    for i, h in enumerate(s.headers):
-        table.add_column(Text(h), justify="left" if i == 0 else "right")
-    for i, row in enumerate(s.rows):
-        table.add_row(*map(Text, row), style="italic" if i >= n_filters else None,
-                      end_section=i == n_filters - 1)
-    return table
+        return _transposed(s, n_filters, title, width)
+    columns = [(h, None) for h in s.headers]
+    rows = [(row, "italic" if i >= n_filters else None, i == n_filters - 1)
+            for i, row in enumerate(s.rows)]
+    return _number_table(title, s.caption, columns, rows, width)
 
 
 def html_table(result: MonteCarloResult) -> str:
@@ -412,15 +480,12 @@ def matching_summaries(result: MonteCarloResult) -> list[Summary]:
     return [s for s in out if s is not None]
 
 
-def summary_rich_table(s: Summary) -> Table:
-    """A :class:`Summary` as a ``rich`` table (first column left, the rest right)."""
-    table = Table(title=s.title or None, caption=s.caption, header_style="bold",
-                  box=box.SIMPLE_HEAD)
-    for i, h in enumerate(s.headers):
-        table.add_column(Text(h), justify="left" if i == 0 else "right")
-    for i, row in enumerate(s.rows):
-        table.add_row(*map(Text, row), end_section=i in s.sections)
-    return table
+def summary_rich_table(s: Summary, width: int | None = None) -> Table | Group:
+    """A :class:`Summary` as a ``rich`` table (first column left, the rest right; folded into
+    several when wider than ``width``: no number is ever cut)."""
+    rows = [(row, None, i in s.sections) for i, row in enumerate(s.rows)]
+    return _number_table(s.title or None, s.caption, [(h, None) for h in s.headers], rows,
+                         width)
 
 
 def summary_html_table(s: Summary) -> str:
@@ -437,7 +502,8 @@ def summary_html_table(s: Summary) -> str:
             f"<thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody>\n</table>")
 
 
-def matching_rich_tables(result: MonteCarloResult, width: int | None = None) -> list[Table]:
+def matching_rich_tables(result: MonteCarloResult, width: int | None = None
+                         ) -> list[Table | Group]:
     """The error-window tables (:func:`window_summaries`, transposed when wider than
     ``width``), :func:`matching_summaries`, the missing-measurement table
     (:func:`gap_summary`) and the classification table (:func:`classification_summary`),
@@ -445,7 +511,8 @@ def matching_rich_tables(result: MonteCarloResult, width: int | None = None) -> 
     n = len(result.filters)
     windows = [fit_rich_table(s, width, n) for s in window_summaries(result)]
     extra = [t for t in (gap_summary(result), classification_summary(result)) if t is not None]
-    return windows + [summary_rich_table(s) for s in matching_summaries(result) + extra]
+    return windows + [summary_rich_table(s, width)
+                      for s in matching_summaries(result) + extra]
 
 
 def classification_summary(result: MonteCarloResult) -> Summary | None:
