@@ -28,7 +28,8 @@ before a 10 deg heading change; 10/10 first overshoot <= 10 deg if L/V < 10 s, <
 L/V >= 30 s, else (5 + L/V / 2) deg; 10/10 second overshoot <= 25 deg if L/V < 10 s,
 <= 40 deg if L/V >= 30 s, else (17.5 + 0.75 L/V) deg; 20/20 first overshoot <= 25 deg.
 The standards formally apply to ships of 100 m in length and over (and to chemical and gas
-carriers regardless of length); for the 19.6 m craft they are shown for reference only.
+carriers regardless of length); for Zolfagharnasab and Seif's 19.6 m craft they are shown for
+reference only.
 Beside them, the paper's acceptance band 2 <= D/L <= 7.
 """
 

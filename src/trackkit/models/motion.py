@@ -429,7 +429,7 @@ class RandomSine(MotionModel):
 
     F = [[1, dt, 0], [0, 1, 0], [0, 0, 1]],
     Q = [[q1 dt^3/3, q1 dt^2/2, 0], [q1 dt^2/2, q1 dt, 0], [0, 0, q2 dt]].
-    The two-state S6 variant [theta, omega] is ``ConstantVelocity(dim=1, q=q1)``.
+    The two-state variant of section 4-4, [theta, omega] is ``ConstantVelocity(dim=1, q=q1)``.
     """
 
     q1: float = 0.2

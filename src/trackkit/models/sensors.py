@@ -575,7 +575,7 @@ class MultipathDelay(SensorModel):
 class Sine(SensorModel):
     """The sine measurement of the missing-measurements thesis: ``y = a sin(theta)`` on the state
     [theta, omega, a] (sections 2-5-5-2 and 2-5-6-4), or ``y = sin(theta)`` on [theta, omega] with
-    ``amplitude=False`` (S6)."""
+    ``amplitude=False`` (section 4-4)."""
 
     sigma: float = 1.0
     amplitude: bool = True

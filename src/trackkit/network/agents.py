@@ -413,8 +413,9 @@ def predict_tracks(tracks: Tracks, dt: float, q: float) -> Tracks:
 def associate(mean: Array, cov: Array, t: float, bearings: BearingSet, settings: AgentSettings
               ) -> NDArray[np.intp]:
     """Assign each track (``mean (T, 4)``, ``cov (T, 4, 4)`` at time t) at most one bearing of
-    one source's scan (``bearings``, all of one sensor at one time): gate, seed-004 cost and
-    Munkres (module docstring, step 3). Returns ``det (T,)``, -1 for none."""
+    one source's scan (``bearings``, all of one sensor at one time): gate, the cost of
+    Jalalipoor and Kardehi Moghaddam (2021) and Munkres (module docstring, step 3).
+    Returns ``det (T,)``, -1 for none."""
     T, D = mean.shape[0], bearings.size
     if T == 0 or D == 0:
         return np.full(T, -1, np.intp)

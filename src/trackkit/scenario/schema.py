@@ -328,8 +328,9 @@ class SensorSpec(_Strict):
         1.0, description="probability that a scan has a measurement (1 = always); missing "
         "ones are nan")
     amplitude: bool = Field(True, description="Sine only: y = a sin(theta) on the state "
-                            "[theta, omega, a] (true, S3), or y = sin(theta) on [theta, omega] "
-                            "(false, S6)")
+                            "[theta, omega, a] (true, section 2-5-5-2 of the missing-measurements "
+                            "thesis), or y = sin(theta) on [theta, omega] (false, its section "
+                            "4-4)")
 
     @model_validator(mode="after")
     def _noise_given(self) -> SensorSpec:

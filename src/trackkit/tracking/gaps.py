@@ -421,7 +421,7 @@ class SineFit(_Fit):
     whose cost no longer falls is done. It starts from the filter's own predicted estimate
     at the first missing step: ``omega = x[rate]``, ``theta0 = x[phase] - omega (t -
     t_ref)``, ``a = x[amplitude]`` (or 1). With ``amplitude=None`` the amplitude is held at
-    1 (S6's ``y = sin theta``); with an index it is fitted too (and reported with a >= 0,
+    1 (section 4-4's ``y = sin theta``); with an index it is fitted too (and reported with a >= 0,
     since ``a sin(phi) = -a sin(phi + pi)``). ``short_window`` as for
     ``PolynomialFit`` (P'). The sensor must measure one component.
     """
