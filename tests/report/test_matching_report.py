@@ -185,10 +185,10 @@ def test_report_writes_and_embeds_the_new_figures(uw, uw_report):
     assert set(embedded) == {"time", "rmse", "nees", *NEW_FIGURES}
     for name in NEW_FIGURES:
         assert embedded[name] == paths[name].read_bytes()
-    assert "<h2>Seed 000 metrics and tuning</h2>" in page
-    assert "<h3>Seed 000 metrics: Monte Carlo mean over 6 runs</h3>" in page
+    assert "<h2>Naseri Solhdar metrics and tuning</h2>" in page
+    assert "<h3>Naseri Solhdar metrics: Monte Carlo mean over 6 runs</h3>" in page
     assert "<h3>Tuning of the fuzzy systems (off-line)</h3>" in page
-    assert page.index("<h2>Summary</h2>") < page.index("Seed 000 metrics") < page.index(
+    assert page.index("<h2>Summary</h2>") < page.index("Naseri Solhdar metrics") < page.index(
         "<h2>Figures</h2>")
     assert "<th>J3-X2</th>" in page and "<th>J4 (alpha 1000)</th>" in page
     s = tables.matching_summary(uw, "run0")
@@ -275,7 +275,7 @@ def test_no_new_sections_without_matching(plain, tmp_path):
     assert not set(NEW_FIGURES) & set(paths)
     assert not any((tmp_path / "out" / plots.PLOT_FILES[n]).exists() for n in NEW_FIGURES)
     page = paths["html"].read_text(encoding="utf-8")
-    assert "Seed 000" not in page and "<h3>" not in page
+    assert "Naseri Solhdar" not in page and "<h3>" not in page
 
 
 def test_stale_figures_removed_when_rewritten_without_matching(uw_report, plain, tmp_path):

@@ -28,7 +28,8 @@ before a 10 deg heading change; 10/10 first overshoot <= 10 deg if L/V < 10 s, <
 L/V >= 30 s, else (5 + L/V / 2) deg; 10/10 second overshoot <= 25 deg if L/V < 10 s,
 <= 40 deg if L/V >= 30 s, else (17.5 + 0.75 L/V) deg; 20/20 first overshoot <= 25 deg.
 The standards formally apply to ships of 100 m in length and over (and to chemical and gas
-carriers regardless of length); for seed 003's 19.6 m craft they are shown for reference only.
+carriers regardless of length); for Zolfagharnasab and Seif's 19.6 m craft they are shown for
+reference only.
 Beside them, the paper's acceptance band 2 <= D/L <= 7.
 """
 
@@ -253,7 +254,7 @@ def imo_criteria(length: float, speed: ArrayLike, *, turning: TurningMetrics | N
             "tactical_diameter", turning.tactical_diameter, -np.inf, 5 * length,
             "MSC.137(76) 5.3.1: tactical diameter <= 5 L")
         out["paper_band"] = _check("paper_band", turning.diameter_to_length, 2.0, 7.0,
-                                   "seed 003 (paper): 2 <= D/L <= 7, steady diameter")
+                                   "Zolfagharnasab and Seif 2025: 2 <= D/L <= 7, steady diameter")
     if zigzag10 is not None:
         out["initial_turning"] = _check(
             "initial_turning", zigzag10.initial_turning_distance, -np.inf, 2.5 * length,

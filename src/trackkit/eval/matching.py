@@ -1,4 +1,4 @@
-"""Innovation covariance matching and the thesis metrics J1-J4 of seed 000 (eqs 3-15 to
+"""Innovation covariance matching and the thesis metrics J1-J4 of Naseri Solhdar (eqs 3-15 to
 3-18), accumulated per run as the filter streams.
 
 For every filter, whatever its kind, the innovations ``r_k`` and their covariance ``S_k`` give

@@ -1,5 +1,5 @@
 """Posterior Cramer-Rao bound of constant-velocity targets seen by several moving bearing
-sensors at asynchronous times (seed 004; issue 14, "References the paper lacks").
+sensors at asynchronous times (Jalalipoor and Kardehi Moghaddam 2021 give no such reference).
 
 Each target's state x = [x, y, vx, vy] follows ``models.ConstantVelocity(dim=2, q=q)``
 (F(dt), Q(dt)). The bearings of a run, from any agents at any times, are sorted into an event

@@ -1,5 +1,5 @@
-"""Two network Monte Carlos of the same runs side by side (seed 004, issue 14): steered
-against straight courses, or a lossy network against a lossless one.
+"""Two network Monte Carlos of the same runs side by side (Jalalipoor and Kardehi Moghaddam 2021):
+steered against straight courses, or a lossy network against a lossless one.
 
 Both must be the same scenario's runs 0 .. R-1 from the same seed, so that run r has the
 same targets and bearing noise in both (``eval.network_mc``): the comparison is paired. Per

@@ -1,4 +1,4 @@
-"""Monte Carlo of a network scenario (seed 004, issue 14): runs of
+"""Monte Carlo of a network scenario (Jalalipoor and Kardehi Moghaddam 2021): runs of
 ``network.run.run_network``, each agent scored against the true targets beside the
 centralised reference and the centralised PCRLB of that run.
 

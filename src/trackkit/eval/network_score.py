@@ -1,5 +1,6 @@
 """Scoring of one tracker's confirmed tracks against the true targets, execution by
-execution (seed 004's agents and the centralised reference; ``network.run.Trace``).
+execution (the agents of Jalalipoor and Kardehi Moghaddam (2021) and the centralised reference;
+``network.run.Trace``).
 
 At execution e with truth positions X_e = {x_1..x_Nt} and confirmed track positions
 Y_e = {y_1..y_m} (``eval.multitarget``, d the Euclidean position distance, cut-off c,

@@ -33,7 +33,7 @@ class FilterResult:
     nis_in_bounds: float
     diverged: int  # runs diverged (rule: trackkit.eval.metrics docstring)
     seconds_per_step: float  # wall time per run-step (filter only, not simulation)
-    #: seed 000's per-run metrics (trackkit.eval.matching): "J2" (runs, m), "J3" (runs, n),
+    #: Naseri Solhdar's per-run metrics (trackkit.eval.matching): "J2" (runs, m), "J3" (runs, n),
     #: "J4" (runs,)
     matching: dict[str, Array] = field(default_factory=dict)
     #: missing measurements (scenario [gaps], filter gaps handlers): "handler" (label or

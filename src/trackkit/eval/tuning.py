@@ -1,4 +1,5 @@
-"""Off-line tuning of the fuzzy-adaptive filters' membership functions (seed 000, 3-2, 3-4-4).
+"""Off-line tuning of the fuzzy-adaptive filters' membership functions (Naseri Solhdar, sections 3-2
+and 3-4-4).
 
 The thesis's design procedure: simulate the problem, run the filter with a candidate fuzzy
 system, score it by the degree of matching alone,

@@ -1,5 +1,5 @@
-"""Seed 003 (issue 15): the vessel identification Monte Carlo, a demonstrated sea trial, the
-standard trials of an identified model with the IMO criteria, and the identification of a
+"""Zolfagharnasab and Seif (2025): the vessel identification Monte Carlo, a demonstrated sea trial,
+the standard trials of an identified model with the IMO criteria, and the identification of a
 recorded GPS/INS log.
 
     sc = load_vessel("vessel-zigzag-20")

@@ -1,4 +1,4 @@
-"""Adaptive filters of seed 002 paper (b) (Hashemi and Alfi, Doppler-bearing tracking):
+"""Adaptive filters of Hashemi and Alfi (2019) (Doppler-bearing tracking):
 the modified-covariance EKF, its second-order Jacobian term, the innovation-based R and the
 new Q adaptation (the proposed AMCEKF), and a Sage-Husa adaptive EKF as the paper's
 baseline [16].
@@ -122,8 +122,8 @@ def second_order_jacobian(sensor, x: Array) -> Array:
 
     ``H_ij = dh_i/dx_j + 1/2 d2h_i/dx_j^2``, i.e. ``J_h(x) + 1/2 diag(Hess h_i(x))`` row by row,
     which keeps the m x n shape. The paper writes ``H = dh/dx + d2h/(2 dx^2)`` without saying
-    how the second derivative becomes an m x n matrix (seed 002, B.2.4, B.6); this is the
-    most plausible reading. It is NOT the second-order EKF of Athans, Wishner and Bertolini
+    how the second derivative becomes an m x n matrix; this is
+    the most plausible reading. It is NOT the second-order EKF of Athans, Wishner and Bertolini
     (``EKF(order=2)``), which corrects the predicted measurement and S with the full Hessians.
     Note that the added term is not dimensionally a derivative: it is the paper's heuristic.
     For the DBT sensor at a few km it is about 1e-4 of the Jacobian's entries, so its effect
@@ -224,7 +224,7 @@ def q_factor(delta: Array, P: Array, form: str = "normalised", K: Array | None =
       garbled eq. 21. It has units (m^2, (m/s)^2, Hz^2 mixed), so ``Q <- lambda Q``
       explodes or collapses geometrically unless delta happens to be of order 1.
     - ``"inverse-mean-square"``: ``lambda = 1 / ((1/n) sum_i delta_i^2)``, the other reading
-      allowed by the extra "1" token (seed 002, B.2.6); as unit-laden as the first.
+      allowed by the extra "1" token in the printed equation; as unit-laden as the first.
     - ``"normalised"`` (default): ``lambda = delta^T P-^{-1} delta / tr(K H)``. Dimensionless,
       and equal to 1 on average for a consistent filter: ``delta = K r`` with
       ``E[r r^T] = S`` gives ``E[delta^T P-^{-1} delta] = tr(P-^{-1} K S K^T)
@@ -319,7 +319,7 @@ def _keep_mask(miss: Array | None, batch: tuple[int, ...]) -> Array:
 
 
 class MCEKF(_Linearised):
-    """Modified-covariance EKF (seed 002 paper b, ref. [22]; eqs. 10-11).
+    """Modified-covariance EKF (Hashemi and Alfi 2019, eqs. 10-11).
 
     Prediction as the EKF: ``x- = f(x)``, ``P- = F P F^T + Q``. Update::
 
@@ -371,7 +371,7 @@ class MCEKF(_Linearised):
 
 
 class AMCEKF(Filter):
-    """Adaptive modified-covariance EKF, the filter proposed by seed 002 paper (b).
+    """Adaptive modified-covariance EKF, the filter proposed by Hashemi and Alfi (2019).
 
     MC-EKF update (eqs. 10-13, :class:`MCEKF`) with ``R_t = r_scale R0`` and
     ``Q_t = q_scale Q0``, then, per row with a measurement::
@@ -387,7 +387,7 @@ class AMCEKF(Filter):
 
     Both updates compound, as in the paper; alpha and lambda from step t apply from step t+1.
 
-    Choices the paper leaves open (seed 002, B.6), all documented here:
+    Choices the paper leaves open (Hashemi and Alfi 2019), all documented here:
 
     - ``window`` N (paper: 25). ``warmup="partial"`` (default): before N innovations have
       been seen, C_r averages the k available ones (1/k, not 1/N, so alpha is not biased
@@ -515,8 +515,8 @@ class AEKF(Filter):
     """Adaptive EKF baseline (stands for the paper's ref. [16]): the Sage-Husa noise
     estimator with fading memory.
 
-    The paper's [16] tunes Q and R online by steepest descent but gives no equations (seed
-    002, B.1, B.5 item 3c: "any documented adaptive EKF will do"). This is the widely used
+    The paper's [16] tunes Q and R online by steepest descent but gives no equations, so
+    any documented adaptive EKF will do. This is the widely used
     Sage-Husa estimator (A. P. Sage and G. W. Husa, "Adaptive filtering with unknown prior
     statistics", Proc. JACC, 1969) with the exponential forgetting factor b. At the k-th
     update of a row (k = 0, 1, ...), with r = z - h(x-), H = J_h(x-)::

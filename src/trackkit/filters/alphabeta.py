@@ -1,5 +1,5 @@
-"""Constant-gain trackers of seed 001 (sections 2.1-2.4): the alpha-beta and
-alpha-beta-gamma filters, their gain designers, variance-reduction ratios, steady-state
+"""Constant-gain trackers of the missing-measurements thesis (sections 2-1 to 2-4): the alpha-beta
+and alpha-beta-gamma filters, their gain designers, variance-reduction ratios, steady-state
 covariances and stability tests.
 
 Each position coordinate is filtered on its own with the same gains. Per coordinate, with
@@ -19,7 +19,8 @@ In matrix form (2-1..2-3, 2-13..2-16, 2-41..2-44) ``x(n|n) = A x(n-1|n-1) + K y(
 **One gamma convention for the whole module: the acceleration gain is 2 gamma / T^2**
 (eq. 2-35, the thesis's characteristic polynomial 2-49, Brookner's g-h-k filter and
 FilterPy's ``GHKFilter``, whose k is our gamma). The thesis's VRR formulas 2-45..2-47 are
-exact for an acceleration gain gamma'/T^2 (seed 001, 2.4), so they are evaluated here at
+exact for an acceleration gain gamma'/T^2 (the missing-measurements thesis, section 2-4), so they
+are evaluated here at
 ``gamma' = 2 gamma``. Fading-memory and growing-memory gains for alpha-beta-gamma are given
 in this convention too.
 
@@ -512,7 +513,8 @@ def alpha_beta_track(z: ArrayLike, T: ArrayLike, alpha: ArrayLike,
             x_s(n) = x_p(n) + alpha (x0(n) - x_p(n))                          (2-4)
             v_s(n) = v_s(n-1) + (beta / T) (x0(n) - x_p(n))                   (2-5)
 
-    (x_s(2) is not printed; x0(2) is the natural choice, seed 001 2.2.) ``alpha`` and
+    (x_s(2) is not printed; x0(2) is the natural choice, as in the missing-measurements thesis,
+    section 2-3.) ``alpha`` and
     ``beta`` are scalars or broadcast against z (per-scan gains such as Simpson's,
     shape ``(K, 1, ...)``); ``T`` the scan period (s).
     """
@@ -978,8 +980,8 @@ class _ConstantGain(Filter):
 
 
 class AlphaBeta(_ConstantGain):
-    """The alpha-beta tracker (seed 001 2.2-2.3), batched, with d = 1..3 position
-    coordinates filtered alike; state [x, y, vx, vy] for d = 2.
+    """The alpha-beta tracker (the missing-measurements thesis, section 2-3), batched, with d = 1..3
+    position coordinates filtered alike; state [x, y, vx, vy] for d = 2.
 
     ``AlphaBeta(alpha, beta)`` has the thesis's start-up rules (``startup="thesis"``);
     ``startup="prior"`` uses the constant gains from the first scan (the prior is the
@@ -1006,9 +1008,9 @@ class AlphaBeta(_ConstantGain):
 
 
 class AlphaBetaGamma(_ConstantGain):
-    """The alpha-beta-gamma tracker (seed 001 2.4), acceleration gain 2 gamma / T^2;
-    state [x, y, vx, vy, ax, ay] for d = 2. Options as :class:`AlphaBeta`; Simpson's gains
-    are the growing-memory quadratic (:func:`simpson_abg`)."""
+    """The alpha-beta-gamma tracker (the missing-measurements thesis, section 2-4), acceleration
+    gain 2 gamma / T^2; state [x, y, vx, vy, ax, ay] for d = 2. Options as :class:`AlphaBeta`;
+    Simpson's gains are the growing-memory quadratic (:func:`simpson_abg`)."""
 
     name = "AlphaBetaGamma"
     _m = 3

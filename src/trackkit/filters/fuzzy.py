@@ -1,4 +1,4 @@
-"""Fuzzy-adaptive Kalman filtering by innovation covariance matching (seed 000, chapter 3):
+"""Fuzzy-adaptive Kalman filtering by innovation covariance matching (Naseri Solhdar, chapter 3):
 the Mamdani fuzzy system and the OFKF / OFEKF wrappers around the KF, EKF and UKF.
 
 **Covariance matching** (thesis eqs 3-3 to 3-6). With the innovation ``r_k = z_k - h(x-_k)``
@@ -29,7 +29,7 @@ where for Q the input d_j is DOM(i,i) for the pair ``q_inputs[j] = (i, i)`` and 
 an off-diagonal pair (the thesis's eq 3-21, DOM(3,3) := DOM(1,2)^2, which gives a 3 x 3 Q a
 third input from a 2 x 2 DOM).
 
-Choices the thesis leaves open (seed 000 section 6), documented:
+Choices the thesis leaves open (Naseri Solhdar), documented:
 
 - ``normalise`` sets the units the fuzzy system works in (the thesis tunes raw DOM and
   adjustments for one problem at a time):

@@ -21,7 +21,7 @@ posterior mu_j. ``estimate`` is the combination above, the moment-matched Gaussi
 **Models of different state sizes.** The IMM's state is the union of the models' states:
 ``state_maps[j]`` lists, for each component of model j's state, its index in the union (by
 default model j's state is the first ``dim_x`` components of the union, which with the state
-ordering of DESIGN.md puts CV ``[x, y, vx, vy]`` inside CT ``[x, y, vx, vy, omega]`` and CA
+trackkit's state ordering puts CV ``[x, y, vx, vy]`` inside CT ``[x, y, vx, vy, omega]`` and CA
 ``[x, y, vx, vy, ax, ay]``). A model that does not carry a component (CV and the turn rate)
 still enters every sum above; what it is taken to say about that component is ``fill``:
 
@@ -46,8 +46,8 @@ still enters every sum above; what it is taken to say about that component is ``
   adds to the covariance only each model's own block, leaving out the spread of the means
   in the missing components; here the exact mixture moments are used.
 
-On seed 001's S7 (CV + CT, 200 runs) "others" gives the lower position RMSE, 0.178 against
-0.186, and is better in 84% of runs (``tests/test_imm.py``).
+On the missing-measurements thesis's section 4-5 scenario (CV + CT, 200 runs) "others" gives the
+lower position RMSE, 0.178 against 0.186, and is better in 84% of runs (``tests/test_imm.py``).
 
 Missing measurements (nan in z) keep every model's prediction and leave mu at c_j. The
 returned :class:`~trackkit.belief.Innovation` is that of the moment-matched predicted

@@ -1,4 +1,4 @@
-"""GA-based track initialisation for Doppler-bearing tracking (seed 002, paper b, sec. 4-2).
+"""GA-based track initialisation for Doppler-bearing tracking (Hashemi and Alfi 2019, section 4-2).
 
 The paper's Fig. 2: a genetic algorithm searches the initial target position; each candidate
 initialises an auxiliary Kalman filter, the filter's residuals over the first measurements
@@ -20,7 +20,7 @@ one batch of shape (runs, population) per generation.
 **Choices the paper leaves open (documented defaults):**
 
 - *K, the number of measurements.* One measurement cannot fix range, and with the velocity
-  and tone unknown a few tens cannot either: for seed 002 scenario 1 (2 deg, 0.3 Hz, 1 s)
+  and tone unknown a few tens cannot either: for Hashemi and Alfi's scenario 1 (2 deg, 0.3 Hz, 1 s)
   the Cramer-Rao bound on the initial position along the line of sight, from K measurements
   with no prior on velocity and tone, is about 243 km at K = 20, 18 km at 100, 2.5 km at
   300, 420 m at 600 and 160 m at 800 (scenario 2: 300 m at 600). The paper's "< 1000 m" then

@@ -1,15 +1,16 @@
-"""Joint tracking and classification with multiple-model particle filters (seed 002 paper a).
+"""Joint tracking and classification with multiple-model particle filters (Hosseini, Haeri and
+Khaloozadeh 2019).
 
 Two filters estimate the state ``x = [x, y, vx, vy]`` and the class ``c`` of a target (an
 airliner or a fighter, :mod:`trackkit.models.classes`) from radar plots:
 
-* :class:`JTC`, the paper's single filter (002.md A.2.4, Table 1): each particle carries a
+* :class:`JTC`, the paper's single filter (Table 1): each particle carries a
   state, a class label and a manoeuvre mode; particles are allocated to the classes at every
   step by ``N_c ~ Mult(N, p(c | Z^k))`` with a floor, and resampled within their class.
-* :class:`MultiFilterJTC`, the baseline of A.2.3: one multiple-model particle filter per class,
-  each with its class's modes and a fixed number of particles, combined by Bayes' rule.
+* :class:`MultiFilterJTC`, the paper's baseline (Fig. 1): one multiple-model particle filter
+  per class, each with its class's modes and a fixed number of particles, combined by Bayes' rule.
 
-Both run the same step for each particle j of class c = c^j (A.2.2):
+Both run the same step for each particle j of class c = c^j:
 
     m_k^j ~ p(m_k | m_{k-1}^j)                   the class's mode chain (inverse CDF)
     x_k^j = F(omega_m) x_{k-1}^j + G (a_m + w)    the mode's motion, w ~ N(0, sigma^2 I)
@@ -103,7 +104,7 @@ SPEEDS = ("estimate", "particle")
 
 
 def next_modes(rows: Ints, cdf: Array, u: Array) -> NDArray[np.int8]:
-    """Each particle's next mode by inverse-CDF sampling (002.md A.2.2, step 1).
+    """Each particle's next mode by inverse-CDF sampling (step 1 of the MMPF).
 
     ``cdf[r]`` is row r of a transition matrix, cumulated: ``b_j = p_r1 + ... + p_rj``;
     particle i in row ``rows[i]`` (its class's table row for its current mode) with the
@@ -377,7 +378,7 @@ def _draw_prior(prior: Gaussian, shape: tuple[int, ...], rng: np.random.Generato
 
 class JTC:
     """Joint tracking and classification by one multiple-model particle filter whose particles
-    carry a class label (seed 002 paper a, Table 1; module docstring).
+    carry a class label (Hosseini, Haeri and Khaloozadeh 2019, Table 1; module docstring).
 
     ``classes``: the target classes (default the paper's airliner and fighter);
     ``particles_per_class`` N_c (N = s N_c in all); ``floor``: the fraction of N_c every class
@@ -624,9 +625,9 @@ class MultiFilterBelief(NamedTuple):
 
 
 class MultiFilterJTC:
-    """The multiple-model JTC baseline (002.md A.2.3, Fig. 1): one multiple-model particle
-    filter per class, each with its class's modes and ``particles_per_class`` particles,
-    resampled (systematic) at every step; the class posterior
+    """The multiple-model JTC baseline (Hosseini, Haeri and Khaloozadeh 2019, Fig. 1): one
+    multiple-model particle filter per class, each with its class's modes and
+    ``particles_per_class`` particles, resampled (systematic) at every step; the class posterior
     ``p(c | Z^k) = p(z_k, y_k | c, Z^{k-1}) p(c | Z^{k-1}) / sum_c' (...)`` from each filter's
     likelihood (the mean of its unnormalised weights ``p(z | x) g(v | c)``, as in
     :class:`JTC`), and the overall estimate the posterior-weighted mixture of the class

@@ -1,4 +1,4 @@
-"""Identification of seed 003's vessel model (Zolfagharnasab and Seif 2025): the 16
+"""Identification of the vessel model of Zolfagharnasab and Seif (2025): the 16
 coefficients of ``trackkit.models.vessel`` from sea-trial data.
 
 * ``programme``: the trial programme that generates identification data (batched, seeded

@@ -1,4 +1,5 @@
-"""Identification of seed 003's 16 coefficients by a Kalman filter on the augmented state.
+"""Identification of the 16 coefficients of Zolfagharnasab and Seif (2025) by a Kalman filter on the
+augmented state.
 
 The state is ``x_a = [u, v, r, theta]`` (19): the body states in SI (m/s, m/s, rad/s) and the
 coefficients ``theta = [a1..a9, b1..b4, c1..c3]`` in the prime units of ``norm``, exactly as

@@ -1,4 +1,5 @@
-"""Batch least squares for seed 003's coefficients: the equation-error baseline.
+"""Batch least squares for the coefficients of Zolfagharnasab and Seif (2025): the equation-error
+baseline.
 
 The model is linear in theta, so the forward-Euler step with the mean input (paper eq. 4)
 gives one linear regression per sample pair::

@@ -1,4 +1,5 @@
-"""The trial programme that generates identification data for seed 003's vessel model.
+"""The trial programme that generates identification data for the vessel model of Zolfagharnasab and
+Seif (2025).
 
 A sea-trial identification programme is a sequence of separate trials, each started on a
 straight course at the steady speed of its engine setting, recorded at ``T`` and joined into

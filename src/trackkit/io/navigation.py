@@ -7,7 +7,7 @@ the body-frame measurement ``y = [u, v, r]`` on a uniform time grid; and the mea
     inputs, _ = read_inputs_csv("inputs.csv", epoch=log.epoch)
     nozzle, n = inputs_on_grid(inputs, m.t)
 
-The steps (seed 003 leaves them open, section 2.5):
+The steps (Zolfagharnasab and Seif 2025 leave them open):
 
 1. latitude and longitude to east, north (m) in an :class:`~trackkit.io.frames.EnuFrame`
    (default at the median position, as the other readers);

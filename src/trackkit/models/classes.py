@@ -1,12 +1,12 @@
-"""Target classes for joint tracking and classification (seed 002 paper a, 002.md A.2.5-A.2.6).
+"""Target classes for joint tracking and classification (Hosseini, Haeri and Khaloozadeh 2019).
 
 A class is what a target *is* (an airliner, a fighter): it does not change in time, and it
 shows in how the target moves. Each class has
 
 * a speed likelihood ``g(v | c)``, the class's speed envelope, standing in for the feature
-  measurements a radar does not give (A.2.6);
+  measurements a radar does not give;
 * a set of manoeuvre modes, each a constant turn rate ``omega`` and a constant acceleration
-  ``u`` held over a step, between which the target switches by a Markov chain (A.2.5).
+  ``u`` held over a step, between which the target switches by a Markov chain.
 
 One step of mode (omega, u) on the state ``x = [x, y, vx, vy]`` with white acceleration noise
 ``w ~ N(0, sigma^2 I)`` (the paper's common noise gain ``G``) is
@@ -69,7 +69,7 @@ ALONG = ("velocity", "axes")
 
 @dataclass(frozen=True)
 class SpeedLikelihood:
-    """``g(v | c)``: constant below ``v_low`` and above ``v_high``, a ramp between (A.2.6)::
+    """``g(v | c)``: constant below ``v_low`` and above ``v_high``, a ramp between::
 
         g(v) = g_low                                               v <= v_low
              = g_low + (g_high - g_low) / (v_high - v_low) (v - v_low)   v_low < v <= v_high
@@ -129,7 +129,7 @@ class Mode:
 
 
 def paper_modes(u: float, omega: float) -> tuple[Mode, ...]:
-    """The five modes of a class (002.md A.2.5): CV; CA with +u and -u (m/s^2); CT with
+    """The five modes of a class: CV; CA with +u and -u (m/s^2); CT with
     +omega and -omega (rad/s)."""
     return (Mode("CV"), Mode("CA+", acceleration=u), Mode("CA-", acceleration=-u),
             Mode("CT+", turn_rate=omega), Mode("CT-", turn_rate=-omega))
@@ -297,7 +297,7 @@ def _step(px: Array, py: Array, vx: Array, vy: Array, s: Array, c: Array, cos: A
     return x1, y1, vx1, vy1
 
 
-# the paper's two classes (002.md A.2.5-A.2.6), with the c2 sign typo fixed (0.1 + ..., not
+# the paper's two classes, with the c2 sign typo fixed (0.1 + ..., not
 # 0.1 - ...) and the turn rates read in deg/s (module docstring)
 AIRLINER = TargetClass(
     "airliner", SpeedLikelihood(v_low=100.0, g_low=0.8, v_high=300.0, g_high=0.1),

@@ -3,7 +3,7 @@
 Each model is a small frozen dataclass with vectorised methods over leading batch axes:
 ``f(x, dt)``, ``jacobian(x, dt)`` (shape broadcastable to ``(..., n, n)``) and
 ``noise(x, dt)`` (Q, broadcastable to ``(..., n, n)``). ``dt`` is a float or an array that
-broadcasts against the batch axes (asynchronous steps). State ordering follows DESIGN.md:
+broadcasts against the batch axes (asynchronous steps). State ordering (trackkit's convention):
 positions, then velocities, then accelerations, then extras.
 """
 
@@ -424,12 +424,12 @@ class CoordinatedTurn(MotionModel):
 
 @dataclass(frozen=True, eq=False)
 class RandomSine(MotionModel):
-    """Seed 001's random-sine demo (S3): state [theta, omega, a], phase, angular velocity and
-    amplitude; omega and a are random walks.
+    """The random-sine example of the missing-measurements thesis (sections 2-5-5-2 and 2-5-6-4):
+    state [theta, omega, a], phase, angular velocity and amplitude; omega and a are random walks.
 
     F = [[1, dt, 0], [0, 1, 0], [0, 0, 1]],
     Q = [[q1 dt^3/3, q1 dt^2/2, 0], [q1 dt^2/2, q1 dt, 0], [0, 0, q2 dt]].
-    The two-state S6 variant [theta, omega] is ``ConstantVelocity(dim=1, q=q1)``.
+    The two-state variant of section 4-4, [theta, omega] is ``ConstantVelocity(dim=1, q=q1)``.
     """
 
     q1: float = 0.2

@@ -352,7 +352,7 @@ class RangeBearing(SensorModel):
 
 @dataclass(frozen=True, eq=False)
 class AzimuthElevation(SensorModel):
-    """3-D angles from ``origin``: z = [azimuth, elevation] (seed 000, chapter 5).
+    """3-D angles from ``origin``: z = [azimuth, elevation] (Naseri Solhdar, chapter 5).
 
     azimuth as ``Bearing`` on (x, y) (nautical by default; the thesis measures it from the x
     axis, ``convention="math"``); elevation ``atan2(dz, sqrt(dx^2 + dy^2))``, up positive.
@@ -418,7 +418,7 @@ class AzimuthElevation(SensorModel):
 
 @dataclass(frozen=True, eq=False)
 class BearingFrequency(SensorModel):
-    """Doppler-bearing sensor (seed 002, paper b): z = [bearing, received frequency].
+    """Doppler-bearing sensor (Hashemi and Alfi 2019): z = [bearing, received frequency].
 
     State [x, y, vx, vy, f0]; ``origin`` and ``velocity`` are the observer's. With
     d = target - observer, r = |d|, dv the relative velocity and b = atan2(dx, dy):
@@ -511,7 +511,7 @@ class BearingFrequency(SensorModel):
 
 @dataclass(frozen=True, eq=False)
 class MultipathDelay(SensorModel):
-    """Surface and bottom multipath delays at one hydrophone (seed 000, chapter 4).
+    """Surface and bottom multipath delays at one hydrophone (Naseri Solhdar, chapter 4).
 
     z = [tau1, tau2]: the surface-reflected and bottom-reflected arrival times minus the
     direct one. By the image method, with d = target - sensor (z up), ``R = |d|``,
@@ -573,8 +573,9 @@ class MultipathDelay(SensorModel):
 
 @dataclass(frozen=True, eq=False)
 class Sine(SensorModel):
-    """Seed 001's sine measurement: ``y = a sin(theta)`` on the state [theta, omega, a] (S3),
-    or ``y = sin(theta)`` on [theta, omega] with ``amplitude=False`` (S6)."""
+    """The sine measurement of the missing-measurements thesis: ``y = a sin(theta)`` on the state
+    [theta, omega, a] (sections 2-5-5-2 and 2-5-6-4), or ``y = sin(theta)`` on [theta, omega] with
+    ``amplitude=False`` (section 4-4)."""
 
     sigma: float = 1.0
     amplitude: bool = True

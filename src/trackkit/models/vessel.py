@@ -1,4 +1,4 @@
-"""Seed 003's manoeuvring model of a waterjet search-and-rescue boat (Zolfagharnasab and Seif
+"""The manoeuvring model of a waterjet search-and-rescue boat (Zolfagharnasab and Seif
 2025), identified with an EKF on the state augmented by its 16 coefficients.
 
 Body state ``x = [u, v, r]``: surge (m/s, forward), sway (m/s, positive to starboard) and yaw

@@ -1,4 +1,4 @@
-"""Decentralised cooperative tracking (seed 004).
+"""Decentralised cooperative tracking (Jalalipoor and Kardehi Moghaddam 2021).
 
 The agents' program and an in-process network run (:mod:`~trackkit.network.agents`,
 :mod:`~trackkit.network.run`), built on composite measurements from asynchronous bearings

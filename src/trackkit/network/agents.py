@@ -1,5 +1,6 @@
-"""One agent of seed 004's decentralised tracker: its program per execution (004.md Fig. 2),
-its tracks batched (arrays over tracks), and the versioned message it broadcasts.
+"""One agent of the decentralised tracker of Jalalipoor and Kardehi Moghaddam (2021): its program
+per execution (Jalalipoor and Kardehi Moghaddam 2021, Fig. 2), its tracks batched (arrays over
+tracks), and the versioned message it broadcasts.
 
 Per execution at time t (the order of Fig. 2, with the reconstruction's choices):
 
@@ -38,11 +39,11 @@ Per execution at time t (the order of Fig. 2, with the reconstruction's choices)
    default rule is ``"information"`` (covariance intersection with those fixed weights,
    consistent whatever the correlation: our composites and a neighbour's share raw bearings);
    ``"paper"`` is eqs. 49-50 as printed. Only the neighbours' confirmed tracks are used.
-7. **Initiation** (section 2.5). Bearings no track claimed (own and neighbours') stay in a pool
+7. **Initiation** (eqs. 7-8). Bearings no track claimed (own and neighbours') stay in a pool
    for ``init_window_s``. Each unclaimed bearing new at this execution (own or a
    neighbour's, so that a target only neighbours measure can be started; up to
    ``max_initiations`` per execution, in random order) seeds ``initiate`` over the pool.
-   *Support rule* (the seed has none; ours): the best candidate is accepted only when at
+   *Support rule* (the paper has none; ours): the best candidate is accepted only when at
    least ``min_support`` pool bearings lie within 2 sigma of it, from at least
    ``min_sources`` different sensors (two separated sensors observe a CV target without
    manoeuvres; one does not), and the composite measurement of those bearings at t from the
@@ -52,7 +53,7 @@ Per execution at time t (the order of Fig. 2, with the reconstruction's choices)
    within the similarity gate; ``TimerLogic`` steps with hit = "a bearing was associated at
    this execution"; DELETED tracks are dropped, and so are *ghosts*, confirmed tracks no
    neighbour able to see them has matched for ``corroborate_s`` (ours; ``AgentSettings``).
-   A Lost track coasts: the seed feeds it its
+   A Lost track coasts: the paper feeds it its
    own predicted measurement, z = h(x-), whose innovation is zero, so the update returns the
    prediction (with the covariance shrunk by a fictitious measurement, which we refuse:
    coasting keeps P- honest).
@@ -132,7 +133,7 @@ _DEL = np.int8(TrackStatus.DELETED)
 
 @dataclass(frozen=True)
 class AgentSettings:
-    """An agent's parameters (the seed gives none of them; these are ours).
+    """An agent's parameters (the paper gives none of them; these are ours).
 
     Association: ``k1`` = 1, ``k2`` = 0.5 (the cost K1 (1 - exp(-K2 d2)), d2 the squared
     Mahalanobis bearing residual, so 1 - c/K1 is the Gaussian likelihood's shape);
@@ -154,7 +155,7 @@ class AgentSettings:
     Timers (``TimerLogic``): ``confirm_after`` = 30 s, ``lost_after`` = 60 s,
     ``delete_after`` = 180 s.
     Initiation: ``n_candidates`` = 2 000; ``r_min`` = 100 m, ``r_max`` = 50 km (capped by the
-    measurement range), ``v_max`` = 30 m/s (the seed's top speed); ``init_window_s`` = 60 s
+    measurement range), ``v_max`` = 30 m/s (the paper's top speed); ``init_window_s`` = 60 s
     (the unclaimed-bearing pool); ``min_support`` = 8 bearings within 2 sigma from
     ``min_sources`` = 2 sensors; ``max_initiations`` = 1 track started per execution, from at
     most ``init_attempts`` = 3 seed bearings.
@@ -162,7 +163,7 @@ class AgentSettings:
     chi2.ppf(0.99, 4) (track-to-track matching and duplicate pruning); ``combination``
     "information" (or "paper", "convex", "ci"); ``combine_neighbours`` False turns the
     combination step off (a centralised node has no neighbours anyway).
-    Corroboration (ours; the seed has none): ``corroborate_s`` = 60 s (inf turns it off)
+    Corroboration (ours; the paper has none): ``corroborate_s`` = 60 s (inf turns it off)
     deletes a confirmed track of ours that no neighbour able to see it has matched for that
     long: a *ghost*, a track at the wrong range on a true line of sight (the initiation's
     ambiguity, docs/network-comparison.md), gathers our own bearings and keeps its timers
@@ -412,8 +413,9 @@ def predict_tracks(tracks: Tracks, dt: float, q: float) -> Tracks:
 def associate(mean: Array, cov: Array, t: float, bearings: BearingSet, settings: AgentSettings
               ) -> NDArray[np.intp]:
     """Assign each track (``mean (T, 4)``, ``cov (T, 4, 4)`` at time t) at most one bearing of
-    one source's scan (``bearings``, all of one sensor at one time): gate, seed-004 cost and
-    Munkres (module docstring, step 3). Returns ``det (T,)``, -1 for none."""
+    one source's scan (``bearings``, all of one sensor at one time): gate, the cost of
+    Jalalipoor and Kardehi Moghaddam (2021) and Munkres (module docstring, step 3).
+    Returns ``det (T,)``, -1 for none."""
     T, D = mean.shape[0], bearings.size
     if T == 0 or D == 0:
         return np.full(T, -1, np.intp)

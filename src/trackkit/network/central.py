@@ -1,5 +1,5 @@
 """Centralised fusion of every agent's bearings: the reference a decentralised network is
-measured against (issue 14, "References the paper lacks").
+measured against (Jalalipoor and Kardehi Moghaddam 2021 give no such reference).
 
 One filter per target receives every bearing of every agent, one at a time in time order,
 as a fusion centre linked to every agent without loss or delay would. Batched over runs R
@@ -9,11 +9,11 @@ either (the loop is over the M = A E executions, sorted by time).
 **Association is ideal.** The bearing of target j goes to filter j: the simulation's true
 target label is used, which no real tracker has. The reference therefore measures *fusion*
 (how well all the bearings together fix each target), not association or track management:
-that is what "centralised fusion" means in issue 14, and it is the quantity the PCRLB bounds.
+that is what "centralised fusion" means here, and it is the quantity the PCRLB bounds.
 A decentralised agent that comes within a factor of this reference loses that factor to its
 partial view, its composite batching, its association and its life cycle together.
 
-The model (DESIGN.md conventions). Target j moves by ``models.ConstantVelocity(dim=2, q)``:
+The model (trackkit's conventions). Target j moves by ``models.ConstantVelocity(dim=2, q)``:
 
     x_k = F(dt) x_{k-1} + w,   F(dt) = [[I, dt I], [0, I]],
     Q(dt) = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]],   dt = t_k - t_{k-1}

@@ -1,5 +1,5 @@
-"""Composite measurement (seed 004, section 2.3): the maximum-likelihood constant-velocity
-state at a reference time from M asynchronous bearings, with its Cramer-Rao bound.
+"""Composite measurement (Jalalipoor and Kardehi Moghaddam 2021, eqs. 13-33): the maximum-likelihood
+constant-velocity state at a reference time from M asynchronous bearings, with its Cramer-Rao bound.
 
 M bearings z(t_k), k = 1..M, of one target are taken from known sensor positions S(t_k) (one
 or several sensors, any times). With the constant-velocity transition F(t_k, t_f) (F of
@@ -7,7 +7,7 @@ or several sensors, any times). With the constant-velocity transition F(t_k, t_f
 X(t_k) = F(t_k, t_f) X(t_f), and the bearing is
 
     z(t_k) = h(X(t_k), S(t_k)) + w_k,    w_k ~ N(0, sigma_k^2),
-    h = atan2(x - x_s, y - y_s)          (nautical: clockwise from north; DESIGN.md)
+    h = atan2(x - x_s, y - y_s)          (nautical: clockwise from north)
 
 The likelihood of X = X(t_f) is Lambda(X; Z) = prod_k p(z(t_k) | X), and
 

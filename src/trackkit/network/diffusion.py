@@ -1,5 +1,5 @@
-"""Diffusion Kalman filter over a network of agents (seed 004 section 2.8, eqs. 44-50;
-Cattivelli and Sayed, "Diffusion strategies for distributed Kalman filtering and smoothing",
+"""Diffusion Kalman filter over a network of agents (Jalalipoor and Kardehi Moghaddam 2021, eqs.
+44-50; Cattivelli and Sayed, "Diffusion strategies for distributed Kalman filtering and smoothing",
 IEEE TAC 55(9), 2010).
 
 N agents hold estimates of the same target(s). A belief is a :class:`~trackkit.Gaussian`
@@ -205,7 +205,7 @@ def measurement_information(z: ArrayLike, R: ArrayLike,
     ``z`` is ``(..., N, m)`` (one measurement per agent; a row with any ``nan`` is missing
     and contributes zero), ``R`` broadcasts to ``(..., N, m, m)`` (its rows may be ``nan``
     where z is missing) and ``H`` is ``(m, n)`` or ``(..., N, m, n)``, by default the
-    identity (the seed's composite measurement, ``H = I_4``, ``R = J^-1``). Returns arrays of
+    identity (the paper's composite measurement, ``H = I_4``, ``R = J^-1``). Returns arrays of
     shape ``(..., N, n, n)``, ``(..., N, n)`` and the boolean ``(..., N)``.
     """
     z = np.asarray(z, dtype=float)
@@ -360,7 +360,8 @@ def combine(belief: Gaussian, weights: ArrayLike, method: str = "information",
 
     * ``"convex"`` (Cattivelli and Sayed 2010): ``x_k = sum_l a_lk psi_l`` and ``P_k``
       kept (the agent's own updated covariance);
-    * ``"paper"`` (seed 004, eqs. 49-50 as printed): ``x_k = sum_l a_lk psi_l`` and
+    * ``"paper"`` (Jalalipoor and Kardehi Moghaddam 2021, eqs. 49-50 as printed): ``x_k = sum_l a_lk
+    psi_l`` and
       ``P_k = (sum_l a_lk P_l^-1)^-1``. The covariance is a harmonic mean, the mean an
       arithmetic one: when the agents' covariances differ the pair can be badly
       overconfident (the mean keeps a share a_lk of the worst agent's error, the covariance
@@ -460,7 +461,7 @@ class DiffusionKF:
 
     def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
         """``x_k- = F x_k``, ``P_k- = F P_k F^T + Q`` for every agent (eqs. 44-45; the
-        printed ``G v(k)`` term is zero-mean and left out): the core KF prediction. The seed's
+        printed ``G v(k)`` term is zero-mean and left out): the core KF prediction. The paper's
         ``G Q G^T`` is ``trackkit.models.LinearMotion(F, G Q G^T)``;
         ``trackkit.models.ConstantVelocity`` is its continuous-time counterpart."""
         x = np.asarray(belief.mean)

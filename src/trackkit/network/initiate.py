@@ -1,4 +1,4 @@
-"""Randomised track initiation from bearings (seed 004, section 2.5, eqs. 7-8).
+"""Randomised track initiation from bearings (Jalalipoor and Kardehi Moghaddam 2021, eqs. 7-8).
 
 A bearing that no track claims may be a new target. Candidate targets are drawn around it:
 from the measuring sensor at ``o`` with bearing ``z`` and noise ``sigma``,
@@ -7,7 +7,7 @@ from the measuring sensor at ``o`` with bearing ``z`` and noise ``sigma``,
     speed_c ~ U(0, v_max),    x_c = o + r_c (sin beta_c, cos beta_c),
     v_c = speed_c (sin course_c, cos course_c)
 
-(the seed draws the range "uniform in the sensor's measurement range"; its speed is unstated,
+(the paper draws the range "uniform in the sensor's measurement range"; its speed is unstated,
 uniform up to the targets' top speed is our reading). Each candidate's congruity with the M
 unclaimed bearings (z_m at t_m from o_m, noise sigma_m; the agent's own and its neighbours')
 is a robust sum over them,
@@ -15,16 +15,16 @@ is a robust sum over them,
     C_c = sum_m K1 (1 - exp(-K2 zeta_cm^2)),
     zeta_cm = wrap(h(x_c + (t_m - t_0) v_c; o_m) - z_m) / sigma_m
 
-with h the nautical bearing. The seed's zeta is in radians with unstated K1, K2; here it is in
+with h the nautical bearing. The paper's zeta is in radians with unstated K1, K2; here it is in
 standard deviations of each bearing, so that K2 = 1/2 makes each term a Gaussian kernel of
 the bearing's own noise, and bearings of unequal quality mix. A bearing of another target
-costs at most K1: a candidate is not dragged towards it. The seed keeps the candidate of
+costs at most K1: a candidate is not dragged towards it. The paper keeps the candidate of
 "highest congruity" with a cost that is 0 for a perfect match; the best candidate is the one
 whose summed cost is least, and :func:`initiate` returns it with a starting covariance.
 
 Where another agent's bearings of a different target cross this bearing's line of sight, the
 crossing (a ghost) can be supported by as many bearings as the target: bearings-only
-initiation from several sensors is ambiguous there, and the seed's cost does not remove the
+initiation from several sensors is ambiguous there, and the paper's cost does not remove the
 ambiguity; the track's later bearings and the duplicate pruning must.
 """
 

@@ -1,4 +1,5 @@
-"""Seed 004's agents as separate operating-system processes talking over ZeroMQ.
+"""the agents of Jalalipoor and Kardehi Moghaddam (2021) as separate operating-system processes
+talking over ZeroMQ.
 
 :func:`run_network_processes` runs the same network as :func:`trackkit.network.run.run_network`
 (same arguments, same :class:`~trackkit.network.run.NetworkResult`), but every agent lives in

@@ -1,4 +1,5 @@
-"""An in-process network run of seed 004's agents (:mod:`trackkit.network.agents`).
+"""An in-process network run of the agents of Jalalipoor and Kardehi Moghaddam (2021)
+(:mod:`trackkit.network.agents`).
 
 One run, one multi-target problem:
 

@@ -1,15 +1,15 @@
-"""Agent course control (seed 004 section 2.9, eqs. 52-64): three sub-optimisations over the
-turn-rate-limited course interval, under range constraints, blended into one course.
+"""Agent course control (Jalalipoor and Kardehi Moghaddam 2021, eqs. 52-64): three sub-optimisations
+over the turn-rate-limited course interval, under range constraints, blended into one course.
 
-Geometry (DESIGN.md): x east, y north; courses and bearings are nautical (clockwise from
+Geometry (trackkit's convention): x east, y north; courses and bearings are nautical (clockwise from
 north), so an agent at speed v on course C moves with velocity ``v (sin C, cos C)`` and the
 bearing from p to q is ``B = atan2(q_x - p_x, q_y - p_y)``; every angle is wrapped to
 (-pi, pi].
 
 **Admissible courses.** An agent on course C that runs its program again after dt, with the
-turn-rate limit w (2 deg/s in the seed), may command any course in
+turn-rate limit w (2 deg/s in the paper), may command any course in
 
-    [C - w dt, C + w dt]                                           (section 2.9, "course bounds")
+    [C - w dt, C + w dt]                                           (eqs. 52-64, "course bounds")
 
 The interval is searched on a grid of ``n_candidates`` courses ``C + w dt g_k`` with g_k
 evenly spaced on [-1, 1] (both ends and g = 0 included), ordered by |g_k| so that ties go to
@@ -37,7 +37,7 @@ t + dt, B_j the bearing from P_a(c) to target j):
 with r_min = 0.05, r_max = 0.95. An infinite range ("very large", scenario 1) has no lower
 bound (5% of infinity is no constraint) and no upper bound.
 
-The seed checks the constraints at the predicted positions only (``safety="step"`` here). A
+The paper checks the constraints at the predicted positions only (``safety="step"`` here). A
 one-step check cannot keep them: an agent heading for a neighbour near the lower bound needs
 a quarter turn, (pi/2)/w = 45 s and up to v/w = 859 m of closing at 30 m/s, to stop closing,
 so it must start turning before a one-step check sees anything; and with several neighbours
@@ -80,7 +80,7 @@ position T(t + dt) and keeps
 alone (rho = 0). For static targets this set is kept like the neighbours' one; a moving
 target can leave it faster than the agent follows, and the bounds can then break.
 
-**Choosing among candidates** (the seed is silent). A candidate is *feasible* when every
+**Choosing among candidates** (the paper is silent). A candidate is *feasible* when every
 pair meets its barrier. Each sub-objective is minimised over the feasible candidates. When
 none is feasible, target constraints are relaxed before neighbour ones (connectivity first: a
 lost link loses everything that neighbour knows, a target out of range only its own bearings):
@@ -88,7 +88,7 @@ the candidates meeting every neighbour barrier with the least total target short
 those with the least total neighbour shortfall (metres summed over the pairs). The agent then
 turns back inside the constraints as fast as the turn rate allows.
 
-**Blend** (eq. 64): the seed averages the three courses linearly,
+**Blend** (eq. 64): the paper averages the three courses linearly,
 ``C = (K_Rn C_Rn + K_Rt C_Rt + K_Dt C_Dt) / (K_Rn + K_Rt + K_Dt)``, which blends 359 deg and
 1 deg to 180 deg. Here it is the weighted circular mean
 
@@ -129,7 +129,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-#: the seed's turn-rate limit, 2 deg/s
+#: the paper's turn-rate limit, 2 deg/s
 TURN_RATE = float(np.deg2rad(2.0))
 #: the constraint checks of :class:`Steering` (module docstring)
 SAFETY = ("circle", "step")
@@ -139,14 +139,14 @@ _TIE = 1e-6
 
 @dataclass(frozen=True)
 class Steering:
-    """Course-control parameters (seed 004 eqs. 52-64).
+    """Course-control parameters (Jalalipoor and Kardehi Moghaddam 2021, eqs. 52-64).
 
     ``k_rn``, ``k_rt``, ``k_dt``: blend weights K_Rn, K_Rt, K_Dt of eq. 64 (>= 0).
     ``K1``, ``K2``: the LOS-perpendicular cost K1 (1 - exp(-K2 (lambda - pi/2)^2)) (eq. 56).
-    ``turn_rate``: w, rad/s (the seed's 2 deg/s). ``n_candidates``: odd grid size over the
+    ``turn_rate``: w, rad/s (the paper's 2 deg/s). ``n_candidates``: odd grid size over the
     admissible interval (>= 3). ``r_min``, ``r_max``: the range factors 0.05 and 0.95.
     ``safety``: ``"circle"`` checks each pair with the backup turning circles and a shared
-    barrier (module docstring); ``"step"`` is the seed's check at the predicted positions
+    barrier (module docstring); ``"step"`` is the paper's check at the predicted positions
     alone. ``share``: rho, the fraction of a neighbour barrier an agent must keep per step
     (1/2: two agents deciding at once). ``margin``: m, metres kept clear of every bound in
     ``"circle"`` (absorbs the second-order terms the barrier neglects). ``straight``: keep
@@ -287,7 +287,7 @@ def blend_courses(courses: ArrayLike, weights: ArrayLike = (1.0, 1.0, 1.0)) -> A
     """Eq. 64 as a weighted circular mean: ``atan2(sum_m K_m sin C_m, sum_m K_m cos C_m)``.
 
     ``courses`` ``(..., 3)``: (C_Rn, C_Rt, C_Dt); ``weights`` ``(3,)`` or ``(..., 3)``:
-    (K_Rn, K_Rt, K_Dt), >= 0 and not all 0. The seed's linear mean would blend 359 deg and
+    (K_Rn, K_Rt, K_Dt), >= 0 and not all 0. The paper's linear mean would blend 359 deg and
     1 deg to 180 deg; the circular mean gives 0.
     """
     C = _array(courses, "courses")
@@ -309,7 +309,7 @@ def blend_courses(courses: ArrayLike, weights: ArrayLike = (1.0, 1.0, 1.0)) -> A
 
 def swarm_neighbours(position: ArrayLike, course: ArrayLike, speed: ArrayLike,
                      comm_range: ArrayLike) -> tuple[Array, Array, Array]:
-    """Every agent's neighbours in the disk graph of section 2.10 (agents a and i linked when
+    """Every agent's neighbours in the disk graph of the paper (agents a and i linked when
     their distance is at most min(CR_a, CR_i)), as the per-agent arrays :func:`steer` takes.
 
     ``position`` ``(..., N, 2)``, ``course``, ``speed``, ``comm_range`` ``(..., N)``. Returns
@@ -345,8 +345,9 @@ def steer(position: ArrayLike, course: ArrayLike, speed: ArrayLike, dt: ArrayLik
           neighbours: ArrayLike | None = None, neighbour_velocity: ArrayLike | None = None,
           neighbour_range: ArrayLike | None = None, comm_range: ArrayLike = np.inf,
           meas_range: ArrayLike = np.inf, params: Steering | None = None) -> CourseCommand:
-    """The course each agent commands for its next dt (seed 004 eqs. 52-64; see the module
-    docstring for the maths, the horizon, the constraints and the choices made).
+    """The course each agent commands for its next dt (Jalalipoor and Kardehi Moghaddam 2021, eqs.
+    52-64; see the module docstring for the maths, the horizon, the constraints and the choices
+    made).
 
     Shapes (``...`` runs, N agents; every array broadcasts against the others):
 

@@ -1,5 +1,5 @@
-"""Tracks across agents (seed 004, section 2.7): similarity, track-to-track matching,
-duplicate pruning, and the memory of neighbours' messages.
+"""Tracks across agents (Jalalipoor and Kardehi Moghaddam 2021, eqs. 39 and 51): similarity,
+track-to-track matching, duplicate pruning, and the memory of neighbours' messages.
 
 Similarity of track i (``x_i``, ``P_i``) and track j (eq. 39)::
 
@@ -144,7 +144,7 @@ class Message:
 @dataclass
 class MessageMemory:
     """Messages received from neighbours, kept for ``keep_s`` seconds of simulated time
-    and then forgotten (the seed: data are held for a fixed period, and the neighbours are
+    and then forgotten (the paper: data are held for a fixed period, and the neighbours are
     the agents whose data are in memory). The newest message of each sender is kept; an
     older one arriving late is counted in ``stale`` and not stored."""
 

@@ -19,7 +19,7 @@ Every optimiser minimises B independent problems at once::
   identical whether it is solved alone or in a batch (for a cost whose rows are independent).
 
 ``repeat`` runs one problem several times with independent seeds and reports the best, mean
-and worst final cost, as optimiser comparisons do (seed 000, Table 3-2: 15 runs each).
+and worst final cost, as optimiser comparisons do (Naseri Solhdar, Table 3-2: 15 runs each).
 """
 
 from __future__ import annotations

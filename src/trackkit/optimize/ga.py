@@ -14,7 +14,7 @@ One generation, for each problem, with population N and e elites:
      widened by ``alpha`` times its width on each side;
    - ``"arithmetic"`` (whole arithmetic): ``c1 = g p1 + (1 - g) p2``,
      ``c2 = (1 - g) p1 + g p2`` with one ``g ~ U(0, 1)`` per pair;
-   - ``"single_point"`` (the textbook binary-GA operator of seed 000, swap tails): the genes
+   - ``"single_point"`` (the textbook binary-GA operator of Naseri Solhdar, swap tails): the genes
      after a cut ``j ~ U{1, ..., d-1}`` are exchanged (``d = 1``: no change).
 
 4. **Mutation**, independently per gene with probability ``mutation``:
@@ -65,7 +65,7 @@ class GA(Optimizer):
     """Real-coded GA: tournament selection, crossover, per-gene mutation, elitism.
 
     ``GA(population=50, generations=200, crossover=0.8, mutation=0.05)`` are the settings of
-    seed 002 (paper b). See the module docstring for the operators.
+    Hashemi and Alfi (2019). See the module docstring for the operators.
     """
 
     population: int = 50

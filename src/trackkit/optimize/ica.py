@@ -64,7 +64,7 @@ empires is not implemented.
 
 Defaults: ``beta = 2`` and ``gamma = pi/4`` (the paper's suggested values), ``zeta = 0.1``
 (the paper's), ``revolution = 0.3`` (the reference implementation's rate), 5 imperialists
-(10 % of the countries), population 50 and 30 iterations (seed 000's settings).
+(10 % of the countries), population 50 and 30 iterations (Naseri Solhdar's settings).
 
 ``history[t]`` is the best cost over all countries evaluated up to iteration t (row 0: the
 initial countries): non-increasing, last row equal to ``best_f``. (An imperialist of an
@@ -140,7 +140,7 @@ class ICA(Optimizer):
     """Imperialist competitive algorithm: assimilation with angular deviation, revolution,
     exchange of positions, imperialistic competition, elimination of empty empires.
 
-    ``ICA(population=50, iterations=30)`` are seed 000's settings; the other defaults are the
+    ``ICA(population=50, iterations=30)`` are Naseri Solhdar's settings; the other defaults are the
     paper's (see the module docstring for the steps and the choices).
     """
 

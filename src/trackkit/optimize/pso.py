@@ -32,7 +32,7 @@ steps; it also needs no extra randomness), ``P_i = X_i(0)``.
 
 Defaults: ``c1 = c2 = 2`` (Kennedy and Eberhart's acceleration constants) with the inertia
 going from 0.9 to 0.4 (Shi and Eberhart 1999), ``v_max = 0.2`` of the box width per variable
-(the usual 10-20 %), population 50 and 30 iterations (seed 000's settings).
+(the usual 10-20 %), population 50 and 30 iterations (Naseri Solhdar's settings).
 
 ``history[t]`` is the global best cost ``f(G)`` after iteration t (row 0: the initial
 swarm), i.e. the best cost seen so far: non-increasing, last row equal to ``best_f``.
@@ -74,7 +74,7 @@ Array = NDArray[np.float64]
 class PSO(Optimizer):
     """Particle swarm with linearly decreasing inertia, velocity clamping and walls.
 
-    ``PSO(population=50, iterations=30)`` are seed 000's settings; the other defaults are the
+    ``PSO(population=50, iterations=30)`` are Naseri Solhdar's settings; the other defaults are the
     standard ones (see the module docstring for the update and the choices).
     """
 

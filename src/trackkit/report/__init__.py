@@ -3,7 +3,7 @@
     from trackkit.report import write_report, rich_table
     paths = write_report(result, "out/")       # result: trackkit.eval.results.MonteCarloResult
     rich.print(rich_table(result))
-    for table in matching_rich_tables(result):   # seed 000's J1-J4 / tuning tables, if any
+    for table in matching_rich_tables(result):   # Naseri Solhdar's J1-J4 / tuning tables, if any
         rich.print(table)
 """
 

@@ -1,4 +1,4 @@
-"""One self-contained HTML page: scenario, summary table, seed 000's J1-J4 and tuning tables
+"""One self-contained HTML page: scenario, summary table, Naseri Solhdar's J1-J4 and tuning tables
 (when the result has them), notes, the PNGs inlined as base64 data URIs and the glossary of
 the metrics, with inline CSS and no scripts, so it opens in a browser with no network."""
 
@@ -37,7 +37,8 @@ _CAPTIONS = {
     "time": "Run 0 against time: the first state component's truth and each filter's estimate "
             "(top), and the measurements with each filter's pseudo-measurements (bottom); the "
             "gaps shaded.",
-    "classes": "Class probability against time (seed 002 paper a, Fig. 4): each classifying "
+    "classes": "Class probability against time (Hosseini, Haeri and Khaloozadeh 2019, Fig. 4): "
+               "each classifying "
                "filter's probability of the true class, mean over runs with the 10-90th "
                "percentile band (or, without a true class, the mean probability of each "
                "class).",
@@ -128,7 +129,7 @@ def render_html(result: MonteCarloResult, images: Mapping[str, str | Path | byte
                                                            len(result.filters))]
     extra = matching_html_tables(result)
     if extra:
-        parts.append("<h2>Seed 000 metrics and tuning</h2>")
+        parts.append("<h2>Naseri Solhdar metrics and tuning</h2>")
     for title, table in extra:
         parts += [f"<h3>{esc(title)}</h3>", table]
     gap = gap_summary(result)

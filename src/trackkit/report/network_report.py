@@ -1,4 +1,5 @@
-"""The report of a network Monte Carlo (seed 004, issue 14), written atomically into one
+"""The report of a network Monte Carlo (Jalalipoor and Kardehi Moghaddam 2021), written atomically
+into one
 directory with ``report.files.write_atomically``:
 
 * ``results.json``: per agent (numbered from 1) the fraction of runs ending with every target

@@ -1,5 +1,5 @@
 """Report figures, one PNG each: geometry, RMSE against time with the PCRLB, NEES with bounds;
-and, for seed 000's scenarios when the result has the data, the covariance matching of run 0
+and, for Naseri Solhdar's scenarios when the result has the data, the covariance matching of run 0
 (R, S, C and DOM per channel), the tuned fuzzy systems' membership functions and the
 optimisers' convergence.
 
@@ -231,7 +231,8 @@ def plot_nees(result: MonteCarloResult, path: str | Path) -> Path:
     return _save(nees_figure(result), path)
 
 
-# --- seed 000: covariance matching, fuzzy membership functions, optimiser convergence ---------
+# --- Naseri Solhdar's thesis: covariance matching, fuzzy membership functions, optimiser
+# convergence ---------
 
 
 def _color(result: MonteCarloResult, name: str) -> str:
@@ -424,9 +425,9 @@ def _shade_gaps(ax, result: MonteCarloResult) -> None:
 
 
 def time_figure(result: MonteCarloResult) -> Figure | None:
-    """Run 0 against time (seed 001's figures 4-4 .. 4-15): the first state component, true
-    and estimated by each filter, and the first measurement channel, measured and fed as a
-    pseudo-measurement by each filter; gaps shaded. None without an example run."""
+    """Run 0 against time (the missing-measurements thesis's figures 4-4 .. 4-15): the first state
+    component, true and estimated by each filter, and the first measurement channel, measured and
+    fed as a pseudo-measurement by each filter; gaps shaded. None without an example run."""
     ex = result.example
     if ex is None:
         return None
@@ -463,10 +464,10 @@ def plot_time(result: MonteCarloResult, path: str | Path) -> Path | None:
 
 
 def classes_figure(result: MonteCarloResult) -> Figure | None:
-    """Class probability against time (seed 002 paper a, Fig. 4): for each filter that
-    classifies, its probability of the true class, mean over runs with the 10-90th percentile
-    band shaded; without a true class, the mean probability of each of its classes (one line
-    style per class). None when no filter classifies."""
+    """Class probability against time (Hosseini, Haeri and Khaloozadeh 2019, Fig. 4): for each
+    filter that classifies, its probability of the true class, mean over runs with the 10-90th
+    percentile band shaded; without a true class, the mean probability of each of its classes (one
+    line style per class). None when no filter classifies."""
     names = result.classifiers()
     if not names:
         return None

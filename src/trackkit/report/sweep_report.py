@@ -22,8 +22,8 @@ Files, written into the campaign directory all or nothing (``files.write_atomica
   ``x1`` for factors, framed).
 - ``heatmap-ratio_rmse_GROUP.png``: for a grid over two parameters, each filter's RMSE over
   the reference filter's at the same point (same truths and measurements): the reference is
-  the scenario's published table's (``[report] published``, e.g. the EKF of seed 002 paper b),
-  else the scenario's first filter. Where the paper gives that filter's ratio, the panel's
+  the scenario's published table's (``[report] published``, e.g. the EKF of Hashemi and Alfi
+  (2019)), else the scenario's first filter. Where the paper gives that filter's ratio, the panel's
   title gives it beside ours at the scenario's own setting, and a dashed contour runs where
   ours crosses it.
 - ``report.html``: the settings, the table of headline metrics, each published ratio beside

@@ -5,7 +5,7 @@ fraction of steps with the average NEES inside its 95% bounds, diverged runs, an
 per run-step. Values are SI inside; the only unit conversion (radians to degrees for angle
 groups) happens here, in :func:`display_unit`, and the plots use the same function.
 
-When the scenario asks for seed 000's metrics (``report.matching``), two more tables shaped
+When the scenario asks for Naseri Solhdar's metrics (``report.matching``), two more tables shaped
 like the thesis's Tables 3-1, 3-3, 4-1 and 5-1..5-3 (rows J1-Z^i, J2-Z^i, J3-X^j, J4; one
 column per filter): the Monte Carlo mean of the per-run values and run 0 alone (the thesis's
 tables are single fixed-seed runs). When fuzzy systems were tuned, a table shaped like
@@ -319,7 +319,8 @@ def html_table(result: MonteCarloResult) -> str:
             f"<thead><tr>{head}</tr></thead>\n<tbody>\n" + "\n".join(body) + "\n</tbody>\n</table>")
 
 
-# --- seed 000: the thesis metrics J1-J4 and the tuning of the fuzzy systems -------------------
+# --- Naseri Solhdar's thesis: the thesis metrics J1-J4 and the tuning of the fuzzy systems
+# -------------------
 
 #: state components named like the error groups, for the 3-D [x, y, z, vx, vy, vz] state
 _STATE_3D = (("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s"))
@@ -444,10 +445,10 @@ def matching_summary(result: MonteCarloResult, which: str = "mean") -> Summary |
             sections.append(i - 1)
         last = key
     if which == "mean":
-        title = f"Seed 000 metrics: Monte Carlo mean over {result.runs} runs"
+        title = f"Naseri Solhdar metrics: Monte Carlo mean over {result.runs} runs"
         how = f"mean of the per-run values over {result.runs} runs"
     else:
-        title = "Seed 000 metrics: run 0 (one fixed-seed run, as in the thesis)"
+        title = "Naseri Solhdar metrics: run 0 (one fixed-seed run, as in the thesis)"
         how = f"run 0 alone (the first run of seed {result.seed})"
     caption = (f"{result.scenario}: {how}; SI units. J1: raw noise RMS; J2: noise-free minus "
                "estimated measurement RMS; J3: state RMSE (the thesis's J1 in chapters 4-5); "
@@ -473,8 +474,8 @@ def tuning_summary(result: MonteCarloResult) -> Summary | None:
 
 
 def matching_summaries(result: MonteCarloResult) -> list[Summary]:
-    """The seed-000 tables present in ``result``: J1-J4 mean and run 0 (with matching
-    data), then the tuning table (when tuned). Empty for other scenarios."""
+    """The tables of Naseri Solhdar's metrics present in ``result``: J1-J4 mean and run 0
+    (with matching data), then the tuning table (when tuned). Empty for other scenarios."""
     out = [matching_summary(result, "mean"), matching_summary(result, "run0"),
            tuning_summary(result)]
     return [s for s in out if s is not None]

@@ -1,4 +1,4 @@
-"""The report of a multi-target Monte Carlo comparison (issue 11), written atomically into one
+"""The report of a multi-target Monte Carlo comparison , written atomically into one
 directory like ``report.files.write_report``:
 
 * ``results.json``: per tracker the time-averaged GOSPA (alpha = 2, p = 2) and its

@@ -1,4 +1,4 @@
-"""The report of a vessel identification (seed 003, issue 15): a scenario's Monte Carlo
+"""The report of a vessel identification (Zolfagharnasab and Seif 2025): a scenario's Monte Carlo
 (``eval.vessel_mc.run_vessel``) or a recorded log (``eval.vessel_mc.identify_recorded``),
 written atomically into one directory with ``report.files.write_atomically``:
 

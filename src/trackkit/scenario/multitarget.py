@@ -1,5 +1,5 @@
 """Multi-target scenarios: a bundled radar scene, the trackers to compare, the Monte Carlo
-runs and the report settings, as a TOML file validated with pydantic (issue 11).
+runs and the report settings, as a TOML file validated with pydantic .
 
     sc = load_multitarget("radar-crossing")       # bundled by name, or a path to a .toml file
     scene, trackers = build(sc)                   # trackkit.sim.multitarget.Scene, {name: Tracker}

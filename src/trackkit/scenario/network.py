@@ -1,5 +1,5 @@
-"""Network scenarios (seed 004, issue 14): moving agents with bearing sensors that track
-several targets together, the agents' settings, the Monte Carlo runs and the report, as a
+"""Network scenarios (Jalalipoor and Kardehi Moghaddam 2021): moving agents with bearing sensors
+that track several targets together, the agents' settings, the Monte Carlo runs and the report, as a
 TOML file validated with pydantic.
 
     sc = load_network("net-baseline")        # bundled by name, or a path to a .toml file
@@ -184,9 +184,9 @@ class AgentSpec(_Strict):
     y_m: Finite = Field(description="initial position, north")
     course_deg: Finite = Field(description="initial course, clockwise from north")
     speed_mps: Annotated[float, Field(ge=0, le=30, allow_inf_nan=False)] = Field(
-        description="constant speed (the seed's agents: at most 30 m/s)")
+        description="constant speed (the paper's agents: at most 30 m/s)")
     sigma_deg: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] = Field(
-        2.0, description="bearing standard deviation (the seed assumes at most 5 degrees, "
+        2.0, description="bearing standard deviation (the paper assumes at most 5 degrees, "
         "2 in its simulations)")
     meas_range_m: float = Field(math.inf, description="measurement range (inf: unlimited)",
                                 json_schema_extra=_unit("m"))
@@ -246,8 +246,8 @@ class RandomTargetsSpec(_Strict):
 class SettingsSpec(_Strict):
     """The agents' program settings exposed here (the rest: ``AgentSettings``' defaults)."""
 
-    steering: bool = Field(True, description="course control (seed 004 section 2.9); false: "
-                           "straight courses")
+    steering: bool = Field(True, description="course control (Jalalipoor and Kardehi "
+                           "Moghaddam 2021, eqs. 52-64); false: straight courses")
     combination: Literal["information", "paper", "convex", "ci"] = Field(
         "information", description="the diffusion combination rule (information: covariance "
         "intersection with the uniform weights; paper: eqs. 49-50 as printed)")

@@ -339,9 +339,9 @@ FILTER_TYPES: dict[str, FilterType] = {
                "towards their mean by sqrt(1 - h^2) before the jitter, so the cloud keeps its "
                "covariance (Liu and West)"),
     )),
-    "MCEKF": FilterType(tkf.MCEKF, "modified-covariance EKF (seed 002 paper b)", (
+    "MCEKF": FilterType(tkf.MCEKF, "modified-covariance EKF (Hashemi and Alfi 2019)", (
         Option("second_order", "bool", False, "H = J_h + 1/2 diag(Hess h) (eqs. 12-13)"),)),
-    "AMCEKF": FilterType(tkf.AMCEKF, "adaptive modified-covariance EKF (seed 002 paper b)", (
+    "AMCEKF": FilterType(tkf.AMCEKF, "adaptive modified-covariance EKF (Hashemi and Alfi 2019)", (
         Option("window", "int", 25, _WINDOW + " C_r (eq. 15)", low=1),
         Option("second_order", "bool", True, "H = J_h + 1/2 diag(Hess h) (eqs. 12-13)"),
         Option("adapt_r", "bool", True, "adapt R by alpha = tr(C_r) / tr(S) (eqs. 18-19)"),
@@ -365,7 +365,8 @@ FILTER_TYPES: dict[str, FilterType] = {
         Option("adapt_q", "bool", False, "estimate Q as well as R"),
     )),
     "AlphaBeta": FilterType(alpha_beta, "alpha-beta tracker, constant gains on [x, y, vx, "
-                            "vy] (seed 001; a Position sensor, a ConstantVelocity motion)", (
+                            "vy] (the missing-measurements thesis; a Position sensor, a "
+                            "ConstantVelocity motion)", (
         Option("gains", "choice", "kohn", "the gain designer: kohn (0.5, 0.167), "
                "benedict-bordner (alpha), fading-memory (xi) or explicit (alpha, beta)",
                choices=AB_GAINS),
@@ -377,8 +378,9 @@ FILTER_TYPES: dict[str, FilterType] = {
         _STARTUP,
     )),
     "AlphaBetaGamma": FilterType(alpha_beta_gamma, "alpha-beta-gamma tracker on [x, y, vx, "
-                                 "vy, ax, ay], acceleration gain 2 gamma / T^2 (seed 001; a "
-                                 "Position sensor, a 3 dim state)", (
+                                 "vy, ax, ay], acceleration gain 2 gamma / T^2 (the "
+                                 "missing-measurements thesis; a Position sensor, a 3 dim "
+                                 "state)", (
         Option("gains", "choice", "fading-memory", "the gain designer: benedict-bordner "
                "(alpha, beta; gamma by eq. 2-50), fading-memory (xi) or explicit (alpha, beta, "
                "gamma)", choices=ABG_GAINS),
@@ -397,8 +399,9 @@ FILTER_TYPES: dict[str, FilterType] = {
                choices=("others", "zero")),
     )),
     "JTC": FilterType(JTC, "joint tracking and classification: one multiple-model particle "
-                      "filter whose particles carry a class label, airliner or fighter (seed "
-                      "002 paper a; a 2-D [x, y, vx, vy] state; the classes' own motion modes)",
+                      "filter whose particles carry a class label, airliner or fighter (Hosseini, "
+                      "Haeri and Khaloozadeh 2019; a 2-D [x, y, vx, vy] state; the classes' "
+                      "own motion modes)",
                       _JTC_OPTIONS[:1] + (
         Option("floor", "float", 0.1, "the fraction of particles_per_class every class keeps "
                "(the paper's N_Thr = 0.1 N_c)", low=0, high=1, open_low=True,
@@ -411,14 +414,15 @@ FILTER_TYPES: dict[str, FilterType] = {
     ) + _JTC_OPTIONS[3:], fixed={"classes": PAPER_CLASSES, "class_prior": None}),
     "MultiFilterJTC": FilterType(MultiFilterJTC, "the multi-filter JTC baseline: one "
                                  "multiple-model particle filter per class, combined by Bayes' "
-                                 "rule (seed 002 paper a; a 2-D [x, y, vx, vy] state)",
+                                 "rule (Hosseini, Haeri and Khaloozadeh 2019; a 2-D [x, y, "
+                                 "vx, vy] state)",
                                  _JTC_OPTIONS,
                                  fixed={"classes": PAPER_CLASSES, "class_prior": None}),
-    "OFKF": FilterType(tkf.FuzzyAdaptive, "KF with fuzzy-adaptive R or Q (seed 000)",
+    "OFKF": FilterType(tkf.FuzzyAdaptive, "KF with fuzzy-adaptive R or Q (Naseri Solhdar)",
                        _FUZZY_OPTIONS, base="KF"),
-    "OFEKF": FilterType(tkf.FuzzyAdaptive, "EKF with fuzzy-adaptive R or Q (seed 000)",
+    "OFEKF": FilterType(tkf.FuzzyAdaptive, "EKF with fuzzy-adaptive R or Q (Naseri Solhdar)",
                         _FUZZY_OPTIONS, base="EKF"),
-    "OFUKF": FilterType(tkf.FuzzyAdaptive, "UKF with fuzzy-adaptive R or Q (seed 000)",
+    "OFUKF": FilterType(tkf.FuzzyAdaptive, "UKF with fuzzy-adaptive R or Q (Naseri Solhdar)",
                         _FUZZY_OPTIONS, base="UKF"),
 }
 

@@ -194,11 +194,11 @@ class MotionSpec(_Strict):
                                "m^2/s^3"))
     q_diag: list[NonNegFloat] | None = Field(
         None, description="Q per step as a diagonal, in state order, instead of from q: the "
-        "additive Q = q I of seed 000 (ConstantVelocity and Linear)",
+        "additive Q = q I of Naseri Solhdar (ConstantVelocity and Linear)",
         json_schema_extra=_unit("SI squared"))
     F: list[list[Finite]] | None = Field(
         None, description="the transition matrix per step of a Linear model (any state, e.g. "
-        "seed 000's chapter 3)", json_schema_extra=_unit("SI"))
+        "Naseri Solhdar's chapter 3)", json_schema_extra=_unit("SI"))
     A: list[list[Finite]] | None = Field(
         None, description="the continuous-time system matrix of a ContinuousLinear model",
         json_schema_extra=_unit("SI"))
@@ -297,7 +297,8 @@ class SensorSpec(_Strict):
                    "BearingFrequency", "MultipathDelay", "Sine"] = Field(
         description="the measurement: bearing; range and bearing; position; azimuth and "
         "elevation; bearing and received frequency; surface and bottom multipath delays; "
-        "a sin(theta) of the state [theta, omega, a] (seed 001's random sine)")
+        "a sin(theta) of the state [theta, omega, a] (the random sine of the "
+        "missing-measurements thesis)")
     sigma_deg: PositiveFloat | None = Field(None, description="standard deviation of the "
                                             "bearing (and elevation) noise")
     sigma_m: PositiveFloat | None = Field(None, description="standard deviation of the range "
@@ -309,7 +310,7 @@ class SensorSpec(_Strict):
     r_diag_si: list[PositiveFloat] | None = Field(
         None, description="the noise covariance's diagonal per channel (m^2, rad^2, Hz^2, "
         "s^2) instead of the sigmas; for Position it also sets the dimension (H = [I 0], "
-        "e.g. seed 000's chapter 3)", json_schema_extra=_unit("SI squared"))
+        "e.g. Naseri Solhdar's chapter 3)", json_schema_extra=_unit("SI squared"))
     snr_db: Finite | None = Field(None, description="signal-to-noise ratio instead of the "
                                   "sigmas: noise variance per channel = mean square of the "
                                   "noise-free measurement over the nominal truth / "
@@ -327,8 +328,9 @@ class SensorSpec(_Strict):
         1.0, description="probability that a scan has a measurement (1 = always); missing "
         "ones are nan")
     amplitude: bool = Field(True, description="Sine only: y = a sin(theta) on the state "
-                            "[theta, omega, a] (true, S3), or y = sin(theta) on [theta, omega] "
-                            "(false, S6)")
+                            "[theta, omega, a] (true, section 2-5-5-2 of the missing-measurements "
+                            "thesis), or y = sin(theta) on [theta, omega] (false, its section "
+                            "4-4)")
 
     @model_validator(mode="after")
     def _noise_given(self) -> SensorSpec:
@@ -366,7 +368,7 @@ class Observer(_Strict):
 
 
 class GAInitSpec(_Strict):
-    """The GA initialiser of seed 002 paper (b) (``trackkit.filters.initialise``): per run, a
+    """The GA initialiser of Hashemi and Alfi (2019) (``trackkit.filters.initialise``): per run, a
     genetic algorithm searches the initial target position that minimises an auxiliary EKF's
     normalised residuals over the first ``measurements`` measurements; every filter then
     starts from ``N([p_GA, velocity_guess_mps, f0_guess], diag(std^2))`` at the prior time,
@@ -475,13 +477,13 @@ class PriorSpec(_Strict):
 class ScenarioPriorSpec(PriorSpec):
     """The scenario's prior (``[prior]``): a filter prior (``std`` or ``cov``, ``mean``) that
     is also the PCRLB's ``J0 = P0^-1``, and how every filter's first estimate is made:
-    ``initialiser = "draw"`` (the prior) or ``"ga"`` (the GA initialiser of seed 002 paper b,
+    ``initialiser = "draw"`` (the prior) or ``"ga"`` (the GA initialiser of Hashemi and Alfi (2019),
     settings in ``prior.ga``)."""
 
     initialiser: Literal["draw", "ga"] = Field(
         "draw", description="how every filter's first estimate is made: \"draw\", the "
         "prior above (mean, or the truth plus a draw from N(0, P0)); \"ga\", the GA "
-        "initialiser of seed 002 paper (b) from the first measurements (settings in "
+        "initialiser of Hashemi and Alfi (2019) from the first measurements (settings in "
         "prior.ga; Doppler-bearing scenarios only). With \"ga\" the prior above is still the "
         "PCRLB's J0 = P0^-1, which a GA-started filter does not use")
     ga: GAInitSpec | None = Field(None, description="the GA initialiser's settings (with "
@@ -507,10 +509,11 @@ class ScenarioPriorSpec(PriorSpec):
 
 
 class GapsSpec(_Strict):
-    """Missing measurements (seed 001, chapter 4): every listed interval is masked out of the
-    simulated measurements of every filter (nan, as if the radar saw nothing). Intervals by
-    time, by sample index or by count, several of each, combined (their union); measurement
-    k (0-based) is taken at ``t = (k + 1) step_s``. What each filter is fed instead is its own
+    """Missing measurements (the missing-measurements thesis, chapter 4): every listed interval is
+    masked out of the simulated measurements of every filter (nan, as if the radar saw nothing).
+    Intervals by time, by sample index or by count, several of each, combined (their union);
+    measurement k (0-based) is taken at ``t = (k + 1) step_s``. What each filter is fed instead is
+    its own
     ``gaps`` handler (default B0: nothing, the filter coasts)."""
 
     time_s: list[tuple[NonNegFloat, NonNegFloat]] = Field(
@@ -519,7 +522,8 @@ class GapsSpec(_Strict):
         "step_s = 0.1 hides the 30 measurements at t = 2.0 .. 4.9 s; each must hold one")
     samples: list[tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=0)]]] = Field(
         default_factory=list, description="[first, last] measurement indices, 0-based, both "
-        "included (seed 001's samples 50 to 90, counted from 1, are [49, 89])",
+        "included (the missing-measurements thesis's samples 50 to 90, counted from 1, are "
+        "[49, 89])",
         json_schema_extra=_unit("index"))
     counts: list[tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=1)]]] = Field(
         default_factory=list, description="[start, count]: count consecutive measurements "
@@ -608,7 +612,7 @@ _HANDLER_OPTIONS = {
 
 
 class GapHandlerSpec(_Strict):
-    """What a filter is fed at a missing measurement (seed 001, chapter 4;
+    """What a filter is fed at a missing measurement (the missing-measurements thesis, chapter 4;
     ``trackkit.tracking.gaps``): B0 nothing (coast on the prediction), B1 the last real
     measurement, B2 the mean of the last n, P a least-squares fit through the last ``window``
     real measurements extrapolated over the gap (a polynomial in time of ``degree``, or the
@@ -682,7 +686,8 @@ class GapHandlerSpec(_Strict):
 
 
 class TuneSpec(_Strict):
-    """Off-line tuning of a fuzzy-adaptive filter's membership functions (seed 000, 3-2):
+    """Off-line tuning of a fuzzy-adaptive filter's membership functions (Naseri Solhdar, section
+    3-2):
     ``runs`` independent optimiser runs on the DOM cost of ``realisations`` simulated runs of
     the scenario drawn from ``seed``, which is kept apart from the Monte Carlo seed so the
     filter is never scored on the data it was tuned on; the best run's parameters are used.
@@ -991,13 +996,15 @@ class ReportSpec(_Strict):
         default_factory=list, description="a paper's error tables for this scenario "
         "({ group, versus, rmse = { FILTER = RMSE, ... }, source }): the sweep report marks "
         "the paper's ratios beside ours")
-    matching: bool = Field(False, description="report seed 000's J1-J4 and the per-step R, "
+    matching: bool = Field(False, description="report Naseri Solhdar's J1-J4 and the per-step R, "
                            "S, C, DOM of run 0 (trackkit.eval.matching)")
     dom_alpha: PositiveFloat = Field(1000.0, description="the alpha of J4 = alpha sum_i "
-                                     "RMS(DOM(i,i)) (seed 000: 1000 in chapter 3, 5000 after)")
+                                     "RMS(DOM(i,i)) (Naseri Solhdar: 1000 in chapter 3, 5000 "
+                                     "after)")
     angle_states: list[Annotated[int, Field(ge=0)]] = Field(
         default_factory=list, description="state indices (0-based) whose errors are angles, "
-        "wrapped to (-pi, pi] in every metric (e.g. the phase theta of seed 001's sine, which "
+        "wrapped to (-pi, pi] in every metric (e.g. the phase theta of the sine of the "
+        "missing-measurements thesis, which "
         "a measurement of sin(theta) cannot tell from theta + 2 pi)", json_schema_extra=_unit(
             "index"))
     true_class: Literal[tuple(CLASSES)] | None = Field(  # type: ignore[valid-type]
@@ -1114,7 +1121,7 @@ class Scenario(_Strict):
                                      f"{len(leg.velocity_mps)} components; expected "
                                      f"{self.dim} (dim)")
         if self.linear_system:
-            # a full state follows DESIGN.md's ordering: with at least 2 dim components its
+            # a full state follows trackkit's state ordering: with at least 2 dim components its
             # head is [positions, velocities] (a CWPA's [x, y, vx, vy, ax, ay])
             allowed = {f"x{i}" for i in range(1, n + 1)}
             if n >= 2 * self.dim:

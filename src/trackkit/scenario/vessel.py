@@ -1,4 +1,4 @@
-"""Vessel scenarios (seed 003, issue 15): the manoeuvring model of the 19.6 m SAR boat
+"""Vessel scenarios (Zolfagharnasab and Seif 2025): the manoeuvring model of the 19.6 m SAR boat
 identified from simulated GPS/INS sea-trial data, a demonstrated sea trial and the Monte
 Carlo runs, as a TOML file validated with pydantic. Run with ``trackkit identify NAME``.
 
@@ -103,7 +103,7 @@ Array = NDArray[np.float64]
 
 #: the identifiers a scenario (and ``trackkit identify --filter``) may name
 FILTERS = METHODS
-#: Naji 7's maximum speed (seed 003, Table 2)
+#: Naji 7's maximum speed (Zolfagharnasab and Seif 2025, Table 2)
 MAX_SPEED_KN = 44.0
 
 

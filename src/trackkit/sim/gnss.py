@@ -72,8 +72,8 @@ __all__ = [
     "simulate_ins",
 ]
 
-#: A default local origin: the Khor Musa channel off Bandar Imam Khomeini, where seed 003's
-#: SAR boat Naji 7 operates (latitude, longitude in degrees).
+#: A default local origin: the Khor Musa channel off Bandar Imam Khomeini, where the SAR boat
+#: Naji 7 of Zolfagharnasab and Seif (2025) operates (latitude, longitude in degrees).
 KHOR_MUSA = (30.43, 49.07)
 
 

@@ -1,5 +1,5 @@
-"""Asynchronous bearings of moving agents on constant-velocity targets (seed 004, sections
-2.1, 2.2 and 2.10), batched over Monte Carlo runs, seeded per run.
+"""Asynchronous bearings of moving agents on constant-velocity targets (Jalalipoor and Kardehi
+Moghaddam 2021, eqs. 1-4, 9-12 and 17-18), batched over Monte Carlo runs, seeded per run.
 
 Geometry and measurement (2.1). Agent i at S_i(t) = [x_s, y_s] takes, at each of its
 executions t, one bearing of every target j whose position T_j(t) = [x_t, y_t] lies within its
@@ -22,7 +22,7 @@ F = [[1, dt], [0, 1]], Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]], q in m^2/s^3). Th
 exact sampling of continuous white-noise acceleration at arbitrary times, so the truth is
 consistent on any grid, including the union of a fine grid and every execution time.
 
-Asynchrony (2.1, 3: "random delays", distribution not given by the seed). Time is cut into
+Asynchrony ("random delays" in the paper, which gives no distribution). Time is cut into
 slots of the nominal period P; agent i's e-th execution (e = 0 .. E-1, E = floor(D / P) for a
 duration D) is delayed from the slot's start by a uniform random delay::
 

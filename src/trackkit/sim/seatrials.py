@@ -1,4 +1,5 @@
-"""Sea-trial manoeuvres of seed 003's vessel model, batched over leading run axes.
+"""Sea-trial manoeuvres of the vessel model of Zolfagharnasab and Seif (2025), batched over leading
+run axes.
 
 Every trial starts at t = 0 on a straight course (heading ``psi0``, body state
 ``[speed, 0, 0]``, nozzle amidships) and executes its first command at t = 0. Between output

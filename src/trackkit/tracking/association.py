@@ -17,7 +17,8 @@ Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of ga
   - :func:`pda_costs`: ``c_ij = -beta_ij`` with beta the single-track PDA probabilities
     (Stone Soup's ``GNNWith2DAssignment`` over a ``PDAHypothesiser``, which maximises
     their sum);
-  - :func:`seed004_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of seed 004.
+  - :func:`seed004_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of Jalalipoor and
+  Kardehi Moghaddam (2021).
 
 * :func:`jpda`: marginal association probabilities from the feasible joint events of each
   cluster, and :func:`jpda_update`, the combined-innovation state update.
@@ -219,7 +220,7 @@ def pda_costs(g: Gate, p_d: float, clutter_density: float,
 
 def seed004_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | None = None,
                   distance: Literal["mahalanobis", "residual"] = "mahalanobis") -> Costs:
-    """Seed 004's cost ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``.
+    """The cost of Jalalipoor and Kardehi Moghaddam (2021), ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``.
 
     ``gamma_ij^2`` is the squared Mahalanobis distance d2_ij, or with ``distance="residual"``
     the squared innovation ``|nu_ij|^2`` (the paper's bearing difference, wrapped). The paper

@@ -1,4 +1,5 @@
-"""Keeping a track through missing measurements: seed 001's chapter 4, its own contribution.
+"""Keeping a track through missing measurements: the missing-measurements thesis's chapter 4, its
+own contribution.
 
 When the radar sees nothing for a while (smoke, cloud, a beam problem), a handler decides
 what the filter is fed at each missing step:
@@ -90,9 +91,9 @@ def mask_by_time(times: ArrayLike, start: ArrayLike, stop: ArrayLike) -> Mask:
     carry per-run batch axes.
 
     The interval is half-open so that a gap holds ``(stop - start) / T`` samples (30 for
-    seed 001's 2-5 s at T = 0.1 s, as the thesis counts them, 5 for its 20-25 s at T = 1 s)
-    and back-to-back gaps tile without overlap; the first measurement after the gap is the
-    one at ``stop``. Ends are compared within 1e-9 relative (of ``max(1, |start|, |stop|)``
+    the missing-measurements thesis's 2-5 s at T = 0.1 s, as the thesis counts them, 5 for its 20-25
+    s at T = 1 s) and back-to-back gaps tile without overlap; the first measurement after the gap is
+    the one at ``stop``. Ends are compared within 1e-9 relative (of ``max(1, |start|, |stop|)``
     seconds), so times computed as ``k dt`` land on the grid whichever way they round.
     A gap that holds no sample is an error.
     """
@@ -122,7 +123,8 @@ def mask_by_time(times: ArrayLike, start: ArrayLike, stop: ArrayLike) -> Mask:
 
 def mask_by_samples(steps: int, first: ArrayLike, last: ArrayLike) -> Mask:
     """Missing at sample indices ``first .. last``, both included (0-based indices into the
-    measurement axis; seed 001's "from sample 50 to sample 90", counted from 1, is
+    measurement axis; the missing-measurements thesis's "from sample 50 to sample 90", counted from
+    1, is
     ``first=49, last=89``). Per-run arrays give ``(K, ...)``."""
     K = _count(steps, "steps", 1)
     a = _indices(first, "first")
@@ -166,8 +168,8 @@ def union(*masks: ArrayLike) -> Mask:
 
 
 def gap_and_after(mask: ArrayLike, after: int) -> Mask:
-    """The missing steps and the ``after`` steps that follow each gap (where seed 001 looks
-    for the error: over the gap and while the filter recovers)."""
+    """The missing steps and the ``after`` steps that follow each gap (where the
+    missing-measurements thesis looks for the error: over the gap and while the filter recovers)."""
     m = _mask(mask, "gap_and_after mask")
     n = _count(after, "after", 0)
     out = m.copy()
@@ -409,8 +411,9 @@ class PolynomialFit(_Fit):
 
 
 class SineFit(_Fit):
-    """P for seed 001's sine (S3, S6): ``y(t) = a sin(theta0 + omega (t - t_ref))`` fitted
-    to the last ``window`` real measurements, extrapolated to the missing times.
+    """P for the missing-measurements thesis's sine (sections 2-5-5-2 and 4-4): ``y(t) = a
+    sin(theta0 + omega (t - t_ref))`` fitted to the last ``window`` real measurements, extrapolated
+    to the missing times.
 
     Nonlinear least squares, ``min sum_i (y_i - a sin(phi_i))^2``, ``phi_i = theta0 +
     omega tau_i``, by batched Gauss-Newton: ``J_i = [a cos phi_i, a tau_i cos phi_i,
@@ -418,7 +421,7 @@ class SineFit(_Fit):
     whose cost no longer falls is done. It starts from the filter's own predicted estimate
     at the first missing step: ``omega = x[rate]``, ``theta0 = x[phase] - omega (t -
     t_ref)``, ``a = x[amplitude]`` (or 1). With ``amplitude=None`` the amplitude is held at
-    1 (S6's ``y = sin theta``); with an index it is fitted too (and reported with a >= 0,
+    1 (section 4-4's ``y = sin theta``); with an index it is fitted too (and reported with a >= 0,
     since ``a sin(phi) = -a sin(phi + pi)``). ``short_window`` as for
     ``PolynomialFit`` (P'). The sensor must measure one component.
     """
@@ -625,7 +628,8 @@ HANDLER_NAMES = ("B0", "B1", "B2", "P", "P'")
 
 
 def make_handler(name: str, **options: Any) -> GapHandler:
-    """A handler by seed 001's name and its options, as a scenario file selects it:
+    """A handler by the missing-measurements thesis's name and its options, as a scenario file
+    selects it:
 
     ``"B0"`` (coast), ``"B1"`` (hold last), ``"B2"`` (``n``), ``"P"`` (``function=
     "polynomial"`` with ``degree``, ``window``; or ``function="sine"`` with ``window``,

@@ -1,5 +1,5 @@
-"""Track life cycle: M-of-N history logic, SPRT score logic, seed 004's timer logic and
-stable track IDs.
+"""Track life cycle: M-of-N history logic, SPRT score logic, the timer logic of Jalalipoor and
+Kardehi Moghaddam (2021) and stable track IDs.
 
 Every live track is a row of one batched state (axis 0 = track, any leading axes allowed).
 The logics are small frozen dataclasses holding parameters; their methods are pure kernels
@@ -383,7 +383,7 @@ class ScoreLogic:
 
 
 # ------------------------------------------------------------------------------------------
-# Timer logic (seed 004, section 2.6)
+# Timer logic (Jalalipoor and Kardehi Moghaddam 2021, track status logic)
 
 
 class TimerState(NamedTuple):
@@ -404,7 +404,8 @@ def lost(state: TimerState) -> Bool:
 
 @dataclass(frozen=True)
 class TimerLogic:
-    """Seed 004's track states on elapsed times (its section 2.6; the seed gives no values):
+    """The track states of Jalalipoor and Kardehi Moghaddam (2021) on elapsed times (the paper gives
+    no values):
 
     - Query (``TENTATIVE``) from birth; Track (``CONFIRMED``) once ``t - born >=
       confirm_after`` with a measurement within the last ``lost_after`` seconds;

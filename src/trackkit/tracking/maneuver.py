@@ -1,4 +1,5 @@
-"""Manoeuvre detection from innovations, and the responses to a detection (seed 001, 2.11-2.12).
+"""Manoeuvre detection from innovations, and the responses to a detection (the missing-measurements
+thesis, sections 3-3-4-1 and 3-3-4-2).
 
 A filter with the right motion model has white innovations; a manoeuvre makes them large and
 correlated. Three detectors test that, each a small frozen dataclass of parameters with pure
@@ -841,7 +842,8 @@ def run_variable_order(
     end_window: int = 3,
     end_pfa: float = 0.05,
 ) -> VariableOrderRun:
-    """The variable-order filter (seed 001, section 3-3-4-3; Bar-Shalom and Birmiwal 1982).
+    """The variable-order filter (the missing-measurements thesis, section 3-3-4-3; Bar-Shalom and
+    Birmiwal 1982).
 
     ``z`` is ``(K, ..., m)`` (nan where missing), ``prior`` a CV Gaussian ``(..., 2d)`` one
     ``dt`` before the first measurement, ``sensor`` a linear sensor of the position

@@ -1,4 +1,5 @@
-"""The multi-target tracker: the radar loop of seed 001 (section 1) on the batched core.
+"""The multi-target tracker: the radar loop of the missing-measurements thesis (its chapter 1) on
+the batched core.
 
 One scan, for every live track at once (axis 0 of one batched belief is the track axis):
 
@@ -74,7 +75,7 @@ class GNN:
     gated detections. ``cost``: "loglik" (negative log-likelihood ratio against clutter and
     a miss: the most probable joint event), "distance" (the Mahalanobis distance d, a miss
     costing ``missed_distance`` M, as Stone Soup's ``DistanceHypothesiser``) or
-    "seed004" (``K1 (1 - exp(-K2 d^2))``, 004.md 2.6).
+    "seed004" (``K1 (1 - exp(-K2 d^2))``, Jalalipoor and Kardehi Moghaddam 2021).
 
     With the distance cost and no ``missed_distance`` the miss costs the gate's edge
     sqrt(gamma), gamma = chi2.ppf(P_G, m). With ``missed_distance`` M the gate is M instead
