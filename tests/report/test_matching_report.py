@@ -15,6 +15,7 @@ from rich.console import Console
 from typer.testing import CliRunner
 
 from trackkit import cli
+from trackkit.cli import stages
 from trackkit.filters.fuzzy import INPUT_SETS, OUTPUT_SETS, fis
 from trackkit.report import files, plots, tables
 from trackkit.report.html import render_html
@@ -249,9 +250,9 @@ def test_convergence_tolerates_infinite_costs(uw, tmp_path):
 
 
 def test_cli_prints_the_tables_after_the_summary(uw, uw_report, tmp_path, monkeypatch):
-    monkeypatch.setattr(cli, "_load", lambda name: type("S", (), {"name": name, "run": None}))
-    monkeypatch.setattr(cli, "_run", lambda scenario, **kw: uw)
-    monkeypatch.setattr(cli, "_write", lambda result, out: uw_report[1])  # written already
+    monkeypatch.setattr(stages, "_load", lambda name: type("S", (), {"name": name, "run": None}))
+    monkeypatch.setattr(stages, "_run", lambda scenario, **kw: uw)
+    monkeypatch.setattr(stages, "_write", lambda result, out: uw_report[1])  # written already
     monkeypatch.delenv("TRACKKIT_DEBUG", raising=False)
     res = CliRunner().invoke(cli.app, ["run", "uw", "--out", str(tmp_path / "o")])
     assert res.exit_code == 0, res.output

@@ -63,7 +63,7 @@ _BLOCK = re.compile(r"block-(\d{6,})\.tkb")
 _TMP = re.compile(r"\..+\.tmp-[0-9a-f]{12}")
 #: the parts of the package whose code changes a block's numbers are hashed; these are not
 #: (reports, readers, the command line, other seeds' programmes)
-_UNHASHED = ("report", "io", "identify", "network", "cli.py")
+_UNHASHED = ("report", "io", "identify", "network", "cli")
 #: the identity's entries as messages name them
 _NAMES = {"format": "store format", "scenario": "scenario", "parameters": "swept parameters",
           "seed": "campaign seed (--seed)", "runs": "runs per point (--runs)",

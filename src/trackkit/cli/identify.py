@@ -1,0 +1,294 @@
+"""``trackkit identify``: a vessel's manoeuvring model from a recorded GPS/INS log and its
+inputs, or from a vessel scenario's simulated sea trials (Monte Carlo)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.text import Text
+
+from trackkit.cli import stages
+from trackkit.cli.entry import app
+from trackkit.cli.options import OnBad, _at_least, _number
+from trackkit.cli.output import (
+    OutputDir,
+    _default_dir,
+    _deliver_interrupt,
+    _output_dir,
+    _say_note,
+    _stderr,
+    _user_errors,
+)
+from trackkit.cli.summaries import _print_recorded_summary, _print_vessel_summary
+
+
+class VesselFilter(StrEnum):
+    ekf = "ekf"
+    ukf = "ukf"
+    ckf = "ckf"
+    srckf = "srckf"
+    ls = "ls"
+
+
+#: the NMEA sentences the identifier reads
+NMEA_TYPES = "GGA RMC VTG HDT THS ROT"
+#: the NMEA log suffixes; any other log is the CSV form (.csv)
+NMEA_SUFFIXES = (".nmea", ".log", ".txt")
+#: a log shorter than this cannot show converged coefficients (the paper: 500 s)
+_CONVERGED_AFTER_S = 500.0
+
+
+def _identify_kind(what: str) -> str:
+    """``"log"`` or ``"scenario"`` for ``trackkit identify WHAT``; a ValueError in words when
+    it is neither."""
+    from trackkit.scenario.vessel import is_vessel
+
+    p = Path(what)
+    suffix = p.suffix.lower()
+    if suffix in (*NMEA_SUFFIXES, ".csv"):
+        if not p.is_file():
+            why = "is not a file" if p.exists() else "no such file"
+            raise ValueError(f"{what}: {why}; expected a GPS/INS log (NMEA 0183 "
+                             f"{', '.join(NMEA_SUFFIXES)} or CSV .csv)")
+        return "log"
+    if p.is_dir():
+        raise ValueError(f"{what}: is a directory; expected a GPS/INS log file (NMEA 0183 "
+                         f"{', '.join(NMEA_SUFFIXES)} or CSV .csv) with --inputs, or a vessel "
+                         "scenario (.toml or a bundled name)")
+    if suffix == ".toml" or p.exists():
+        if suffix != ".toml" and p.is_file():
+            raise ValueError(f"{what}: unknown log type {suffix or '(no suffix)'!r}; expected "
+                             f"an NMEA 0183 log ({', '.join(NMEA_SUFFIXES)}), the CSV form "
+                             "(.csv) or a vessel scenario (.toml)")
+        if p.is_file() and not is_vessel(what):
+            stages._parse_toml(p)
+            raise ValueError(f"{what}: not a vessel scenario (it has no [vessel] table); see "
+                             "`trackkit show vessel-turning` for a vessel scenario's fields")
+        return "scenario"  # (a missing or unreadable .toml: load_vessel says so)
+    if is_vessel(what):
+        return "scenario"
+    others = {**stages._bundled(), **stages._bundled_multitarget()}
+    vessels = sorted(stages._bundled_vessel())
+    from trackkit.scenario.network import bundled_network
+
+    if what in others or what in bundled_network():
+        raise ValueError(f"{what!r} is not a vessel scenario; `trackkit identify` takes a "
+                         f"GPS/INS log or one of {vessels}")
+    raise ValueError(f"{what}: no such log file and no bundled vessel scenario of that name; "
+                     f"expected a GPS/INS log ({', '.join(NMEA_SUFFIXES)}, .csv) with "
+                     f"--inputs, a vessel scenario .toml or one of {vessels}")
+
+
+@app.command()
+def identify(
+    what: Annotated[str, typer.Argument(
+        metavar="LOG|SCENARIO",
+        help="A GPS/INS log, NMEA 0183 (.nmea, .log, .txt: GGA RMC VTG HDT THS ROT) or the "
+        "CSV form (.csv: time, lat, lon, sog_kn, cog_deg, heading_deg, rot_deg_min), with "
+        "--inputs; or a bundled vessel scenario (vessel-zigzag-20, vessel-turning, "
+        "vessel-identify; see trackkit list) or a vessel scenario TOML file.")],
+    inputs: Annotated[Path | None, typer.Option(
+        "--inputs", "-i", help="The log's measured inputs, CSV with columns time, "
+        "nozzle_deg (positive to starboard), rpm; they must cover the log's time span.",
+        show_default="required with a log")] = None,
+    filt: Annotated[VesselFilter | None, typer.Option(
+        "--filter", help="Identifier: augmented EKF, UKF or CKF, or batch least squares "
+        "(ls).", show_default="ekf; a scenario: its identification.filters")] = None,
+    period: Annotated[float | None, typer.Option(
+        "--period", callback=_number(0, 60), help="Grid period T of the pre-processed u, v, "
+        "r (s), for a log.", show_default="1")] = None,
+    runs: Annotated[int | None, typer.Option(
+        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs (a scenario).",
+        show_default="the scenario's run.runs")] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", "-s", callback=_at_least(0), help="Master seed (a scenario).",
+        show_default="the scenario's run.seed")] = None,
+    on_bad: Annotated[OnBad, typer.Option(
+        "--on-bad", help="Skip bad log and input lines (counted and named by line) or stop "
+        "at the first.")] = OnBad.skip,
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output directory (created if missing).",
+        show_default="trackkit-out/identify-STEM, or trackkit-out/SCENARIO")] = None,
+) -> None:
+    """Identify a vessel's 16-coefficient manoeuvring model (Zolfagharnasab and Seif 2025;
+    augmented EKF on u, v, r): from a recorded GPS/INS log and its inputs, or by running a
+    vessel scenario (simulated sea trials, Monte Carlo). Prints the coefficients with their
+    standard deviations and writes results.json, convergence, track, heading and trial plots
+    and report.html; the identified model's 20 deg turn and 10/10 and 20/20 zig-zags with
+    the IMO table."""
+    with _user_errors() as state:
+        kind = _identify_kind(what)
+        if kind == "scenario":
+            from trackkit.scenario.vessel import load_vessel
+
+            given = [o for o, v in (("--inputs", inputs), ("--period", period)) if v is not None]
+            if given:
+                raise ValueError(f"{' and '.join(given)}: for a GPS/INS log; {what} is a "
+                                 "vessel scenario, which simulates its sensors (its period is "
+                                 "identification.period_s)")
+            sc = load_vessel(what)
+            target, label = _output_dir(out, _default_dir(what, sc))
+            with OutputDir(target, label) as where:
+                state.interrupted = f"interrupted; nothing was written to {target}"
+                _say_note(where)
+                _run_vessel(sc, where.path, runs=runs, seed=seed,
+                            filters=None if filt is None else [filt.value])
+                state.interrupted = "interrupted"
+            return
+        given = [o for o, v in (("--runs", runs), ("--seed", seed)) if v is not None]
+        if given:
+            raise ValueError(f"{' and '.join(given)}: for a vessel scenario's Monte Carlo; "
+                             f"{what} is a recorded log")
+        if inputs is None:
+            raise ValueError(f"{what}: a log needs its inputs: --inputs FILE.csv with columns "
+                             "time, nozzle_deg, rpm")
+        if not inputs.is_file():
+            why = "is not a file" if inputs.exists() else "no such file"
+            raise ValueError(f"--inputs {inputs}: {why}; expected a CSV with columns time, "
+                             "nozzle_deg, rpm")
+        log = Path(what)
+        target, label = _output_dir(out, f"identify-{log.stem}")
+        with OutputDir(target, label) as where:
+            state.interrupted = f"interrupted; nothing was written to {target}"
+            _say_note(where)
+            _identify_log(log, inputs, where.path, filt=(filt or VesselFilter.ekf).value,
+                          period=1.0 if period is None else period, on_bad=on_bad.value)
+            state.interrupted = "interrupted"
+
+
+@contextmanager
+def _stage(what: str) -> Iterator[None]:
+    """Say on stderr what the command is doing, as a line (seen in a pipe or a log too) and,
+    on a terminal, a spinner while it lasts."""
+    console = _stderr()
+    console.print(Text(f"{what} ...", style="dim"), soft_wrap=True)
+    with console.status(what):
+        yield
+
+
+def _filter_compiled(filt: str) -> bool:
+    """Whether the identifier's compiled step is in numba's cache already (the EKF's fused
+    step is compiled on its first run and cached beside its module)."""
+    if filt != "ekf":
+        return True
+    try:
+        from trackkit.identify import fused
+
+        return Path(fused._step._cache._cache_file._index_path).is_file()
+    except AttributeError:  # another numba: do not guess
+        return True
+
+
+def _stop_hint(err: ValueError, columns: str) -> ValueError:
+    """A reader's message in the command's words (its options, not the function's)."""
+    return ValueError(str(err).replace(
+        "[on_bad='stop'; pass on_bad='skip' to skip bad records]",
+        "[--on-bad stop; pass --on-bad skip to skip bad records]").replace(
+        " (pass a column mapping)", f"; expected the columns {columns}"))
+
+
+def _check_log_usable(log: Path, nav: Any, read: Any, expected: str) -> None:
+    """A log with no usable position is named as the culprit (before its inputs, which
+    cannot be read against the times of a log without any)."""
+    if read.rows_kept and nav.t_pos.size:
+        return
+    why = ", ".join(f"{n} {r}" for r, n in sorted(read.skipped.items(), key=lambda kv: -kv[1]))
+    first = f"; first: {read.bad[0]}" if read.bad else ""
+    kept = (f"{read.rows_kept} kept but none gives a position (GGA or RMC)" if read.rows_kept
+            else f"none usable ({why or 'empty'}){first}")
+    raise ValueError(f"{log}: no usable GPS/INS record: {read.rows_read} lines read, {kept}; "
+                     f"expected {expected}")
+
+
+def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: float,
+                  on_bad: str) -> None:
+    """Read, pre-process and identify a recorded log; write its report; print the
+    coefficients, the standard trials and the IMO table."""
+    from trackkit.eval.vessel_mc import identify_recorded
+    from trackkit.io.navigation import INPUT_COLUMNS, preprocess, read_inputs_csv
+    from trackkit.io.nmea import NAV_CSV_COLUMNS, read_nav_csv, read_nmea
+    from trackkit.report.vessel_report import write_recorded_report
+
+    console = Console()
+    notes: list[str] = []
+    with _stage(f"reading {log} and {inputs}"):
+        try:
+            if log.suffix.lower() == ".csv":
+                nav, read = read_nav_csv(log, on_bad)
+            else:
+                nav, read = read_nmea(log, on_bad)
+        except ValueError as err:
+            raise _stop_hint(err, ", ".join(NAV_CSV_COLUMNS)) from None
+        _check_log_usable(log, nav, read, (
+            f"the columns {', '.join(NAV_CSV_COLUMNS)}" if log.suffix.lower() == ".csv" else
+            f"NMEA 0183 sentences ({NMEA_TYPES}) with valid checksums"))
+        fmt = "iso" if nav.epoch is not None else "seconds"  # a log without a date: both
+        try:
+            ins, iread = read_inputs_csv(inputs, on_bad, epoch=nav.epoch, time_format=fmt)
+        except ValueError as err:
+            raise _stop_hint(err, ", ".join(INPUT_COLUMNS)) from None
+    console.print(Text(read.summary()), soft_wrap=True)
+    console.print(Text(iread.summary()), soft_wrap=True)
+    if nav.unsupported:
+        console.print(Text("  sentence types not used: " + ", ".join(
+            f"{k} {v}" for k, v in sorted(nav.unsupported.items()))), soft_wrap=True)
+    if ins.t.size < 2:
+        raise ValueError(f"--inputs {inputs}: {ins.t.size} usable records "
+                         f"({iread.n_skipped} skipped); expected nozzle angle and rpm over "
+                         "the log's time span")
+    rate_source = "gyro"
+    if nav.t_rate.size < 2 and nav.t_heading.size >= 2:  # no ROT: differentiate the heading
+        rate_source = "heading"
+        notes.append("the log has no rate of turn (ROT); the yaw rate is the differenced INS "
+                     "heading")
+    try:
+        m = preprocess(nav, T=period, rate_source=rate_source)
+    except ValueError as err:
+        raise ValueError(f"{log}: {err}") from None
+    if m.gaps:
+        notes.append(f"{len(m.gaps)} gap(s) in the log's streams ("
+                     + ", ".join(f"{g.stream} {g.start:.1f}-{g.end:.1f} s" for g in m.gaps[:5])
+                     + ("..." if len(m.gaps) > 5 else "") + "): no measurement there, the "
+                     "filter predicts across")
+    doing = f"identifying the 16 coefficients with {filt} ({m.t.size} samples)"
+    if not _filter_compiled(filt):
+        doing = (f"compiling the {filt} filter (the first run only: about half a minute; "
+                 f"later runs reuse it), then {doing}")
+    with _stage(doing):
+        rec = identify_recorded(m, ins, filter=filt, inputs_name=f"--inputs {inputs}")
+    span = rec.t[-1] - rec.t[0]
+    if span < _CONVERGED_AFTER_S:
+        notes.append(f"the log is {span:.0f} s long; the paper's coefficients converged only "
+                     f"after {_CONVERGED_AFTER_S:.0f} s: expect wide standard deviations")
+    if not rec.stable:
+        notes.append(f"the identified model is unstable in a straight line at the log's "
+                     f"{rec.speed / 1852.0 * 3600.0:.1f} kn and {rec.rpm:.0f} rpm (an eigenvalue "
+                     "of df/dx with a positive real part): its simulated trials diverge and "
+                     "their metrics are not meaningful")
+    if rec.dropped:
+        notes.append(f"the first {rec.dropped} grid sample(s) lack a measurement and were "
+                     "left out")
+    with _stage(f"writing the report to {out}"):
+        paths = write_recorded_report(rec, out, title=log.name, notes=notes, log_read=read,
+                                      inputs_read=iread)
+    _print_recorded_summary(paths, log, notes)
+
+def _run_vessel(sc: Any, out: Path, **kwargs: Any) -> None:
+    """A vessel scenario's Monte Carlo (``eval.vessel_mc.run_vessel``), its report written
+    into ``out`` and a summary printed."""
+    from trackkit.eval.vessel_mc import run_vessel
+    from trackkit.report.vessel_report import write_vessel_report
+
+    runs = kwargs.get("runs") or sc.run.runs
+    with _stderr().status(f"{sc.name}: simulating and identifying, {runs} runs"):
+        result = run_vessel(sc, **kwargs)
+        _deliver_interrupt()
+    with _stderr().status("writing the report"):
+        paths = write_vessel_report(result, sc, out)
+    _print_vessel_summary(paths, sc.notes)

@@ -1,0 +1,54 @@
+"""Option types and checks shared by the commands (a bad value is named in the message)."""
+
+from __future__ import annotations
+
+import math
+from enum import StrEnum
+from typing import Any
+
+import typer
+
+SCENARIO_HELP = "Bundled scenario name (see trackkit list) or TOML file."
+
+
+def _positive_hours(value: float) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"{value}; expected a positive number of hours")
+    return value
+
+
+def _at_least(lowest: int) -> Any:
+    """An option callback: the message names the value given (typer's own range check
+    says only what the bound is)."""
+    def check(value: int | None) -> int | None:
+        if value is not None and value < lowest:
+            raise typer.BadParameter(f"{value}; expected an integer >= {lowest}")
+        return value
+
+    return check
+
+
+def _number(lo: float | None = None, hi: float | None = None, *, open_lo: bool = True,
+            open_hi: bool = False) -> Any:
+    """An option callback for a float in a range; the message names the value given."""
+    def check(value: float | None) -> float | None:
+        if value is None:
+            return value
+        bad = not math.isfinite(value)
+        if lo is not None:
+            bad |= value <= lo if open_lo else value < lo
+        if hi is not None:
+            bad |= value >= hi if open_hi else value > hi
+        if bad:
+            lo_s = "" if lo is None else f"{'>' if open_lo else '>='} {lo:g}"
+            hi_s = "" if hi is None else f"{'<' if open_hi else '<='} {hi:g}"
+            raise typer.BadParameter(f"{value:g}; expected a finite number "
+                                     f"{' and '.join(s for s in (lo_s, hi_s) if s)}")
+        return value
+
+    return check
+
+
+class OnBad(StrEnum):
+    skip = "skip"
+    stop = "stop"

@@ -1,0 +1,409 @@
+"""Tracking recorded data, from Python as ``trackkit track`` does it from the command line.
+
+AIS or ADS-B position reports are tracked through a virtual radar (plots of the reported
+positions, the reports kept as the truth to score against); a detections file's plots are
+tracked as they are::
+
+    from trackkit.io import samples
+    from trackkit.tracking.recorded import TrackOptions, track_recording
+
+    result = track_recording(samples.path("solent-ais"),
+                             TrackOptions(as_radar=True, max_scans=20))
+    result.history  # the tracker's history, as trackkit track writes it to tracks.parquet
+
+The tracker is a constant-velocity EKF or UKF with GNN or JPDA association and an SPRT track
+score (Blackman and Popoli 1999), one per input kind's profile (``TRACK_PROFILES``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Literal
+
+__all__ = ["TRACK_PROFILES", "Recording", "TrackOptions", "TrackProfile", "TrackingResult",
+           "open_recording", "track_recording"]
+
+Kind = Literal["ais", "opensky", "detections"]
+#: ``progress(stage, done, total)``: stage "reading" (bytes) or "tracking" (scans)
+Progress = Callable[[str, float, float], None]
+
+
+@dataclass(frozen=True)
+class TrackProfile:
+    """The radar, tracker and scoring numbers of one kind of input (None: not used by it)."""
+
+    period: float | None = None  # scan period of the virtual radar (s)
+    sigma_range: float | None = None  # range noise std (m)
+    sigma_bearing_deg: float | None = None  # bearing noise std (deg)
+    sigma_pos: float | None = None  # position noise std of x, y detections (m)
+    pd: float | None = None  # detection probability
+    clutter: float | None = None  # false plots per scan
+    max_range: float | None = None  # instrumented range (m)
+    min_range: float | None = None  # blind range (m)
+    q: float | None = None  # process noise of the constant-velocity model (m^2/s^3)
+    v_std: float | None = None  # velocity std of a new track (m/s)
+    gospa_c: float | None = None  # GOSPA cut-off (m)
+
+
+#: defaults per input: a coastal marine radar over AIS traffic, an en-route air surveillance
+#: radar over ADS-B, a generic tracker for a detections file (the plots are as recorded)
+TRACK_PROFILES: dict[str, TrackProfile] = {
+    "ais": TrackProfile(period=3.0, sigma_range=20.0, sigma_bearing_deg=0.5, pd=0.9,
+                        clutter=10.0, max_range=40e3, min_range=50.0, q=0.05, v_std=10.0,
+                        gospa_c=500.0),
+    "opensky": TrackProfile(period=10.0, sigma_range=50.0, sigma_bearing_deg=0.1, pd=0.9,
+                            clutter=10.0, max_range=400e3, min_range=500.0, q=100.0,
+                            v_std=150.0, gospa_c=2000.0),
+    "detections": TrackProfile(sigma_range=20.0, sigma_bearing_deg=0.5, sigma_pos=20.0, pd=0.9,
+                               clutter=10.0, q=1.0, v_std=50.0, gospa_c=1000.0),
+}
+
+
+@dataclass(frozen=True)
+class TrackOptions:
+    """What ``trackkit track`` takes besides the file (its options, same names and meaning;
+    ``profile`` holds the numbers given, the rest from the input kind's ``TRACK_PROFILES``)."""
+
+    fmt: Kind | None = None  # None: guessed from the columns
+    as_radar: bool = False
+    columns: str | None = None  # KEY=NAME,... (--columns)
+    units: str | None = None  # KEY=VALUE,... (--units)
+    site_lat: float | None = None
+    site_lon: float | None = None
+    profile: TrackProfile = field(default_factory=TrackProfile)
+    max_gap: float | None = None
+    seed: int = 0
+    associator: Literal["gnn", "jpda"] = "gnn"
+    filter: Literal["ekf", "ukf"] = "ekf"
+    on_bad: Literal["skip", "stop"] = "skip"
+    until: float | None = None
+    max_scans: int | None = None
+
+    def settings(self, kind: str) -> TrackProfile:
+        """The numbers given, else the input kind's defaults."""
+        given = {f.name: float(v) for f in fields(TrackProfile)
+                 if (v := getattr(self.profile, f.name)) is not None}
+        return replace(TRACK_PROFILES[kind], **given)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recorded file checked against the options, before any data is read."""
+
+    path: Path
+    kind: Kind
+    header: list[str]
+    options: TrackOptions
+    settings: TrackProfile
+
+
+@dataclass
+class TrackingResult:
+    """The tracks of a recording and what the report is made of."""
+
+    recording: Recording
+    history: Any  # tracking.history.TrackHistory
+    read: Any  # the reader's ReadReport
+    scans: Any  # the tracked Scans
+    sensor: Any
+    frame: Any  # io.EnuFrame or None (x, y as in a detections file)
+    truth: Any  # the reported positions at the scan times, or None
+    site: tuple[float, float] | None
+    max_range: float | None
+    background: Any  # the positions or plots drawn behind the tracks
+    background_label: str
+    config: dict[str, Any]
+    notes: list[str]
+    plots: int
+    objects: int | None = None
+    seen: int | None = None
+
+
+def resolve_input(file: Path) -> Path:
+    """The file, else the bundled sample of that name (a file of that name comes first)."""
+    from trackkit.io import samples
+
+    if not file.exists() and str(file) in samples.SAMPLES:
+        return samples.path(str(file))
+    if not file.is_file():
+        what = "is not a file" if file.exists() else "no such file"
+        raise ValueError(f"{file}: {what}; expected a detections, AIS or OpenSky file, or a "
+                         f"bundled sample ({', '.join(samples.SAMPLES)})")
+    return file
+
+
+def _header_of(path: Path) -> list[str]:
+    if path.suffix.lower() in (".parquet", ".pq"):
+        from trackkit.io._table import open_parquet
+
+        return list(open_parquet(path).schema_arrow.names)
+    from trackkit.io._table import _header
+
+    return _header(str(path))
+
+
+def guess_format(path: Path, header: list[str]) -> Kind:
+    """The input's kind from its columns: AIS (MMSI), OpenSky (icao24) or detections."""
+    names = {h.strip().lower() for h in header}
+    if "mmsi" in names:
+        return "ais"
+    if "icao24" in names:
+        return "opensky"
+    if "time" in names and ({"x", "y"} <= names or {"range", "bearing"} <= names):
+        return "detections"
+    raise ValueError(f"{path}: cannot tell the format from the columns "
+                     f"{', '.join(map(repr, header))}; expected an MMSI column (AIS), icao24 "
+                     "(OpenSky) or time with x, y or range, bearing (detections); pass "
+                     "--format ais|opensky|detections (and --columns for other names)")
+
+
+def open_recording(path: Path | str, options: TrackOptions) -> Recording:
+    """``path`` (or a bundled sample's name) with its kind, checked against the options."""
+    file = resolve_input(Path(path))
+    header = _header_of(file)
+    kind = options.fmt or guess_format(file, header)
+    if kind != "detections" and not options.as_radar:
+        raise ValueError(f"{file}: {kind} position reports are tracked through a "
+                         "virtual radar; add --as-radar (trackkit track --help lists the "
+                         "radar options)")
+    if kind == "detections" and options.as_radar:
+        raise ValueError(f"{file}: --as-radar makes plots of AIS or ADS-B reports; a "
+                         "detections file holds plots already, tracked as they are (drop "
+                         "--as-radar)")
+    if (options.site_lat is None) != (options.site_lon is None):
+        raise ValueError("--site-lat and --site-lon: give both or neither")
+    if options.units and kind != "detections":
+        raise ValueError(f"--units is for detections files; {file} is {kind}")
+    return Recording(file, kind, header, options, options.settings(kind))
+
+
+def track_recording(source: Path | str | Recording, options: TrackOptions | None = None,
+                    progress: Progress | None = None) -> TrackingResult:
+    """Read a recording, make the virtual radar's plots (AIS, ADS-B) or take its detections,
+    and track them: what ``trackkit track`` writes and scores."""
+    rec = source if isinstance(source, Recording) else open_recording(
+        source, options or TrackOptions())
+    report = progress or (lambda stage, done, total: None)
+    report("reading", 0, max(rec.path.stat().st_size, 1))
+    data, read, polar = _read_input(rec, lambda done, total: report("reading", done, total))
+    job = (_detections_job(rec, data, read, polar) if rec.kind == "detections"
+           else _radar_job(rec, data, read))
+    s = rec.settings
+    tracker, desc = _tracker(job["sensor"], s.pd, job.pop("clutter_density"), s.q, s.v_std,
+                             rec.options.associator, rec.options.filter)
+    desc["gospa_c_m"] = s.gospa_c
+    job["config"]["tracker"] = desc
+    from trackkit.tracking.history import run_tracker
+
+    n = len(job["scans"])
+    report("tracking", 0, n)
+    history, _ = run_tracker(tracker, job["scans"],
+                             progress=lambda done: report("tracking", done, n))
+    return TrackingResult(recording=rec, history=history, read=read, **job)
+
+
+def _mapping(text: str | None, option: str, allowed: tuple[str, ...]) -> dict[str, str | None]:
+    """``KEY=VALUE,KEY=VALUE`` (a value ``none`` is None), keys checked against ``allowed``."""
+    out: dict[str, str | None] = {}
+    if not text:
+        return out
+    for item in text.split(","):
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key or not value:
+            raise ValueError(f"{option} {text!r}: {item!r} is not KEY=VALUE; expected e.g. "
+                             f"{option} {allowed[0]}=NAME,{allowed[1]}=NAME")
+        if key not in allowed:
+            raise ValueError(f"{option}: {key!r} is not a known key; expected one of "
+                             f"{', '.join(allowed)}")
+        out[key] = None if value.lower() == "none" else value
+    return out
+
+
+def _read_input(rec: Recording, progress: Callable[[float, float], None]
+                ) -> tuple[Any, Any, bool]:
+    """(Reports or Scans, ReadReport, whether the detections are range-bearing plots)."""
+    from trackkit import io as tio
+
+    path, columns, o = rec.path, rec.options.columns, rec.options
+    kw = dict(on_bad=o.on_bad, progress=progress, max_listed=100_000)
+    if rec.kind == "ais":
+        keys = tuple(f.name for f in fields(tio.AisColumns))
+        cols = tio.AisColumns(**_mapping(columns, "--columns", keys))
+        return (*tio.read_ais_csv(path, cols, **kw), False)
+    if rec.kind == "opensky":
+        if columns:
+            raise ValueError("--columns: the OpenSky reader uses OpenSky's own column names "
+                             "(time, icao24, lat, lon, ...); use --format ais with --columns "
+                             "for another layout of position reports")
+        return (*tio.read_opensky_csv(path, **kw), False)
+    given = _mapping(columns, "--columns",
+                     ("time", "sensor", "x", "y", "z", "range", "bearing"))
+    names = {h.strip().lower(): h.strip() for h in rec.header}
+    if not given and "range" in names and "bearing" in names and "x" not in names:
+        given = {"range": names["range"], "bearing": names["bearing"]}
+    if "sensor" not in given and "sensor" not in names:
+        given["sensor"] = None  # every plot from one sensor
+    un = tio.DetectionUnits(**_mapping(o.units, "--units", ("distance", "angle", "bearing",
+                                                            "time")))
+    dc = tio.DetectionColumns(**given)
+    return (*tio.read_detections(path, dc, un, **kw), dc.polar)
+
+
+def _tracker(sensor: Any, pd: float, clutter_density: float, q: float, v_std: float,
+             associator: str, filt: str) -> tuple[Any, dict[str, Any]]:
+    """The tracker of ``trackkit track``, and its description for the report."""
+    import trackkit as tk
+    from trackkit.tracking import GNN, JPDA, ScoreLogic, SinglePoint, Tracker
+
+    # one new object per hundred false plots: a track is confirmed after two or three hits
+    birth = clutter_density / 100
+    logic = ScoreLogic.from_sprt(alpha=1e-2, beta=1e-3, pd=pd, clutter_density=clutter_density,
+                                 new_target_density=birth)
+    f = tk.filters.EKF() if filt == "ekf" else tk.filters.UKF()
+    tracker = Tracker(f, tk.models.ConstantVelocity(dim=2, q=q), sensor, pd=pd,
+                      clutter_density=clutter_density,
+                      associator=GNN() if associator == "gnn" else JPDA(),
+                      logic=logic, initiator=SinglePoint(v_std=v_std))
+    unit = "per_m_rad" if hasattr(sensor, "sigma_bearing") else "per_m2"
+    desc = {"filter": filt.upper(), "motion": "constant velocity",
+            "q_m2_s3": q, "associator": associator.upper(),
+            "logic": (f"SPRT track score, alpha 0.01, beta 0.001: confirmed at a score of "
+                      f"{logic.confirm_threshold:.3g}, deleted at a drop of "
+                      f"{-logic.delete_threshold:.3g} below its maximum"),
+            "initiator": "single point, velocity 0", "initial_velocity_std_m_s": v_std,
+            "pd_assumed": pd, f"clutter_density_{unit}": clutter_density,
+            "new_target_density": birth}
+    return tracker, desc
+
+
+def _notes(read: Any) -> list[str]:
+    notes = []
+    if read.out_of_order:
+        notes.append(f"{read.out_of_order} records were out of time order in the file and "
+                     "were sorted by time before tracking")
+    if read.duplicates:
+        notes.append(f"{read.duplicates} exact duplicate records were dropped (the first "
+                     "of each kept)")
+    return notes
+
+
+def _limit_scans(scans: Any, until: float | None, max_scans: int | None) -> Any:
+    """The first scans: up to ``until`` s after the first, at most ``max_scans``."""
+    import numpy as np
+
+    from trackkit.tracking.scans import Scans
+
+    n = len(scans)
+    if until is not None and n:
+        n = int(np.searchsorted(scans.times, scans.times[0] + until, side="right"))
+    if max_scans is not None:
+        n = min(n, max_scans)
+    if n == len(scans):
+        return scans
+    off = scans.offsets[:n + 1]
+    return Scans(scans.z[:off[-1]], off, scans.times[:n], scans.sensor[:n])
+
+
+def _radar_job(rec: Recording, reports: Any, read: Any) -> dict[str, Any]:
+    """The virtual radar's plots of AIS or ADS-B reports, and the truth to score against."""
+    import numpy as np
+
+    from trackkit.report.tracks import ground_geodetic
+    from trackkit.sim.virtual_radar import VirtualRadar, virtual_radar
+
+    s, o = rec.settings, rec.options
+    if len(reports) == 0:
+        raise ValueError(f"{rec.path}: no usable position reports ({read.n_skipped} skipped); "
+                         "nothing to track")
+    frame = reports.frame  # at the data's median position
+    if o.site_lat is None:
+        site = (0.0, 0.0)
+    else:
+        x, y, _ = frame.to_enu(o.site_lat, o.site_lon, 0.0)
+        site = (float(x), float(y))
+    radar = VirtualRadar(site=site, period=s.period, sigma_range=s.sigma_range,
+                         sigma_bearing=math.radians(s.sigma_bearing_deg), pd=s.pd,
+                         clutter=s.clutter, max_range=s.max_range,
+                         min_range=s.min_range, max_gap=o.max_gap)
+    until = None if o.until is None else float(reports.time[0]) + o.until
+    run = virtual_radar(reports, radar, o.seed, until=until, max_scans=o.max_scans)
+    lat, lon = ground_geodetic(frame, np.array([site[0]]), np.array([site[1]]))
+    # the reported positions the radar could see, for the picture
+    t_end = float(run.scans.times[-1])
+    near = (np.hypot(reports.x - site[0], reports.y - site[1]) <= radar.max_range) & (
+        reports.time <= t_end)
+    n_plots = int(run.scans.z.shape[0])
+    config = {"virtual radar": {
+        "site_lat_deg": round(float(lat[0]), 6), "site_lon_deg": round(float(lon[0]), 6),
+        "site_x_m": site[0], "site_y_m": site[1], "period_s": radar.period,
+        "sigma_range_m": radar.sigma_range, "sigma_bearing_deg": s.sigma_bearing_deg,
+        "pd": radar.pd, "clutter_per_scan": radar.clutter, "min_range_m": radar.min_range,
+        "max_range_m": radar.max_range, "max_gap_s": radar.gap,
+        "still_distance_m": radar.still_distance, "still_gap_s": radar.still_gap,
+        "seed": o.seed, "scans": len(run.scans), "plots": n_plots,
+        "plots_of_objects": int(np.sum(run.origin >= 0)),
+        "objects_in_file": int(len(reports.ids)), "objects_in_range": run.objects_seen}}
+    notes = _notes(read) + [
+        "The truth is the reported positions (AIS or ADS-B), interpolated linearly to the "
+        "scan times; they carry their own errors (GNSS, tens of metres), so GOSPA has a "
+        "floor of that size. The radar is 2-D: range is horizontal distance in the local "
+        "frame, and every plot of a scan carries the scan's time.",
+        f"Objects in range: {run.objects_seen} of {len(reports.ids)} in the file (an object "
+        "outside the range, or with a single report, is not seen)."]
+    if o.until is not None or o.max_scans is not None:
+        notes.append(f"Limited to {len(run.scans)} scans (--until / --max-scans).")
+    return dict(
+        scans=run.scans, sensor=run.sensor, clutter_density=max(radar.clutter, 0.1)
+        / radar.volume, truth=run.truth, frame=frame, site=site, max_range=radar.max_range,
+        background=reports.position[near], background_label="reported positions",
+        config=config, notes=notes, objects=len(reports.ids), seen=run.objects_seen,
+        plots=n_plots)
+
+
+def _detections_job(rec: Recording, scans: Any, read: Any, polar: bool) -> dict[str, Any]:
+    """A detections file's plots, tracked as they are (no truth)."""
+    import numpy as np
+
+    import trackkit as tk
+    from trackkit.io import EnuFrame
+
+    s, o = rec.settings, rec.options
+    if len(scans) == 0:
+        raise ValueError(f"{rec.path}: no usable detections ({read.n_skipped} skipped); "
+                         "nothing to track")
+    if scans.dim_z != 2:
+        raise ValueError(f"{rec.path}: detections with {scans.dim_z} coordinates; the tracker "
+                         "takes 2-D plots (x, y or range, bearing)")
+    scans = _limit_scans(scans, o.until, o.max_scans)
+    z = scans.z
+    if polar:  # range, bearing (rad, nautical, as the reader gives them) from x, y = 0, 0
+        sensor = tk.models.RangeBearing(origin=(0.0, 0.0), sigma_range=s.sigma_range,
+                                        sigma_bearing=math.radians(s.sigma_bearing_deg))
+        volume = max(float(z[:, 0].max()), 1.0) * 2 * math.pi if len(z) else 2 * math.pi
+        points = np.stack([z[:, 0] * np.sin(z[:, 1]), z[:, 0] * np.cos(z[:, 1])], axis=-1)
+        site: tuple[float, float] | None = (0.0, 0.0)
+    else:
+        sensor = tk.models.Position(dim=2, sigma=s.sigma_pos)
+        volume = float(max(np.ptp(z[:, 0]), 1.0) * max(np.ptp(z[:, 1]), 1.0)) if len(z) else 1.0
+        points = z
+        site = None
+    frame = EnuFrame(o.site_lat, o.site_lon) if o.site_lat is not None else None
+    plots: dict[str, Any] = {"scans": len(scans), "plots": int(z.shape[0]),
+                             "kind": "range, bearing" if polar else "x, y"}
+    if polar:
+        plots.update(sigma_range_m=s.sigma_range, sigma_bearing_deg=s.sigma_bearing_deg)
+    else:
+        plots["sigma_pos_m"] = s.sigma_pos
+    plots.update(clutter_per_scan_assumed=s.clutter, measurement_volume=volume)
+    notes = _notes(read)
+    if frame is None:
+        notes.append("No --site-lat/--site-lon: positions stay in the file's x, y (no "
+                     "lat/lon columns, no GeoJSON).")
+    return dict(
+        scans=scans, sensor=sensor, clutter_density=max(s.clutter, 0.1) / volume, truth=None,
+        frame=frame, site=site, max_range=None, background=points, background_label="plots",
+        config={"plots": plots}, notes=notes, objects=None, seen=None, plots=int(z.shape[0]))
