@@ -23,8 +23,7 @@ class _FlagsWithoutType:
     def get_params(self, ctx: click.Context) -> list[Any]:
         params = super().get_params(ctx)  # type: ignore[misc]
         for p in params:
-            if getattr(p, "is_bool_flag", False) and not p.secondary_opts and (
-                    p.metavar is None):
+            if getattr(p, "is_bool_flag", False) and p.metavar is None:
                 p.metavar = ""
         return params
 
