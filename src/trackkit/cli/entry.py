@@ -13,7 +13,7 @@ import click
 import typer
 from rich.text import Text
 
-from trackkit.cli.output import _describe, _is_interrupt, _say_interrupted, _state, _stderr
+from trackkit.cli.output import describe, is_interrupt, say_interrupted, session, stderr
 
 
 class _FlagsWithoutType:
@@ -86,7 +86,7 @@ def finish_commands() -> None:
 def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
                       lineno: int, file: Any = None, line: str | None = None) -> None:
     # a user sees what happened, not numpy's source path and line
-    _stderr().print(Text(f"warning: {message}", style="yellow"), soft_wrap=True)
+    stderr().print(Text(f"warning: {message}", style="yellow"), soft_wrap=True)
 
 
 def _unraisable(info: Any) -> None:
@@ -94,14 +94,14 @@ def _unraisable(info: Any) -> None:
     # interrupt raised here again would be swallowed with it: remember it, and the next
     # progress report raises it in the main thread, where main() turns it into one line
     if isinstance(info.exc_value, KeyboardInterrupt):
-        _state.interrupt = True
+        session.interrupt = True
     elif os.environ.get("TRACKKIT_DEBUG"):
         sys.__unraisablehook__(info)
 
 
 
 
-def _terminate(signum: int, frame: object) -> None:
+def terminate(signum: int, frame: object) -> None:
     # SIGTERM: unwind like Ctrl-C, so that the lock and temporary files are removed
     raise KeyboardInterrupt
 
@@ -116,7 +116,7 @@ def _forget_handled_interrupt() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``trackkit`` command (and ``python -m trackkit.cli``)."""
-    _state.main, _state.announced = True, False
+    session.main, session.announced = True, False
     try:
         _run_main(argv)
     finally:
@@ -127,7 +127,7 @@ def _run_main(argv: list[str] | None) -> None:
     try:
         try:
             signal.signal(signal.SIGINT, signal.default_int_handler)
-            signal.signal(signal.SIGTERM, _terminate)
+            signal.signal(signal.SIGTERM, terminate)
         except ValueError:  # not the main thread
             pass
         sys.unraisablehook = _unraisable
@@ -135,15 +135,15 @@ def _run_main(argv: list[str] | None) -> None:
             warnings.showwarning = _one_line_warning
             app(args=argv, prog_name="trackkit")
     except SystemExit as done:
-        if done.code == 130 and not _state.announced:
-            _say_interrupted()
+        if done.code == 130 and not session.announced:
+            say_interrupted()
         raise
     except BaseException as err:
-        if _is_interrupt(err):
-            _say_interrupted()
+        if is_interrupt(err):
+            say_interrupted()
             sys.exit(130)
         if os.environ.get("TRACKKIT_DEBUG") or not isinstance(err, Exception):
             raise
-        message, code = _describe(err)
-        _stderr().print(Text(f"error: {message}", style="red"), soft_wrap=True)
+        message, code = describe(err)
+        stderr().print(Text(f"error: {message}", style="red"), soft_wrap=True)
         sys.exit(code)

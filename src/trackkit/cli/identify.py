@@ -15,17 +15,17 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import OnBad, _at_least, _number
+from trackkit.cli.options import OnBad, at_least, number
 from trackkit.cli.output import (
     OutputDir,
-    _default_dir,
-    _deliver_interrupt,
-    _output_dir,
-    _say_note,
-    _stderr,
-    _user_errors,
+    default_dir,
+    deliver_interrupt,
+    output_dir,
+    say_note,
+    stderr,
+    user_errors,
 )
-from trackkit.cli.summaries import _print_recorded_summary, _print_vessel_summary
+from trackkit.cli.summaries import print_recorded_summary, print_vessel_summary
 
 
 class VesselFilter(StrEnum):
@@ -101,13 +101,13 @@ def identify(
         "--filter", help="Identifier: augmented EKF, UKF or CKF, or batch least squares "
         "(ls).", show_default="ekf; a scenario: its identification.filters")] = None,
     period: Annotated[float | None, typer.Option(
-        "--period", callback=_number(0, 60), help="Grid period T of the pre-processed u, v, "
+        "--period", callback=number(0, 60), help="Grid period T of the pre-processed u, v, "
         "r (s), for a log.", show_default="1")] = None,
     runs: Annotated[int | None, typer.Option(
-        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs (a scenario).",
+        "--runs", "-n", callback=at_least(1), help="Monte Carlo runs (a scenario).",
         show_default="the scenario's run.runs")] = None,
     seed: Annotated[int | None, typer.Option(
-        "--seed", "-s", callback=_at_least(0), help="Master seed (a scenario).",
+        "--seed", "-s", callback=at_least(0), help="Master seed (a scenario).",
         show_default="the scenario's run.seed")] = None,
     on_bad: Annotated[OnBad, typer.Option(
         "--on-bad", help="Skip bad log and input lines (counted and named by line) or stop "
@@ -122,7 +122,7 @@ def identify(
     standard deviations and writes results.json, convergence, track, heading and trial plots
     and report.html; the identified model's 20 deg turn and 10/10 and 20/20 zig-zags with
     the IMO table."""
-    with _user_errors() as state:
+    with user_errors() as state:
         kind = _identify_kind(what)
         if kind == "scenario":
             from trackkit.scenario.vessel import load_vessel
@@ -133,10 +133,10 @@ def identify(
                                  "vessel scenario, which simulates its sensors (its period is "
                                  "identification.period_s)")
             sc = load_vessel(what)
-            target, label = _output_dir(out, _default_dir(what, sc))
+            target, label = output_dir(out, default_dir(what, sc))
             with OutputDir(target, label) as where:
                 state.interrupted = f"interrupted; nothing was written to {target}"
-                _say_note(where)
+                say_note(where)
                 _run_vessel(sc, where.path, runs=runs, seed=seed,
                             filters=None if filt is None else [filt.value])
                 state.interrupted = "interrupted"
@@ -153,10 +153,10 @@ def identify(
             raise ValueError(f"--inputs {inputs}: {why}; expected a CSV with columns time, "
                              "nozzle_deg, rpm")
         log = Path(what)
-        target, label = _output_dir(out, f"identify-{log.stem}")
+        target, label = output_dir(out, f"identify-{log.stem}")
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
-            _say_note(where)
+            say_note(where)
             _identify_log(log, inputs, where.path, filt=(filt or VesselFilter.ekf).value,
                           period=1.0 if period is None else period, on_bad=on_bad.value)
             state.interrupted = "interrupted"
@@ -166,7 +166,7 @@ def identify(
 def _stage(what: str) -> Iterator[None]:
     """Say on stderr what the command is doing, as a line (seen in a pipe or a log too) and,
     on a terminal, a spinner while it lasts."""
-    console = _stderr()
+    console = stderr()
     console.print(Text(f"{what} ...", style="dim"), soft_wrap=True)
     with console.status(what):
         yield
@@ -277,7 +277,7 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
     with _stage(f"writing the report to {out}"):
         paths = write_recorded_report(rec, out, title=log.name, notes=notes, log_read=read,
                                       inputs_read=iread)
-    _print_recorded_summary(paths, log, notes)
+    print_recorded_summary(paths, log, notes)
 
 def _run_vessel(sc: Any, out: Path, **kwargs: Any) -> None:
     """A vessel scenario's Monte Carlo (``eval.vessel_mc.run_vessel``), its report written
@@ -286,9 +286,9 @@ def _run_vessel(sc: Any, out: Path, **kwargs: Any) -> None:
     from trackkit.report.vessel_report import write_vessel_report
 
     runs = kwargs.get("runs") or sc.run.runs
-    with _stderr().status(f"{sc.name}: simulating and identifying, {runs} runs"):
+    with stderr().status(f"{sc.name}: simulating and identifying, {runs} runs"):
         result = run_vessel(sc, **kwargs)
-        _deliver_interrupt()
-    with _stderr().status("writing the report"):
+        deliver_interrupt()
+    with stderr().status("writing the report"):
         paths = write_vessel_report(result, sc, out)
-    _print_vessel_summary(paths, sc.notes)
+    print_vessel_summary(paths, sc.notes)

@@ -13,18 +13,18 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import _at_least
+from trackkit.cli.options import at_least
 from trackkit.cli.output import (
     OutputDir,
-    _default_dir,
-    _deliver_interrupt,
-    _output_dir,
-    _progress_bar,
-    _say_note,
-    _stderr,
-    _user_errors,
+    default_dir,
+    deliver_interrupt,
+    output_dir,
+    progress_bar,
+    say_note,
+    stderr,
+    user_errors,
 )
-from trackkit.cli.summaries import _print_network_summary
+from trackkit.cli.summaries import print_network_summary
 
 
 class AgentsMode(StrEnum):
@@ -40,10 +40,10 @@ def network(
         help="Bundled network scenario name (net-baseline, net-limited, net-random; see "
         "trackkit list) or TOML file.")],
     runs: Annotated[int | None, typer.Option(
-        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs (at least 1).",
+        "--runs", "-n", callback=at_least(1), help="Monte Carlo runs (at least 1).",
         show_default="the scenario's run.runs")] = None,
     seed: Annotated[int | None, typer.Option(
-        "--seed", "-s", callback=_at_least(0), help="Master seed (0 or more).",
+        "--seed", "-s", callback=at_least(0), help="Master seed (0 or more).",
         show_default="the scenario's run.seed")] = None,
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Output directory (created if missing).",
@@ -97,7 +97,7 @@ def network(
     report.html.
 
     The same scenario and seed give byte-identical results.json on one machine."""
-    with _user_errors() as state:
+    with user_errors() as state:
         from trackkit.network.run import check_loss
 
         sc = _load_network(scenario)
@@ -121,14 +121,14 @@ def network(
             from trackkit.network.processes import is_loopback
 
             if not is_loopback(host):
-                _stderr().print(Text(f"note: --no-curve with --host {host}: any machine that "
+                stderr().print(Text(f"note: --no-curve with --host {host}: any machine that "
                                      "reaches it can connect and feed the agents bearings or "
                                      "tracks", style="yellow"), soft_wrap=True)
-        name = _default_dir(scenario, sc) + ("-straight" if straight else "")
-        target, label = _output_dir(out, name)
+        name = default_dir(scenario, sc) + ("-straight" if straight else "")
+        target, label = output_dir(out, name)
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
-            _say_note(where)
+            say_note(where)
             _run_network(sc, where.path, runs=runs, seed=seed,
                          steering=False if straight else None, agents=str(agents.value),
                          compare_straight=compare_straight, loss=loss, delay=delay,
@@ -219,26 +219,26 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
     given = "--runs" if kwargs.get("runs") else "the scenario's run.runs; --runs N for fewer"
     where = ("in their own processes" if kwargs.get("agents") == "processes"
              else "in this process")
-    _stderr().print(Text(
+    stderr().print(Text(
         f"{sc.name}: {total} Monte Carlo run{'' if total == 1 else 's'} ({given})"
         + (", then the same runs on straight courses" if compare else "")
         + f", agents {where} -> {out}", style="bold"), soft_wrap=True)
-    with _progress_bar(_stderr()) as bar:
+    with progress_bar(stderr()) as bar:
 
         def monte_carlo(label: str, **more: Any):
             task = bar.add_task(label, total=total, unit="runs")
 
             def progress(done: float, of: int) -> None:
-                _deliver_interrupt()
+                deliver_interrupt()
                 bar.update(task, completed=done, total=of)
 
             result = run_network_mc(sc, progress=progress, **{**kwargs, **more})
-            _deliver_interrupt()
+            deliver_interrupt()
             return result
 
         mc = monte_carlo(str(sc.name))
         straight = (monte_carlo(f"{sc.name} (straight)", steering=False, keep_example=False)
                     if compare else None)
-    with _stderr().status("writing the report"):
+    with stderr().status("writing the report"):
         paths = write_network_report(mc, sc, out, straight=straight)
-    _print_network_summary(paths)
+    print_network_summary(paths)

@@ -11,13 +11,13 @@ import typer
 SCENARIO_HELP = "Bundled scenario name (see trackkit list) or TOML file."
 
 
-def _positive_hours(value: float) -> float:
+def positive_hours(value: float) -> float:
     if not (math.isfinite(value) and value > 0):
         raise typer.BadParameter(f"{value}; expected a positive number of hours")
     return value
 
 
-def _at_least(lowest: int) -> Any:
+def at_least(lowest: int) -> Any:
     """An option callback: the message names the value given (typer's own range check
     says only what the bound is)."""
     def check(value: int | None) -> int | None:
@@ -28,7 +28,7 @@ def _at_least(lowest: int) -> Any:
     return check
 
 
-def _number(lo: float | None = None, hi: float | None = None, *, open_lo: bool = True,
+def number(lo: float | None = None, hi: float | None = None, *, open_lo: bool = True,
             open_hi: bool = False) -> Any:
     """An option callback for a float in a range; the message names the value given."""
     def check(value: float | None) -> float | None:

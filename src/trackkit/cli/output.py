@@ -35,16 +35,16 @@ LOCK_FILE = ".trackkit.lock"
 _LOCK_GRACE_S = 10.0
 
 #: process-wide flags of main(): whether it runs the command, whether "interrupted" was said
-_state = SimpleNamespace(main=False, announced=False, interrupt=False)
+session = SimpleNamespace(main=False, announced=False, interrupt=False)
 
 # --- errors in words --------------------------------------------------------------------------
 
 
-def _stderr() -> Console:
+def stderr() -> Console:
     return Console(stderr=True)
 
 
-def _is_interrupt(err: BaseException | None) -> bool:
+def is_interrupt(err: BaseException | None) -> bool:
     """A KeyboardInterrupt, or an error raised because of one (Python wraps an interrupt
     inside ``__set_name__`` in a RuntimeError, e.g. while pydantic builds a model class)."""
     seen = set()
@@ -56,21 +56,21 @@ def _is_interrupt(err: BaseException | None) -> bool:
     return False
 
 
-def _say_interrupted(message: str = "interrupted") -> None:
-    if _state.main:  # a second Ctrl-C must not break the message into a traceback
+def say_interrupted(message: str = "interrupted") -> None:
+    if session.main:  # a second Ctrl-C must not break the message into a traceback
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _state.announced = True
-    _stderr().print(Text(message, style="yellow"), soft_wrap=True)
+    session.announced = True
+    stderr().print(Text(message, style="yellow"), soft_wrap=True)
 
 
-def _fail(message: str, code: int) -> None:
+def fail(message: str, code: int) -> None:
     text = Text("error: ", style="bold red")
     text.append(message or "unknown error", style="red")
-    _stderr().print(text, soft_wrap=True)
+    stderr().print(text, soft_wrap=True)
     raise typer.Exit(code)
 
 
-def _describe(err: BaseException) -> tuple[str, int]:
+def describe(err: BaseException) -> tuple[str, int]:
     """The message and exit code of an error a user can provoke."""
     if isinstance(err, UnicodeError):  # a ValueError, but its text names no file
         return f"cannot read text: {err}", 2
@@ -108,7 +108,7 @@ def _smaller_job() -> str:
 
 
 @contextmanager
-def _user_errors(state: SimpleNamespace | None = None) -> Iterator[SimpleNamespace]:
+def user_errors(state: SimpleNamespace | None = None) -> Iterator[SimpleNamespace]:
     """Any failure inside becomes one red message and an exit code (see the module doc):
     Ctrl-C -> 130, bad input (ValueError, incl. ScenarioError) -> 2, an OS error or anything
     else -> 1. ``TRACKKIT_DEBUG=1`` re-raises (except Ctrl-C) to keep the traceback. The
@@ -119,13 +119,13 @@ def _user_errors(state: SimpleNamespace | None = None) -> Iterator[SimpleNamespa
     except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
         raise
     except BaseException as err:
-        if _is_interrupt(err):
-            _say_interrupted(state.interrupted)
+        if is_interrupt(err):
+            say_interrupted(state.interrupted)
             raise typer.Exit(130) from None
         if not isinstance(err, Exception) or os.environ.get("TRACKKIT_DEBUG"):
             raise
-        message, code = _describe(err)
-        _fail(message, code)
+        message, code = describe(err)
+        fail(message, code)
 
 
 # --- the output directory: checked, created and locked before any compute -------------------
@@ -336,7 +336,7 @@ def _command_run(path: Path) -> Any:
                       _may_write(ctx.info_name, path))
 
 
-def _default_dir(scenario: str | None, sc: Any) -> str:
+def default_dir(scenario: str | None, sc: Any) -> str:
     """The default output directory's name: a scenario file's stem (my.toml -> my), a
     bundled scenario's name."""
     p = Path(scenario) if scenario else None
@@ -345,7 +345,7 @@ def _default_dir(scenario: str | None, sc: Any) -> str:
     return str(sc.name)
 
 
-def _output_dir(out: Path | None, name: str) -> tuple[Path, str]:
+def output_dir(out: Path | None, name: str) -> tuple[Path, str]:
     """The run's output directory and how to name it in messages. The default
     ``trackkit-out/NAME`` must be a directory inside ``trackkit-out``."""
     if out is not None:
@@ -365,7 +365,7 @@ def _output_dir(out: Path | None, name: str) -> tuple[Path, str]:
 # --- progress ---------------------------------------------------------------------------------
 
 
-def _progress_bar(console: Console) -> Progress:
+def progress_bar(console: Console) -> Progress:
     return Progress(
         TextColumn("{task.description}", style="bold", markup=False),
         BarColumn(),
@@ -379,14 +379,14 @@ def _progress_bar(console: Console) -> Progress:
 
 
 
-def _say_note(where: OutputDir) -> None:
+def say_note(where: OutputDir) -> None:
     """The note of an output directory whose stale lock was taken over, if any."""
     if where.note:
-        _stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
+        stderr().print(Text(f"note: {where.note}", style="yellow"), soft_wrap=True)
 
 
-def _deliver_interrupt() -> None:
+def deliver_interrupt() -> None:
     """Raise a Ctrl-C that arrived inside a finaliser (see ``entry._unraisable``)."""
-    if _state.interrupt:
-        _state.interrupt = False
+    if session.interrupt:
+        session.interrupt = False
         raise KeyboardInterrupt

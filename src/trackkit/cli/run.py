@@ -15,18 +15,18 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import SCENARIO_HELP, _at_least, _positive_hours
+from trackkit.cli.options import SCENARIO_HELP, at_least, positive_hours
 from trackkit.cli.output import (
     OutputDir,
-    _default_dir,
-    _deliver_interrupt,
-    _output_dir,
-    _progress_bar,
-    _say_note,
-    _stderr,
-    _user_errors,
+    default_dir,
+    deliver_interrupt,
+    output_dir,
+    progress_bar,
+    say_note,
+    stderr,
+    user_errors,
 )
-from trackkit.cli.summaries import _number_table, _print_summary
+from trackkit.cli.summaries import number_table, print_summary
 
 
 @dataclass(frozen=True)
@@ -45,22 +45,22 @@ def run(
     scenario: Annotated[str | None, typer.Argument(
         help=SCENARIO_HELP, show_default="the bundled default")] = None,
     runs: Annotated[int | None, typer.Option(
-        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs (at least 1).",
+        "--runs", "-n", callback=at_least(1), help="Monte Carlo runs (at least 1).",
         show_default="the scenario's run.runs")] = None,
     seed: Annotated[int | None, typer.Option(
-        "--seed", "-s", callback=_at_least(0), help="Master seed (0 or more).",
+        "--seed", "-s", callback=at_least(0), help="Master seed (0 or more).",
         show_default="the scenario's run.seed")] = None,
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Output directory (created if missing).",
         show_default="trackkit-out/SCENARIO; for a file, its name without .toml")] = None,
     workers: Annotated[int | None, typer.Option(
-        "--workers", "-w", callback=_at_least(1), help="Local Dask workers (at least 1).",
+        "--workers", "-w", callback=at_least(1), help="Local Dask workers (at least 1).",
         show_default="none: in this process")] = None,
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.",
         show_default="none")] = None,
     max_hours: Annotated[float, typer.Option(
-        "--max-hours", callback=_positive_hours, help="Refuse a run count that the first "
+        "--max-hours", callback=positive_hours, help="Refuse a run count that the first "
         "block's timing says would take longer (hours).")] = 24.0,
 ) -> None:
     """Run a Monte Carlo comparison; write results.json, timings.json, metrics.parquet,
@@ -69,16 +69,16 @@ def run(
     The same scenario, seed and block size give bit-identical numbers on one machine, on any
     executor and any number of workers; another CPU agrees to rounding (see the README,
     "Determinism")."""
-    with _user_errors() as state:
+    with user_errors() as state:
         sc = stages._load(scenario or stages._default_name())
         runner = RUNNERS[stages.kind_of(sc)]
         if runner.command is not None:
             raise ValueError(f"{scenario} is a {stages.kind_of(sc)} scenario; run it with "
                              f"`trackkit {runner.command} {scenario}`")
-        target, label = _output_dir(out, _default_dir(scenario, sc))
+        target, label = output_dir(out, default_dir(scenario, sc))
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
-            _say_note(where)
+            say_note(where)
             runner.run(sc, where.path, state, RunOptions(runs, seed, workers, scheduler,
                                                          max_hours))
 
@@ -88,36 +88,36 @@ def _run_comparison(sc: Any, out: Path, state: SimpleNamespace, o: RunOptions) -
     total = o.runs or getattr(getattr(sc, "run", None), "runs", None) or 1
     result = _run_with_progress(sc, total, runs=o.runs, seed=o.seed, workers=o.workers,
                                 scheduler=o.scheduler, max_seconds=3600.0 * o.max_hours)
-    with _stderr().status("writing the report"):
+    with stderr().status("writing the report"):
         paths = stages._write(result, out)
     state.interrupted = "interrupted"
-    _print_summary(result, paths)
+    print_summary(result, paths)
 
 
 def _run_with_progress(scenario: Any, total: int, **kwargs: Any) -> Any:
     """The comparison with a progress bar of runs (``progress(done, total)``, ``done`` a
     float that moves within a block) and, when fuzzy systems are tuned first, one of
     optimiser generations (``tuning_progress(done, total)``)."""
-    console = _stderr()
-    with _progress_bar(console) as bar:
+    console = stderr()
+    with progress_bar(console) as bar:
         runs = bar.add_task(str(getattr(scenario, "name", "runs")), total=total, unit="runs")
         tuning: list[Any] = []
         final = [total]
 
         def progress(done: float, of: int) -> None:
-            _deliver_interrupt()
+            deliver_interrupt()
             final[0] = of
             bar.update(runs, completed=done, total=of)
 
         def tuning_progress(done: int, of: int) -> None:
-            _deliver_interrupt()
+            deliver_interrupt()
             if not tuning:
                 tuning.append(bar.add_task("tuning", total=of, unit="generations"))
             bar.update(tuning[0], completed=done, total=of)
 
         result = stages._run(scenario, progress=progress, tuning_progress=tuning_progress,
                              **kwargs)
-        _deliver_interrupt()
+        deliver_interrupt()
         bar.update(runs, completed=final[0], total=final[0])
     return result
 
@@ -131,16 +131,16 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     from trackkit.report.tracking_report import write_tracking_report
 
     total = kwargs.get("runs") or sc.run.runs
-    with _progress_bar(_stderr()) as bar:
+    with progress_bar(stderr()) as bar:
         task = bar.add_task(str(sc.name), total=total, unit="runs")
 
         def progress(done: float, of: int) -> None:
-            _deliver_interrupt()
+            deliver_interrupt()
             bar.update(task, completed=done, total=of)
 
         result, example = run_multitarget(sc, progress=progress, **kwargs)
-        _deliver_interrupt()
-    with _stderr().status("writing the report"):
+        deliver_interrupt()
+    with stderr().status("writing the report"):
         paths = write_tracking_report(result, sc, example, out)
     console = Console()
     headers = ["tracker", "GOSPA [m]", "OSPA [m]",
@@ -154,7 +154,7 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
                      f"{100 * s['confirmed_within_fraction']:.1f}%",
                      f"{100 * s['false_tracks'] / scans:.2f}", str(s["breaks"]),
                      str(s["id_switches"]), f"{s['rmse']:.1f}"])
-    console.print(_number_table(headers, rows, f"{sc.name}: {result.runs} runs, seed "
+    console.print(number_table(headers, rows, f"{sc.name}: {result.runs} runs, seed "
                                 f"{result.seed}, c = {result.c:g} m", console))
     for note in sc.notes:
         console.print(Text(f"note: {note}", style="yellow"))

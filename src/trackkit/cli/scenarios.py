@@ -16,7 +16,7 @@ from rich.text import Text
 from trackkit.cli import stages
 from trackkit.cli.entry import app
 from trackkit.cli.options import SCENARIO_HELP
-from trackkit.cli.output import _user_errors
+from trackkit.cli.output import user_errors
 
 
 class Format(StrEnum):
@@ -27,7 +27,7 @@ class Format(StrEnum):
 @app.command("list")
 def list_scenarios() -> None:
     """List the bundled scenarios with one-line descriptions."""
-    with _user_errors():
+    with user_errors():
         from trackkit.scenario.multitarget import bundled_multitarget
         from trackkit.scenario.network import bundled_network
 
@@ -59,7 +59,7 @@ def show(
         "--format", "-f", help="TOML (what trackkit run reads) or JSON.")] = Format.toml,
 ) -> None:
     """Print a scenario with every default filled in (save it, edit it, run it)."""
-    with _user_errors():
+    with user_errors():
         sc = stages._load(scenario or stages._default_name())
         if fmt is Format.toml:
             text = stages._dumps(sc)

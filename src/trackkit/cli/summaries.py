@@ -13,7 +13,7 @@ from rich.table import Table
 from rich.text import Text
 
 
-def _number_table(headers: list[str], rows: list[list[str]], title: str, console: Console
+def number_table(headers: list[str], rows: list[list[str]], title: str, console: Console
                   ) -> Any:
     """A summary table whose numbers are never cut at the console's width (folded instead;
     ``report.tables.summary_rich_table``)."""
@@ -22,7 +22,7 @@ def _number_table(headers: list[str], rows: list[list[str]], title: str, console
     return summary_rich_table(Summary(headers, rows, "", title=title), console.width)
 
 
-def _print_network_summary(paths: dict[str, Path]) -> None:
+def print_network_summary(paths: dict[str, Path]) -> None:
     doc = json.loads(paths["results"].read_text(encoding="utf-8"))
     w = doc["windows"]["last"]
     mode = "steering" if doc["steering"] else "straight courses"
@@ -41,7 +41,7 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
              per_target(e["ratio_to_central_pos_last"], ".2f"),
              per_target(e["ratio_to_pcrlb_pos_last"], ".2f")] for e in doc["per_agent"]]
     console = Console()
-    console.print(_number_table(headers, rows, f"{doc['scenario']}: {doc['runs']} runs, "
+    console.print(number_table(headers, rows, f"{doc['scenario']}: {doc['runs']} runs, "
                                 f"seed {doc['seed']}, {mode} (per target: 1 / 2 / ...)",
                                 console))
     m = doc["messages"]
@@ -73,7 +73,7 @@ def _print_network_summary(paths: dict[str, Path]) -> None:
         console.print(Text(f"report: {html}", style="green"), soft_wrap=True)
 
 
-def _print_summary(result: Any, paths: dict[str, Path]) -> None:
+def print_summary(result: Any, paths: dict[str, Path]) -> None:
     from trackkit.report.tables import matching_rich_tables, rich_table
 
     console = Console()
@@ -90,7 +90,7 @@ def _print_summary(result: Any, paths: dict[str, Path]) -> None:
         console.print(Text(f"report: {html}", style="green"))
 
 
-def _print_sweep_summary(campaign: Any, docs: list[dict], paths: dict[str, Path]) -> None:
+def print_sweep_summary(campaign: Any, docs: list[dict], paths: dict[str, Path]) -> None:
     from trackkit.report.tables import Summary, display_unit, summary_rich_table
 
     console = Console()
@@ -131,7 +131,7 @@ def _print_sweep_summary(campaign: Any, docs: list[dict], paths: dict[str, Path]
     console.print(Text(f"report: {paths['html']}", style="green"), soft_wrap=True)
 
 
-def _print_track_summary(read: Any, job: Any, paths: dict[str, Path]) -> None:
+def print_track_summary(read: Any, job: Any, paths: dict[str, Path]) -> None:
     console = Console()
     console.print(Text(read.summary()), soft_wrap=True)
     if "skipped" in paths:
@@ -175,7 +175,7 @@ def _print_track_summary(read: Any, job: Any, paths: dict[str, Path]) -> None:
         console.print(Text(f"report: {html}", style="green"), soft_wrap=True)
 
 
-def _print_recorded_summary(paths: dict[str, Path], log: Path, notes: list[str]) -> None:
+def print_recorded_summary(paths: dict[str, Path], log: Path, notes: list[str]) -> None:
     doc = json.loads(paths["results"].read_text(encoding="utf-8"))
     console = Console()
     limit = 100 * doc["rel_sd_limit"]
@@ -237,7 +237,7 @@ def _print_trials(mt: dict) -> None:
     console.print(table)
 
 
-def _print_vessel_summary(paths: dict[str, Path], notes: list[str]) -> None:
+def print_vessel_summary(paths: dict[str, Path], notes: list[str]) -> None:
     from rich.markup import escape
 
     doc = json.loads(paths["results"].read_text(encoding="utf-8"))

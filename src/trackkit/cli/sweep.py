@@ -14,19 +14,19 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import SCENARIO_HELP, _at_least
+from trackkit.cli.options import SCENARIO_HELP, at_least
 from trackkit.cli.output import (
     OutputDir,
-    _default_dir,
-    _deliver_interrupt,
-    _fail,
-    _output_dir,
-    _progress_bar,
-    _say_note,
-    _stderr,
-    _user_errors,
+    default_dir,
+    deliver_interrupt,
+    fail,
+    output_dir,
+    progress_bar,
+    say_note,
+    stderr,
+    user_errors,
 )
-from trackkit.cli.summaries import _print_sweep_summary
+from trackkit.cli.summaries import print_sweep_summary
 
 
 class DesignName(StrEnum):
@@ -67,7 +67,7 @@ def _sweep_listener(bar: Progress, console: Console) -> Any:
 
         def progress(self, i: int, runs_done: float) -> None:
             if threading.current_thread() is threading.main_thread():
-                _deliver_interrupt()
+                deliver_interrupt()
             with self.lock:
                 self.done[i] = max(self.done[i], runs_done)
                 if i not in self.rows and len(self.rows) < _POINT_BARS and not (
@@ -107,20 +107,20 @@ def sweep(
         "or by Latin hypercube (seeded by --seed).",
         show_default="the [sweep] table's, else grid")] = None,
     points: Annotated[int | None, typer.Option(
-        "--points", callback=_at_least(1), help="random, lhs: the number of points; grid: "
+        "--points", callback=at_least(1), help="random, lhs: the number of points; grid: "
         "the values per range.")] = None,
     runs: Annotated[int | None, typer.Option(
-        "--runs", "-n", callback=_at_least(1), help="Monte Carlo runs per point.",
+        "--runs", "-n", callback=at_least(1), help="Monte Carlo runs per point.",
         show_default="the scenario's run.runs")] = None,
     seed: Annotated[int | None, typer.Option(
-        "--seed", "-s", callback=_at_least(0), help="Campaign seed; each point's seed is a "
+        "--seed", "-s", callback=at_least(0), help="Campaign seed; each point's seed is a "
         "hash of it and the point's values.", show_default="the scenario's run.seed")] = None,
     block: Annotated[int | None, typer.Option(
-        "--block", callback=_at_least(1), help="Runs per block, the unit of work and of "
+        "--block", callback=at_least(1), help="Runs per block, the unit of work and of "
         "checkpoints (results are bit-identical for the same block size).",
         show_default="the scenario's run.block")] = None,
     workers: Annotated[int | None, typer.Option(
-        "--workers", "-w", callback=_at_least(1), help="Local Dask workers (at least 1).",
+        "--workers", "-w", callback=at_least(1), help="Local Dask workers (at least 1).",
         show_default="none: in this process")] = None,
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.",
@@ -139,7 +139,7 @@ def sweep(
     Every finished block is stored in the campaign directory: run the same command again
     after an interruption and it resumes, with bit-identical results. A point's seed derives
     from the campaign seed and its values, so adding points leaves the others unchanged."""
-    with _user_errors() as state:
+    with user_errors() as state:
         if workers and scheduler:
             raise ValueError(f"--workers {workers} and --scheduler {scheduler}: give one, "
                              "--workers for a local Dask cluster or --scheduler for a running "
@@ -154,36 +154,36 @@ def sweep(
         from trackkit.report.sweep_report import sweep_outputs, write_sweep_report
 
         params = [parse_param(p) for p in param or []]
-        with _stderr().status("checking every point of the sweep"):
+        with stderr().status("checking every point of the sweep"):
             campaign = plan_campaign(sc, params, design.value if design else None, points,
                                      runs, seed, block)
-        target, label = _output_dir(out, f"{_default_dir(scenario, sc)}-sweep")
+        target, label = output_dir(out, f"{default_dir(scenario, sc)}-sweep")
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was stored in {target}"
-            _say_note(where)
+            say_note(where)
             store = CampaignStore(where.path, label)
             store.open(campaign.identity(), fresh=fresh, scenario_toml=stages._dumps(campaign.base),
                        outputs=sweep_outputs(where.path))
             state.interrupted = (f"interrupted; the finished blocks are stored in {target}: "
                                  "run the same command again to resume")
-            console = _stderr()
+            console = stderr()
             console.print(Text(
                 f"{sc.name}: {campaign.design} design, {len(campaign.points)} points x "
                 f"{campaign.runs} runs (block {campaign.block}, seed {campaign.seed}) -> "
                 f"{target}", style="bold"), soft_wrap=True)
             try:
-                with _progress_bar(console) as bar:
+                with progress_bar(console) as bar:
                     docs = run_campaign(campaign, store, workers=workers, scheduler=scheduler,
                                         listener=_sweep_listener(bar, console))
-                    _deliver_interrupt()
+                    deliver_interrupt()
             except BlockFailed as err:
-                _fail(f"{err}. The campaign stopped; the blocks finished so far are stored in "
+                fail(f"{err}. The campaign stopped; the blocks finished so far are stored in "
                       f"{target}: fix the cause and run the same command again to resume",
                       1)
             except CheckpointError as err:
-                _fail(str(err), 1)
-            with _stderr().status("writing the report"):
+                fail(str(err), 1)
+            with stderr().status("writing the report"):
                 paths = write_sweep_report(campaign, docs, where.path,
                                            [store.load_timings(p.id) for p in campaign.points])
             state.interrupted = "interrupted"
-            _print_sweep_summary(campaign, docs, paths)
+            print_sweep_summary(campaign, docs, paths)

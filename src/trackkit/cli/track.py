@@ -10,16 +10,16 @@ from typing import Annotated, Any
 import typer
 
 from trackkit.cli.entry import app
-from trackkit.cli.options import OnBad, _at_least, _number
+from trackkit.cli.options import OnBad, at_least, number
 from trackkit.cli.output import (
     OutputDir,
-    _output_dir,
-    _progress_bar,
-    _say_note,
-    _stderr,
-    _user_errors,
+    output_dir,
+    progress_bar,
+    say_note,
+    stderr,
+    user_errors,
 )
-from trackkit.cli.summaries import _print_track_summary
+from trackkit.cli.summaries import print_track_summary
 from trackkit.tracking.recorded import (
     TRACK_PROFILES,
     TrackingResult,
@@ -77,61 +77,61 @@ def track(
         "deg|rad, bearing nautical|math, time s|iso|unix|unix_ms.",
         show_default="distance=m,angle=deg,bearing=nautical,time=s")] = None,
     site_lat: Annotated[float | None, typer.Option(
-        "--site-lat", callback=_number(-90, 90, open_lo=False), help="Radar site latitude "
+        "--site-lat", callback=number(-90, 90, open_lo=False), help="Radar site latitude "
         "(deg); for detections, the latitude of the origin of x, y (gives lat/lon columns "
         "and GeoJSON).", show_default="the data's median")] = None,
     site_lon: Annotated[float | None, typer.Option(
-        "--site-lon", callback=_number(-180, 180, open_lo=False),
+        "--site-lon", callback=number(-180, 180, open_lo=False),
         help="Radar site longitude (deg).", show_default="the data's median")] = None,
     period: Annotated[float | None, typer.Option(
-        "--period", callback=_number(0), help="Scan period (s).",
+        "--period", callback=number(0), help="Scan period (s).",
         show_default=_profile_default("period"))] = None,
     sigma_range: Annotated[float | None, typer.Option(
-        "--sigma-range", callback=_number(0), help="Range noise std (m).",
+        "--sigma-range", callback=number(0), help="Range noise std (m).",
         show_default=_profile_default("sigma_range"))] = None,
     sigma_bearing_deg: Annotated[float | None, typer.Option(
-        "--sigma-bearing-deg", callback=_number(0), help="Bearing noise std (deg).",
+        "--sigma-bearing-deg", callback=number(0), help="Bearing noise std (deg).",
         show_default=_profile_default("sigma_bearing_deg"))] = None,
     sigma_pos: Annotated[float | None, typer.Option(
-        "--sigma-pos", callback=_number(0), help="Position noise std of x, y detections (m).",
+        "--sigma-pos", callback=number(0), help="Position noise std of x, y detections (m).",
         show_default=_profile_default("sigma_pos"))] = None,
     pd: Annotated[float | None, typer.Option(
-        "--pd", callback=_number(0, 1), help="Detection probability.",
+        "--pd", callback=number(0, 1), help="Detection probability.",
         show_default=_profile_default("pd"))] = None,
     clutter: Annotated[float | None, typer.Option(
-        "--clutter", callback=_number(0, open_lo=False), help="False plots per scan.",
+        "--clutter", callback=number(0, open_lo=False), help="False plots per scan.",
         show_default=_profile_default("clutter"))] = None,
     max_range: Annotated[float | None, typer.Option(
-        "--max-range", callback=_number(0), help="Instrumented range (m).",
+        "--max-range", callback=number(0), help="Instrumented range (m).",
         show_default=_profile_default("max_range"))] = None,
     min_range: Annotated[float | None, typer.Option(
-        "--min-range", callback=_number(0, open_lo=False), help="Blind range (m).",
+        "--min-range", callback=number(0, open_lo=False), help="Blind range (m).",
         show_default=_profile_default("min_range"))] = None,
     max_gap: Annotated[float | None, typer.Option(
-        "--max-gap", callback=_number(0), help="Longest gap between an object's reports "
+        "--max-gap", callback=number(0), help="Longest gap between an object's reports "
         "bridged by interpolation (s).", show_default="max(3 periods, 120 s)")] = None,
     seed: Annotated[int, typer.Option(
-        "--seed", "-s", callback=_at_least(0), help="Seed of the virtual radar.")] = 0,
+        "--seed", "-s", callback=at_least(0), help="Seed of the virtual radar.")] = 0,
     associator: Annotated[AssociatorName, typer.Option(
         "--associator", help="Data association.")] = AssociatorName.gnn,
     filt: Annotated[FilterName, typer.Option("--filter", help="Track filter.")] = FilterName.ekf,
     q: Annotated[float | None, typer.Option(
-        "--q", callback=_number(0), help="Process noise of the constant-velocity model "
+        "--q", callback=number(0), help="Process noise of the constant-velocity model "
         "(m^2/s^3).", show_default=_profile_default("q"))] = None,
     v_std: Annotated[float | None, typer.Option(
-        "--v-std", callback=_number(0), help="Velocity std of a new track (m/s).",
+        "--v-std", callback=number(0), help="Velocity std of a new track (m/s).",
         show_default=_profile_default("v_std"))] = None,
     gospa_c: Annotated[float | None, typer.Option(
-        "--gospa-c", callback=_number(0), help="GOSPA cut-off (m).",
+        "--gospa-c", callback=number(0), help="GOSPA cut-off (m).",
         show_default=_profile_default("gospa_c"))] = None,
     on_bad: Annotated[OnBad, typer.Option(
         "--on-bad", help="Skip bad records (counted, and listed in skipped.csv) or stop at "
         "the first.")] = OnBad.skip,
     until: Annotated[float | None, typer.Option(
-        "--until", callback=_number(0, open_lo=False), help="Track only the first SECONDS "
+        "--until", callback=number(0, open_lo=False), help="Track only the first SECONDS "
         "of the data.", show_default="all")] = None,
     max_scans: Annotated[int | None, typer.Option(
-        "--max-scans", callback=_at_least(1), help="Track at most N scans.",
+        "--max-scans", callback=at_least(1), help="Track at most N scans.",
         show_default="all")] = None,
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Output directory (created if missing).",
@@ -141,7 +141,7 @@ def track(
     report.html. AIS and ADS-B need --as-radar: a virtual radar makes plots of the reported
     positions, and the tracks are scored against those positions with GOSPA. Try it on a
     bundled sample: trackkit track solent-ais --as-radar."""
-    with _user_errors() as state:
+    with user_errors() as state:
         profile = TrackProfile(period=period, sigma_range=sigma_range,
                                sigma_bearing_deg=sigma_bearing_deg, sigma_pos=sigma_pos, pd=pd,
                                clutter=clutter, max_range=max_range, min_range=min_range, q=q,
@@ -152,11 +152,11 @@ def track(
             max_gap=max_gap, seed=seed, associator=associator.value, filter=filt.value,
             on_bad=on_bad.value, until=until, max_scans=max_scans)
         recording = open_recording(file, options)
-        target, label = _output_dir(out, f"track-{recording.path.stem}")
+        target, label = output_dir(out, f"track-{recording.path.stem}")
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
-            _say_note(where)
-            with _progress_bar(_stderr()) as bar:
+            say_note(where)
+            with progress_bar(stderr()) as bar:
                 try:
                     result = track_recording(recording, progress=_bars(bar))
                 except ValueError as err:  # the reader's advice in the command's words
@@ -165,7 +165,7 @@ def track(
                         "[--on-bad stop; pass --on-bad skip to skip bad records]")) from None
             paths = _write(result, where.path)
             state.interrupted = "interrupted"
-            _print_track_summary(result.read, result, paths)
+            print_track_summary(result.read, result, paths)
 
 
 def _bars(bar: Any) -> Any:
@@ -191,5 +191,5 @@ def _write(result: TrackingResult, out: Path) -> dict[str, Path]:
                       gospa_c=rec.settings.gospa_c, config=result.config,
                       background=result.background, background_label=result.background_label,
                       site=result.site, max_range=result.max_range, notes=result.notes)
-    with _stderr().status("writing the tracks and the report"):
+    with stderr().status("writing the tracks and the report"):
         return write_track_report(rep, out)
