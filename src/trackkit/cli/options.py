@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from enum import StrEnum
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 
@@ -47,6 +47,14 @@ def number(lo: float | None = None, hi: float | None = None, *, open_lo: bool = 
         return value
 
     return check
+
+
+#: the Dask options of the commands that run blocks of Monte Carlo runs (run, sweep)
+Workers = Annotated[int | None, typer.Option(
+    "--workers", "-w", callback=at_least(1), help="Local Dask workers (at least 1).",
+    show_default="none: in this process")]
+Scheduler = Annotated[str | None, typer.Option(
+    "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.", show_default="none")]
 
 
 class OnBad(StrEnum):

@@ -15,7 +15,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import SCENARIO_HELP, at_least, positive_hours
+from trackkit.cli.options import SCENARIO_HELP, Scheduler, Workers, at_least, positive_hours
 from trackkit.cli.output import (
     OutputDir,
     default_dir,
@@ -53,12 +53,8 @@ def run(
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Output directory (created if missing).",
         show_default="trackkit-out/SCENARIO; for a file, its name without .toml")] = None,
-    workers: Annotated[int | None, typer.Option(
-        "--workers", "-w", callback=at_least(1), help="Local Dask workers (at least 1).",
-        show_default="none: in this process")] = None,
-    scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.",
-        show_default="none")] = None,
+    workers: Workers = None,
+    scheduler: Scheduler = None,
     max_hours: Annotated[float, typer.Option(
         "--max-hours", callback=positive_hours, help="Refuse a run count that the first "
         "block's timing says would take longer (hours).")] = 24.0,

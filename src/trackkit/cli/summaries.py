@@ -193,12 +193,7 @@ def print_recorded_summary(paths: dict[str, Path], log: Path, notes: list[str]) 
     console.print(Text(f"{16 - n_id} of 16 coefficients are not identified by this log "
                        f"(standard deviation above {limit:.0f}% of the value)",
                        style="yellow" if n_id < 16 else ""), soft_wrap=True)
-    _print_trials(doc["model_trials"])
-    for note in notes:
-        console.print(Text(f"note: {note}", style="yellow"), soft_wrap=True)
-    console.print(Text(f"wrote {len(paths)} files to {paths['results'].parent}",
-                       style="green"), soft_wrap=True)
-    console.print(Text(f"report: {paths['html']}", style="green"), soft_wrap=True)
+    _print_closing(console, doc["model_trials"], notes, paths)
 
 
 def _signed4(v: float | None) -> str:
@@ -235,6 +230,17 @@ def _print_trials(mt: dict) -> None:
     for row in imo_rows(mt["imo"], truth):
         table.add_row(*(escape(c) for c in row))
     console.print(table)
+
+
+def _print_closing(console: Console, trials: dict, notes: list[str],
+                   paths: dict[str, Path]) -> None:
+    """The end of both vessel summaries: the model's trials, the notes, where the files went."""
+    _print_trials(trials)
+    for note in notes:
+        console.print(Text(f"note: {note}", style="yellow"), soft_wrap=True)
+    console.print(Text(f"wrote {len(paths)} files to {paths['results'].parent}",
+                       style="green"), soft_wrap=True)
+    console.print(Text(f"report: {paths['html']}", style="green"), soft_wrap=True)
 
 
 def print_vessel_summary(paths: dict[str, Path], notes: list[str]) -> None:
@@ -276,9 +282,4 @@ def print_vessel_summary(paths: dict[str, Path], notes: list[str]) -> None:
             f"{m(tr['filtered_rmse_median_m'])}; the identified model driven by the inputs "
             f"{m(tr['model_rmse_median_m'])} (largest {m(tr['model_max_error_median_m'])})"),
             soft_wrap=True)
-    _print_trials(doc["model_trials"])
-    for note in notes:
-        console.print(Text(f"note: {note}", style="yellow"), soft_wrap=True)
-    console.print(Text(f"wrote {len(paths)} files to {paths['results'].parent}",
-                       style="green"), soft_wrap=True)
-    console.print(Text(f"report: {paths['html']}", style="green"), soft_wrap=True)
+    _print_closing(console, doc["model_trials"], notes, paths)

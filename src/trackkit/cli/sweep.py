@@ -14,7 +14,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import SCENARIO_HELP, at_least
+from trackkit.cli.options import SCENARIO_HELP, Scheduler, Workers, at_least
 from trackkit.cli.output import (
     OutputDir,
     default_dir,
@@ -119,12 +119,8 @@ def sweep(
         "--block", callback=at_least(1), help="Runs per block, the unit of work and of "
         "checkpoints (results are bit-identical for the same block size).",
         show_default="the scenario's run.block")] = None,
-    workers: Annotated[int | None, typer.Option(
-        "--workers", "-w", callback=at_least(1), help="Local Dask workers (at least 1).",
-        show_default="none: in this process")] = None,
-    scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.",
-        show_default="none")] = None,
+    workers: Workers = None,
+    scheduler: Scheduler = None,
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Campaign directory (created if missing): checkpoints and "
         "report.", show_default="trackkit-out/SCENARIO-sweep")] = None,
