@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import plan_of, run_block, with_run
+from trackkit.experiments.montecarlo import plan_of, run_block, with_run
 
 
 def main() -> None:

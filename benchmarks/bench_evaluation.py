@@ -39,11 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-import trackkit.eval.montecarlo as after_mc
+import trackkit.experiments.montecarlo as after_mc
 import trackkit.scenario as S
 from trackkit.belief import Gaussian, Innovation
-from trackkit.eval.montecarlo import filter_rng, plan_of, with_run
-from trackkit.sim.simulate import simulate_block
+from trackkit.experiments.montecarlo import filter_rng, plan_of, with_run
+from trackkit.scenario.simulate import simulate_block
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the commit before the evaluation work of issue 16 (exact accumulation of every term)
@@ -170,7 +170,7 @@ def short(name: str, runs: int, repeat: int) -> None:
     report file (results.json, metrics.parquet, plots, report.html); best of ``repeat``."""
     import tempfile
 
-    from trackkit.eval.compare import compare
+    from trackkit.experiments.compare import compare
     from trackkit.report.files import write_report
 
     sc = S.load(name)

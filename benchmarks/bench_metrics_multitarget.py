@@ -23,7 +23,7 @@ import numpy as np
 from stonesoup.metricgenerator.ospametric import GOSPAMetric
 from stonesoup.types.state import State
 
-from trackkit.eval.multitarget import frames, gospa, gospa_steps
+from trackkit.eval.track_metrics import frames, gospa, gospa_steps
 
 T0 = datetime.datetime(2024, 1, 1)
 SIDE = 10_000.0

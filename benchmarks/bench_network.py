@@ -31,7 +31,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from trackkit.eval.network_mc import run_network_mc
+from trackkit.experiments.network_mc import run_network_mc
 from trackkit.network import agents
 from trackkit.scenario.network import load_network
 

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.experiments.montecarlo import run_scenario
 
 
 def main() -> None:

@@ -45,11 +45,11 @@ import numpy as np
 import scipy
 
 import trackkit as tk
+from trackkit.io.scans import Scan
 from trackkit.tracking import HistoryLogic, IdCounter, gate, gnn
 from trackkit.tracking.association import clusters, distance_costs, jpda, loglik_costs
 from trackkit.tracking.gating import gate_threshold
 from trackkit.tracking.logic import TrackStatus
-from trackkit.tracking.scans import Scan
 from trackkit.tracking.tracker import GNN, JPDA, SinglePoint, Tracker, Tracks, _take
 
 DT = 2.0  # s between scans

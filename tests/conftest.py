@@ -74,7 +74,7 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
 # Scheduling units other than the file, by node-id prefix (the first match wins); None makes
 # each test a unit of its own.
 SCHEDULING_UNITS = {
-    # the seed-000 tunings, cached per scenario per process (trackkit.eval.tuning), take about
+    # the seed-000 tunings, cached per scenario per process (experiments.tuning), take about
     # 5 min of CPU: the tests that use them share a worker, or the tunings run twice
     "tests/report/test_show_roundtrip.py::test_show_then_compare_gives_the_same_results_tuned":
         "seed-000 tunings",

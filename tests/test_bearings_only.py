@@ -500,7 +500,7 @@ def test_bearing_velocity_is_a_pose_field_that_h_ignores():
 
 def test_scenario_engine_gives_the_sensor_the_observers_velocity():
     import trackkit.scenario as S
-    from trackkit.eval.montecarlo import plan_of
+    from trackkit.experiments.montecarlo import plan_of
 
     plan = plan_of(S.load("bo-cv"))
     for k in (0, 130, 300):

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from tests.cli_helpers import Ran, assert_user_error, trackkit
 from trackkit import cli
 from trackkit.cli import stages
-from trackkit.models.vessel import COEFFICIENT_NAMES
+from trackkit.models.manoeuvring import COEFFICIENT_NAMES
 from trackkit.report.vessel_report import VESSEL_FILES
 
 FIXTURES = Path(__file__).parent / "fixtures"
@@ -122,7 +122,7 @@ def test_user_mistakes_exit_2_naming_the_field(case, names, tmp_path):
 
 
 def test_a_bad_scenario_file_exits_2_without_a_traceback(tmp_path):
-    text = stages._dumps(stages._load("vessel-zigzag-20")).replace("nozzle_deg = 20.0",
+    text = stages.dumps(stages.load("vessel-zigzag-20")).replace("nozzle_deg = 20.0",
                                                                    "nozzle_deg = 90.0")
     f = tmp_path / "bad.toml"
     f.write_text(text, encoding="utf-8")

@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from trackkit import cli
-from trackkit.eval import sweep as sweep_module
+from trackkit.experiments import sweep as sweep_module
 
 from .cli_helpers import LEAKS, assert_user_error, trackkit
 from .eval.test_sweep import (

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import trackkit.eval.montecarlo as mc
+import trackkit.experiments.montecarlo as mc
 import trackkit.scenario as S
 from trackkit.eval.crlb import pcrlb, rmse_bound
-from trackkit.sim.simulate import simulate_block
+from trackkit.scenario.simulate import simulate_block
 
 #: a GA small enough for a unit test: 100 measurements in 4 blocks, 10 x 5 generations
 SMALL_GA = {"measurements": 100, "block": 25, "population": 10, "generations": 5}

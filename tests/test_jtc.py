@@ -14,7 +14,7 @@ import pytest
 import trackkit as tk
 import trackkit.scenario as S
 from trackkit.angles import wrap
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.experiments.montecarlo import run_scenario
 from trackkit.filters.jtc import JTC, JTCBelief, MultiFilterBelief, MultiFilterJTC, next_modes
 from trackkit.models import classes as cl
 from trackkit.models.classes import (

@@ -11,8 +11,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from trackkit.eval.tracking_mc import run_tracking
-from trackkit.eval.tracking_run import run_multitarget
+from trackkit.experiments.tracking_mc import run_tracking
+from trackkit.experiments.tracking_run import run_multitarget
 from trackkit.report.tracking_report import write_tracking_report
 from trackkit.scenario import ScenarioError
 from trackkit.scenario.multitarget import (
@@ -24,7 +24,7 @@ from trackkit.scenario.multitarget import (
     parse_multitarget,
     scan_period,
 )
-from trackkit.sim.multitarget import Scene
+from trackkit.sim.scene import Scene
 from trackkit.tracking import GNN, JPDA, ScoreLogic, SinglePoint, Tracker
 
 BUNDLED = ("radar-crossing", "radar-clutter", "radar-dense")

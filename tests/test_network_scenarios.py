@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from tests.cli_helpers import assert_user_error, trackkit
-from trackkit.eval.network_compare import compare_networks, run_mse
-from trackkit.eval.network_mc import run_network_mc
+from trackkit.experiments.network_compare import compare_networks, run_mse
+from trackkit.experiments.network_mc import run_network_mc
 from trackkit.report.network_report import AGENT_UNITS, write_network_report
 from trackkit.scenario import ScenarioError
 from trackkit.scenario.network import (
@@ -22,7 +22,7 @@ from trackkit.scenario.network import (
     load_network,
     parse_network,
 )
-from trackkit.sim.network import simulate_network
+from trackkit.sim.sensor_network import simulate_network
 
 BUNDLED = ("net-baseline", "net-limited", "net-random")
 
@@ -174,7 +174,7 @@ def test_net_limited_agent_2_never_measures_target_3():
     seen = sim.bearings.in_range  # (R, A, E, Nt)
     assert not seen[:, 1, :, 2].any()
     assert seen[:, 0, :, 2].all() and seen[:, 2, :, 2].all()
-    from trackkit.network.run import run_network
+    from trackkit.network.inprocess import run_network
 
     for run in range(1):
         r = run_network(sc.run.seed, run, sc.target_states(sc.run.seed, run), sc.agent_states(),
@@ -405,7 +405,7 @@ def test_inf_ranges_write_and_read_back():
 
 
 def test_a_loss_outside_0_1_is_refused_naming_it(tmp_path):
-    from trackkit.network.run import check_loss
+    from trackkit.network.inprocess import check_loss
 
     assert check_loss(0.0) == 0.0 and check_loss(0.999) == 0.999
     for bad in (1.0, -0.1, math.nan):

@@ -13,7 +13,7 @@ from rich.console import Console
 
 import trackkit.scenario as S
 from tests.cli_helpers import trackkit
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.experiments.montecarlo import run_scenario
 from trackkit.report.html import render_html
 from trackkit.report.tables import matching_rich_tables, window_summaries
 from trackkit.scenario.schema import window_steps

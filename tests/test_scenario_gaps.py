@@ -11,9 +11,8 @@ import pytest
 
 import trackkit as tk
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import run_scenario
-from trackkit.report import write_report
-from trackkit.tracking.gaps import (
+from trackkit.experiments.montecarlo import run_scenario
+from trackkit.filters.gaps import (
     PolynomialFit,
     SineFit,
     WithGaps,
@@ -21,7 +20,8 @@ from trackkit.tracking.gaps import (
     measurement_times,
     run_with_gaps,
 )
-from trackkit.tracking.maneuver import NISDetector
+from trackkit.filters.maneuver import NISDetector
+from trackkit.report import write_report
 
 GAP_SCENARIOS = ["gaps-cv", "gaps-ca", "gaps-sine"]
 
@@ -211,8 +211,8 @@ def test_engine_matches_run_with_gaps():
     """One filter of a bundled scenario through the engine equals run_with_gaps on the same
     simulated data (the engine's run 0 estimate, 1e-12: the engine's KF runs the same
     kernels on a block of runs)."""
-    from trackkit.eval.montecarlo import plan_of
-    from trackkit.sim.simulate import simulate_block
+    from trackkit.experiments.montecarlo import plan_of
+    from trackkit.scenario.simulate import simulate_block
 
     s = _small("gaps-ca", runs=4, block=4)
     plan = plan_of(s)

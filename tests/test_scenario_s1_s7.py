@@ -13,7 +13,7 @@ import pytest
 import trackkit as tk
 import trackkit.scenario as S
 from trackkit.belief import Gaussian
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.experiments.montecarlo import run_scenario
 from trackkit.filters import alphabeta as ab
 from trackkit.scenario.build import compile_scenario
 from trackkit.scenario.options import make_filter

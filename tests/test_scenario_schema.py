@@ -298,7 +298,7 @@ def _short_bo_cv(sigma_deg: float) -> dict:
 def test_the_precision_limit_sits_between_what_runs_and_what_fails():
     """Just inside the limit the run goes through; far beyond it (sigma_deg = 1e-8, where
     the UKF's covariance stops being positive definite) the scenario is refused at load."""
-    from trackkit.eval.montecarlo import run_scenario
+    from trackkit.experiments.montecarlo import run_scenario
 
     bearing_spread = 0.167  # rad: the first predicted bearing's std in bo-cv
     inside = math.degrees(bearing_spread / math.sqrt(PRECISION_LIMIT)) * 2

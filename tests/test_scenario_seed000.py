@@ -13,11 +13,11 @@ import pytest
 from scipy.linalg import block_diag
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import groups_for, plan_of
+from trackkit.experiments.montecarlo import groups_for, plan_of
 from trackkit.filters import EKF, KF, UKF, FuzzyAdaptive
 from trackkit.models import AzimuthElevation, MultipathDelay
 from trackkit.scenario.build import compile_scenario
-from trackkit.sim.simulate import simulate_block
+from trackkit.scenario.simulate import simulate_block
 
 F3 = [[0.77, 0.20, 0.0], [0.22, 0.72, 0.22], [0.02, 0.0, 0.72]]
 KMH = 1 / 3.6

@@ -18,8 +18,8 @@ from typer.testing import CliRunner
 import trackkit as tk
 import trackkit.scenario as S
 from trackkit import cli
-from trackkit.eval.montecarlo import plan_of, run_scenario
-from trackkit.sim.simulate import simulate_block
+from trackkit.experiments.montecarlo import plan_of, run_scenario
+from trackkit.scenario.simulate import simulate_block
 
 RTOL = 1e-12  # deterministic maths
 

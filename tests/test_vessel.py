@@ -1,4 +1,4 @@
-"""Seed 003's vessel model (trackkit.models.vessel): the data tables, a hand-computed Euler
+"""Seed 003's vessel model (trackkit.models.manoeuvring): the data tables, a hand-computed Euler
 step, Jacobians against central finite differences, the section 4.3 instability of the printed
 coefficients, kinematics, the reference vessel's stability and the augmented model in the
 EKF, UKF and CKF."""
@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import trackkit as tk
-from trackkit.models.vessel import (
+from trackkit.models.manoeuvring import (
     COEFFICIENT_NAMES,
     IDENTITY,
     KNOT,

@@ -11,8 +11,8 @@ import pytest
 from typer.testing import CliRunner
 
 from trackkit import cli
-from trackkit.eval.vessel_mc import model_trials, run_vessel, stable
-from trackkit.models.vessel import KNOT, paper_coefficients, reference_vessel
+from trackkit.experiments.vessel_mc import model_trials, run_vessel, stable
+from trackkit.models.manoeuvring import KNOT, paper_coefficients, reference_vessel
 from trackkit.scenario import ScenarioError
 from trackkit.scenario.network import is_network
 from trackkit.scenario.vessel import bundled_vessel, is_vessel, load_vessel, parse_vessel

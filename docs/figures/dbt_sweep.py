@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from trackkit.eval.sweep import parse_param, plan_campaign
+from trackkit.experiments.sweep import parse_param, plan_campaign
 from trackkit.report.sweep_report import (
     _frame,
     _label_axes,

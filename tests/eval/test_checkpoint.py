@@ -1,4 +1,4 @@
-"""The campaign store (``trackkit.eval.checkpoint``): atomic writes, the identity check that
+"""The campaign store (``trackkit.experiments.checkpoint``): atomic writes, the identity check that
 refuses to mix campaigns, block files that read back as they were written or say why not."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import zlib
 import numpy as np
 import pytest
 
-from trackkit.eval import checkpoint as ck
-from trackkit.eval import safestore
-from trackkit.eval.checkpoint import (
+from trackkit.experiments import checkpoint as ck
+from trackkit.experiments import safestore
+from trackkit.experiments.checkpoint import (
     CampaignMismatch,
     CampaignStore,
     CheckpointError,

@@ -8,7 +8,7 @@ import pytest
 
 from trackkit.angles import wrap
 from trackkit.eval.manoeuvres import imo_criteria, turning_metrics, zigzag_metrics
-from trackkit.models.vessel import naji7, reference_vessel
+from trackkit.models.manoeuvring import naji7, reference_vessel
 from trackkit.sim.seatrials import turning_circle, zigzag
 
 DEG = np.pi / 180

@@ -1,5 +1,5 @@
-"""Seed 000's matching metrics (trackkit.eval.matching): J1-J4 per run, the run-0 logs of R,
-S, C and DOM, and the R a filter uses (``noise_in_use``).
+"""Naseri Solhdar's matching metrics (trackkit.eval.covariance_matching): J1-J4 per run,
+the run-0 logs of R, S, C and DOM, and the R a filter uses (``noise_in_use``).
 
 Expectations are running sums written out in Python loops over hand-fed sequences.
 """
@@ -13,8 +13,8 @@ import pytest
 
 import trackkit.scenario as S
 from trackkit.belief import Gaussian, Innovation
-from trackkit.eval.compare import compare
-from trackkit.eval.matching import MatchingMetrics, measurement_noise_rms, noise_in_use
+from trackkit.eval.covariance_matching import MatchingMetrics, measurement_noise_rms, noise_in_use
+from trackkit.experiments.compare import compare
 from trackkit.filters import KF, FuzzyAdaptive
 from trackkit.filters.adaptive import AdaptiveBelief, SageHusaBelief
 from trackkit.filters.fuzzy import DEFAULT_PARAMS

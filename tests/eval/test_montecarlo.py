@@ -10,8 +10,9 @@ import pytest
 import trackkit.eval.metrics as metrics_module
 import trackkit.scenario as S
 from trackkit.eval.crlb import pcrlb, rmse_bound
-from trackkit.eval.montecarlo import PROGRESS_STEPS, RunBudgetError, plan_of, run_scenario
-from trackkit.sim.simulate import run_rng, simulate_block
+from trackkit.experiments.montecarlo import PROGRESS_STEPS, RunBudgetError, plan_of, run_scenario
+from trackkit.scenario.simulate import simulate_block
+from trackkit.sim.streams import run_rng
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Multi-target metrics (trackkit.eval.multitarget): OSPA, GOSPA and track-level counts.
+"""Multi-target metrics (trackkit.eval.track_metrics): OSPA, GOSPA and track-level counts.
 
 * hand-computed cases (empty sets, all missed, all false, one pair inside and outside c);
 * a brute-force textbook reference (minimum over every assignment) at p = 1, 2, 3, also for
@@ -26,8 +26,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import trackkit.eval.multitarget as mt
-from trackkit.eval.multitarget import (
+import trackkit.eval.track_metrics as mt
+from trackkit.eval.track_metrics import (
     Frames,
     TrackCounts,
     assign,

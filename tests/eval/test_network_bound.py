@@ -1,4 +1,4 @@
-"""The multi-sensor bearings-only PCRLB of asynchronous agents (trackkit.eval.network_bound).
+"""The multi-sensor bearings-only PCRLB of asynchronous agents (trackkit.network.bound).
 
 Statistical tests use fixed seeds (so they are deterministic) and state their confidence.
 """
@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 
 import trackkit as tk
-from trackkit.eval.network_bound import (
+from trackkit.models.motion import ConstantVelocity
+from trackkit.network.bound import (
     bearing_information,
     information_recursion,
     network_pcrlb,
     network_run_pcrlb,
 )
-from trackkit.models.motion import ConstantVelocity
 from trackkit.network.composite import fisher_information
-from trackkit.sim.network import simulate_network
+from trackkit.sim.sensor_network import simulate_network
 
 DEG = math.pi / 180
 SIGMA = 2 * DEG

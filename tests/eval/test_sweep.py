@@ -1,4 +1,4 @@
-"""Campaigns (``trackkit.eval.sweep``): parameters, designs, point seeds, and the same bits
+"""Campaigns (``trackkit.experiments.sweep``): parameters, designs, point seeds, and the same bits
 in this process and on a Dask cluster one of whose workers is killed mid-campaign.
 
 The campaign is a 3 x 3 grid over the full ``bo-cv`` (its seven filters, the particle filter
@@ -16,8 +16,8 @@ import numpy as np
 import psutil
 import pytest
 
-from trackkit.eval.checkpoint import CampaignStore
-from trackkit.eval.sweep import (
+from trackkit.experiments.checkpoint import CampaignStore
+from trackkit.experiments.sweep import (
     Listener,
     canonical,
     parse_param,
@@ -324,8 +324,8 @@ def test_a_block_failing_on_dask_stops_the_campaign_naming_point_and_block(tmp_p
     failure can be injected here."""
     from dask.distributed import LocalCluster
 
-    from trackkit.eval import sweep as sweep_module
-    from trackkit.eval.sweep import ATTEMPTS, BlockFailed
+    from trackkit.experiments import sweep as sweep_module
+    from trackkit.experiments.sweep import ATTEMPTS, BlockFailed
 
     c = plan_campaign(short_bo_cv(), [parse_param("sensor.sigma_deg=1,2")], runs=4, block=2)
     real = sweep_module.run_blocks

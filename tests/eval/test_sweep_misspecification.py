@@ -13,9 +13,15 @@ import math
 import numpy as np
 import pytest
 
-from trackkit.eval.checkpoint import CampaignStore
-from trackkit.eval.montecarlo import combine, run_blocks, with_run
-from trackkit.eval.sweep import factor_of, parse_param, plan_campaign, point_document, run_campaign
+from trackkit.experiments.checkpoint import CampaignStore
+from trackkit.experiments.montecarlo import combine, run_blocks, with_run
+from trackkit.experiments.sweep import (
+    factor_of,
+    parse_param,
+    plan_campaign,
+    point_document,
+    run_campaign,
+)
 from trackkit.report.sweep_report import (
     heatmap_figures,
     published_rows,

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import trackkit as tk
-from trackkit.eval.tracking_mc import run_tracking
-from trackkit.sim.multitarget import Radar, Scene, Target, radar_crossing
+from trackkit.experiments.tracking_mc import run_tracking
+from trackkit.sim.scene import Radar, Scene, Target, radar_crossing
 from trackkit.tracking import GNN, JPDA, HistoryLogic, SinglePoint, Tracker
 
 

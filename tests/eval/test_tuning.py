@@ -1,4 +1,4 @@
-"""Off-line tuning of the fuzzy-adaptive filters (trackkit.eval.tuning): the batched DOM cost
+"""Off-line tuning of the fuzzy-adaptive filters (trackkit.experiments.tuning): the batched DOM cost
 against one candidate at a time, the optimiser statistics, writing the tuned system into the
 scenario, the per-process cache and ``tune.on``.
 
@@ -16,13 +16,13 @@ import pytest
 
 import trackkit.scenario as S
 from trackkit.belief import Gaussian
-from trackkit.eval.compare import compare
-from trackkit.eval.montecarlo import plan_of, run_scenario, with_run
-from trackkit.eval.tuning import TuningResult, dom_costs, tune_filter, tune_scenario
+from trackkit.experiments.compare import compare
+from trackkit.experiments.montecarlo import plan_of, run_scenario, with_run
+from trackkit.experiments.tuning import TuningResult, dom_costs, tune_filter, tune_scenario
 from trackkit.filters import KF, FuzzyAdaptive
 from trackkit.filters.fuzzy import DEFAULT_PARAMS, N_PARAMS, PARAM_BOUNDS
 from trackkit.models import LinearMotion, Position
-from trackkit.sim.simulate import simulate_block
+from trackkit.scenario.simulate import simulate_block
 
 F3 = np.array([[0.77, 0.20, 0.0], [0.22, 0.72, 0.22], [0.02, 0.0, 0.72]])
 OFKF = 3  # index of the ICA-tuned filter in uw-ch3-r and uw-ch3-q

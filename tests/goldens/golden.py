@@ -29,9 +29,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-import trackkit.eval.montecarlo as montecarlo
+import trackkit.experiments.montecarlo as montecarlo
 import trackkit.scenario as S
-from trackkit.eval.compare import compare
+from trackkit.experiments.compare import compare
 
 HERE = Path(__file__).parent
 RUNS = 20

@@ -22,7 +22,7 @@ from trackkit.identify import (
     relative_error,
     settling_step,
 )
-from trackkit.models.vessel import (
+from trackkit.models.manoeuvring import (
     AugmentedVessel,
     augmented_jacobian,
     augmented_step,

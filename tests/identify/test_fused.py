@@ -15,7 +15,7 @@ import pytest
 import trackkit as tk
 from trackkit.belief import Gaussian
 from trackkit.identify import SampledVessel, fused
-from trackkit.models.vessel import reference_vessel, step
+from trackkit.models.manoeuvring import reference_vessel, step
 
 REF = reference_vessel()
 N = 37  # not a multiple of any chunk tried below
@@ -100,7 +100,7 @@ def test_with_inputs_at_the_substeps_the_update_is_the_textbook_ekfs():
 
 def test_the_prediction_is_the_models_euler_step_bit_for_bit():
     # with no measurement the kernel's state is the prediction, and eq. 2 is written once
-    # (trackkit.models.vessel.prime_rates), so one Euler step is the same bits
+    # (trackkit.models.manoeuvring.prime_rates), so one Euler step is the same bits
     x, P, s0, s1, z = _problem(seed=3)
     xf, Pf, nf = _fused(x, P, s0, s1, np.full_like(z, np.nan), 1)
     np.testing.assert_array_equal(xf[:, :3], step(x[:, :3], 0.5 * (s0 + s1), x[:, 3:], 1.0,

@@ -15,7 +15,7 @@ from trackkit.identify import (
     programme,
     relative_error,
 )
-from trackkit.models.vessel import reference_vessel
+from trackkit.models.manoeuvring import reference_vessel
 
 REF = reference_vessel()
 NO_NOISE = NoiseLevels(0.0, 0.0, 0.0)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trackkit.identify import DEFAULT_PROGRAMME, NoiseLevels, TrialSpec, programme
-from trackkit.models.vessel import mean_input, reference_vessel, step, straight_line_speed
+from trackkit.models.manoeuvring import mean_input, reference_vessel, step, straight_line_speed
 from trackkit.sim import seatrials
 
 REF = reference_vessel()

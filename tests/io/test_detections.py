@@ -6,7 +6,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from trackkit.io import NAUTICAL_MILE, DetectionColumns, DetectionUnits, read_detections
-from trackkit.tracking.scans import Scans
+from trackkit.io.scans import Scans
 
 
 def _scans():

@@ -35,7 +35,8 @@ from trackkit.io.nmea import (
     write_nav_csv,
     write_nmea,
 )
-from trackkit.sim.gnss import GpsModel, InsModel, one_run, simulate_gnss
+from trackkit.io.records import one_run
+from trackkit.sim.gnss import GpsModel, InsModel, simulate_gnss
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 DEG = np.pi / 180

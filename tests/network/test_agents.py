@@ -1,5 +1,5 @@
 """Seed 004's agent program (trackkit.network.agents) and the in-process network run
-(trackkit.network.run)."""
+(trackkit.network.inprocess)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from trackkit.network.agents import (
     empty_bearings,
     own_bearings,
 )
-from trackkit.network.run import run_network
+from trackkit.network.inprocess import run_network
 from trackkit.network.tracks import Message
 from trackkit.tracking import TimerLogic
 from trackkit.tracking.logic import TrackStatus

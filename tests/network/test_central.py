@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from trackkit.angles import wrap
-from trackkit.eval.network_bound import network_run_pcrlb
 from trackkit.eval.network_score import position_rmse, score_trace
 from trackkit.network.agents import AgentSettings
+from trackkit.network.bound import network_run_pcrlb
 from trackkit.network.central import (
     CentralSettings,
     central_from_run,
@@ -23,8 +23,8 @@ from trackkit.network.central import (
     nees,
 )
 from trackkit.network.composite import composite_measurement
-from trackkit.network.run import run_network
-from trackkit.sim.network import simulate_network
+from trackkit.network.inprocess import run_network
+from trackkit.sim.sensor_network import simulate_network
 
 SIGMA = math.radians(2.0)
 # the baseline-like geometry of tests/network/test_agents.py (the paper's Table 1 is lost)

@@ -17,6 +17,7 @@ import zmq
 from tests.cli_helpers import assert_user_error, trackkit
 from tests.test_network_scenarios import TINY
 from trackkit.network.agents import PAYLOAD_VERSION, Payload, empty_bearings
+from trackkit.network.inprocess import run_network
 from trackkit.network.processes import (
     AgentError,
     _Environment,
@@ -26,7 +27,6 @@ from trackkit.network.processes import (
     settings_from_dict,
     settings_to_dict,
 )
-from trackkit.network.run import run_network
 from trackkit.scenario.network import load_network
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/fd").is_dir(),

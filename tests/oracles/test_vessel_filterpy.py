@@ -1,7 +1,7 @@
 """Oracle: the augmented-state identification EKF (``trackkit.identify.identify``) against
 FilterPy's ``ExtendedKalmanFilter``, step by step.
 
-FilterPy gets only what is written here, independently of ``trackkit.models.vessel``: the
+FilterPy gets only what is written here, independently of ``trackkit.models.manoeuvring``: the
 16-coefficient model of seed 003 (eq. 2) in the prime system (L = 19.6 m, U0 = 18 kn,
 n0 = 2000 rpm), its forward-Euler step with the mean input (eq. 4) or m Euler sub-steps
 with the input interpolated linearly between samples, the analytic Jacobians of the seed's

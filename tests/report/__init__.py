@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2
 
-from trackkit.eval.results import Example, FilterResult, MonteCarloResult
+from trackkit.experiments.results import Example, FilterResult, MonteCarloResult
 
 FILTERS = ("EKF", "UKF")
 GROUPS = {"position": "m", "velocity": "m/s", "course": "rad"}

@@ -1,5 +1,5 @@
 """The ``trackkit`` CLI. Most tests replace the scenario loader and the comparison engine by
-fakes (``trackkit.cli.stages._load`` etc.), so they test the CLI alone; the tests at the end run the
+fakes (``trackkit.cli.stages.load`` etc.), so they test the CLI alone; the tests at the end run the
 real engine in-process on a few runs."""
 
 from __future__ import annotations
@@ -58,11 +58,11 @@ def fake(monkeypatch):
             kwargs["progress"](done / 4, total)
         return fake_result(runs=total, seed=kwargs["seed"] or scenario.run.seed)
 
-    monkeypatch.setattr(stages, "_load", load)
-    monkeypatch.setattr(stages, "_run", run)
-    monkeypatch.setattr(stages, "_dumps", lambda sc: f'name = "{sc.name}"\n\n[run]\nruns = 20\n')
-    monkeypatch.setattr(stages, "_default_name", lambda: "fake_default")
-    monkeypatch.setattr(stages, "_bundled", lambda: {"fake_default": "The default one.",
+    monkeypatch.setattr(stages, "load", load)
+    monkeypatch.setattr(stages, "run", run)
+    monkeypatch.setattr(stages, "dumps", lambda sc: f'name = "{sc.name}"\n\n[run]\nruns = 20\n')
+    monkeypatch.setattr(stages, "default_name", lambda: "fake_default")
+    monkeypatch.setattr(stages, "bundled", lambda: {"fake_default": "The default one.",
                                                   "other": "Another one."})
     monkeypatch.delenv("TRACKKIT_DEBUG", raising=False)
     return calls
@@ -70,7 +70,7 @@ def fake(monkeypatch):
 
 def _engine(monkeypatch, behaviour):
     """Replace the fake engine by ``behaviour(scenario, **kwargs)``."""
-    monkeypatch.setattr(stages, "_run", behaviour)
+    monkeypatch.setattr(stages, "run", behaviour)
 
 
 def test_list(fake):
@@ -290,7 +290,7 @@ def test_debug_keeps_the_traceback(fake, tmp_path, monkeypatch):
 @pytest.mark.parametrize("name", ["../../escaped", "..", ".", "a/b", "/abs/path"])
 def test_default_output_stays_inside_trackkit_out(fake, tmp_path, monkeypatch, name):
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(stages, "_load", lambda _: fake_scenario(name))
+    monkeypatch.setattr(stages, "load", lambda _: fake_scenario(name))
     res = runner.invoke(cli.app, ["run"], env=WIDE)
     assert res.exit_code == 2, res.output
     assert repr(name) in res.stderr and "--out DIR" in res.stderr

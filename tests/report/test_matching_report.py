@@ -28,7 +28,7 @@ NEW_FIGURES = ("matching", "membership", "convergence")
 
 def _run(name: str, runs: int, cheap_tuning: bool = False):
     scenario = pytest.importorskip("trackkit.scenario")
-    from trackkit.eval.compare import compare
+    from trackkit.experiments.compare import compare
 
     data = scenario.load(name).model_dump()
     if cheap_tuning:
@@ -250,9 +250,9 @@ def test_convergence_tolerates_infinite_costs(uw, tmp_path):
 
 
 def test_cli_prints_the_tables_after_the_summary(uw, uw_report, tmp_path, monkeypatch):
-    monkeypatch.setattr(stages, "_load", lambda name: type("S", (), {"name": name, "run": None}))
-    monkeypatch.setattr(stages, "_run", lambda scenario, **kw: uw)
-    monkeypatch.setattr(stages, "_write", lambda result, out: uw_report[1])  # written already
+    monkeypatch.setattr(stages, "load", lambda name: type("S", (), {"name": name, "run": None}))
+    monkeypatch.setattr(stages, "run", lambda scenario, **kw: uw)
+    monkeypatch.setattr(stages, "write", lambda result, out: uw_report[1])  # written already
     monkeypatch.delenv("TRACKKIT_DEBUG", raising=False)
     res = CliRunner().invoke(cli.app, ["run", "uw", "--out", str(tmp_path / "o")])
     assert res.exit_code == 0, res.output

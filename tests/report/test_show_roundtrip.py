@@ -5,7 +5,7 @@ Every scenario: the shown TOML validates to a Scenario equal to the bundled one.
 without a tune block: both commands run through the real CLI (subprocesses, 3 runs) and their
 results.json are compared byte for byte. The seed-000 scenarios that tune fuzzy systems (about
 90 s of tuning each) run both in-process through ``compare`` at 2 runs: the tuning is cached
-per scenario content in the process (trackkit.eval.tuning), so the second costs nothing and
+per scenario content in the process (trackkit.experiments.tuning), so the second costs nothing and
 the shown scenario hits the bundled one's cache entry only if it is the same scenario.
 """
 
@@ -84,7 +84,7 @@ def test_show_then_run_gives_the_same_results(name, tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", TUNED)
 def test_show_then_compare_gives_the_same_results_tuned(name, tmp_path):
-    from trackkit.eval.compare import compare
+    from trackkit.experiments.compare import compare
 
     docs = [json.dumps(results_document(compare(S.load(source), runs=2)), indent=2)
             for source in (str(_shown(name, tmp_path)), name)]

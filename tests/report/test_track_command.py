@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 import trackkit as tk
 from trackkit import cli
 from trackkit.io import BadRecord, EnuFrame, ReadReport, read_ais_csv
-from trackkit.report.tracks import (
+from trackkit.report.track_pages import (
     TRACK_FILES,
     TrackReport,
     ground_geodetic,
@@ -216,7 +216,7 @@ def test_rewrite_removes_stale_files_and_failure_leaves_nothing(small, tmp_path,
     def boom(*a, **k):
         raise OSError(28, "No space left on device")
 
-    import trackkit.report.tracks as tr
+    import trackkit.report.track_pages as tr
 
     monkeypatch.setattr(tr, "render_track_html", boom)
     with pytest.raises(OSError):

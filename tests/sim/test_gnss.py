@@ -7,11 +7,11 @@ from scipy import stats
 
 from trackkit.angles import wrap
 from trackkit.io.frames import EnuFrame
+from trackkit.io.records import one_run
 from trackkit.sim.gnss import (
     KHOR_MUSA,
     GpsModel,
     InsModel,
-    one_run,
     sample_truth,
     sensor_times,
     simulate_gnss,

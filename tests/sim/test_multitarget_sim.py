@@ -1,4 +1,4 @@
-"""Multi-target radar scene simulation (trackkit.sim.multitarget).
+"""Multi-target radar scene simulation (trackkit.sim.scene).
 
 Statistical tests use fixed seeds (so they are deterministic) and each accepts at the 99%
 level: a two-sided p-value above 0.01.
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-import trackkit.sim.multitarget as mt
+import trackkit.sim.scene as mt
 from trackkit.models.motion import ConstantVelocity
 from trackkit.models.sensors import Bearing, Position, RangeBearing
 from trackkit.sim.kinematics import LegPlan, propagate
-from trackkit.sim.multitarget import (
+from trackkit.sim.scene import (
     Radar,
     Scene,
     Target,

@@ -1,4 +1,4 @@
-"""Asynchronous bearings of a network of agents (trackkit.sim.network; seed 004, 2.1, 2.2,
+"""Asynchronous bearings of a network of agents (trackkit.sim.sensor_network; seed 004, 2.1, 2.2,
 2.10).
 
 Statistical tests use fixed seeds (so they are deterministic) and each accepts at the 99%
@@ -16,7 +16,7 @@ from scipy.spatial.distance import cdist
 
 from trackkit.angles import wrap
 from trackkit.models.motion import ConstantVelocity
-from trackkit.sim.network import (
+from trackkit.sim.sensor_network import (
     bearings_at,
     cv_noise_factor,
     disk_graph,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trackkit.eval.manoeuvres import turning_metrics
-from trackkit.models.vessel import (
+from trackkit.models.manoeuvring import (
     IDENTITY,
     KNOT,
     integrate_pose,

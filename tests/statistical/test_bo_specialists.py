@@ -46,7 +46,7 @@ import numpy as np
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import combine, run_block
+from trackkit.experiments.montecarlo import combine, run_block
 from trackkit.report.tables import summary
 
 pytestmark = pytest.mark.slow

@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.experiments.montecarlo import run_scenario
 
 SCENARIOS = ["dbt-approaching", "dbt-receding", "dbt-observer-manoeuvre"]
 FILTERS = ["EKF", "UKF", "AEKF", "MCEKF", "AMCEKF"]

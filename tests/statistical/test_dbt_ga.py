@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import plan_of
+from trackkit.experiments.montecarlo import plan_of
 from trackkit.filters.initialise import ga_initial_position
-from trackkit.sim.simulate import simulate_block
+from trackkit.scenario.simulate import simulate_block
 
 K, RUNS = 800, 20
 pytestmark = pytest.mark.slow

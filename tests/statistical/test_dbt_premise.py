@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import combine, run_blocks, run_scenario
+from trackkit.experiments.montecarlo import combine, run_blocks, run_scenario
 
 GEOMETRIES = ["dbt-approaching", "dbt-receding", "dbt-observer-manoeuvre"]
 SCENARIOS = [f"{g}-misspecified" for g in GEOMETRIES]

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import trackkit.eval.montecarlo as mc
+import trackkit.experiments.montecarlo as mc
 import trackkit.scenario as S
 
 GEOMETRIES = ["dbt-approaching", "dbt-receding", "dbt-observer-manoeuvre"]

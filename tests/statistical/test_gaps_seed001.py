@@ -21,9 +21,7 @@ import pytest
 
 import trackkit as tk
 from trackkit.angles import wrap
-from trackkit.linalg import psd_factor
-from trackkit.sim.simulate import run_rng
-from trackkit.tracking.gaps import (
+from trackkit.filters.gaps import (
     Coast,
     HoldLast,
     MeanOfLast,
@@ -35,6 +33,8 @@ from trackkit.tracking.gaps import (
     measurement_times,
     run_with_gaps,
 )
+from trackkit.linalg import psd_factor
+from trackkit.sim.streams import run_rng
 
 RUNS = 1000
 

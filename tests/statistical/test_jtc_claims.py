@@ -13,7 +13,7 @@ import math
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.experiments.montecarlo import run_scenario
 
 PARTICLES = 1000
 FILTERS = ("JTC", "MultiFilter")

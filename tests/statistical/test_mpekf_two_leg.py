@@ -44,7 +44,7 @@ import pytest
 from scipy import stats
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import combine, run_block
+from trackkit.experiments.montecarlo import combine, run_block
 
 pytestmark = pytest.mark.slow
 

@@ -5,7 +5,7 @@ on straight courses: the same runs (targets and bearing noise) both ways, as
 Confidence. With 100 runs a fraction observed at p has a binomial standard error of at most
 0.05; the tests assert the issue's thresholds on the observed fractions and print the
 Clopper-Pearson 95% interval beside them. Comparisons of errors are paired over runs
-(``eval.network_compare``: the t test on the per-run MSE, 95%).
+(``experiments.network_compare``: the t test on the per-run MSE, 95%).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.stats import beta
 
-from trackkit.eval.network_compare import compare_networks, run_mse
-from trackkit.eval.network_mc import run_network_mc
+from trackkit.experiments.network_compare import compare_networks, run_mse
+from trackkit.experiments.network_mc import run_network_mc
 from trackkit.scenario.network import load_network
 
 pytestmark = pytest.mark.slow

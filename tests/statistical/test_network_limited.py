@@ -5,7 +5,7 @@ targets and bearing noise equal; the loss stream is the run's own).
 
 Confidence: the observed fractions are asserted against the issue's thresholds with the
 Clopper-Pearson 95% interval printed beside them; the loss comparison is paired over runs
-(``eval.network_compare``, 95%).
+(``experiments.network_compare``, 95%).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.stats import beta, binomtest
 
-from trackkit.eval.network_compare import compare_networks
-from trackkit.eval.network_mc import run_network_mc
+from trackkit.experiments.network_compare import compare_networks
+from trackkit.experiments.network_mc import run_network_mc
 from trackkit.scenario.network import load_network
 
 pytestmark = pytest.mark.slow

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.compare import compare
+from trackkit.experiments.compare import compare
 
 pytestmark = pytest.mark.slow
 

@@ -80,15 +80,15 @@ from scipy.stats import binomtest
 
 import trackkit as tk
 from tests.test_imm import DT, P0, POS, cv_ct, s7_data
-from trackkit.linalg import quadratic_form
-from trackkit.tracking.gaps import (
+from trackkit.filters.gaps import (
     Coast,
     PolynomialFit,
     gap_and_after,
     mask_by_count,
     run_with_gaps,
 )
-from trackkit.tracking.maneuver import WindowDetector
+from trackkit.filters.maneuver import WindowDetector
+from trackkit.linalg import quadratic_form
 
 pytestmark = pytest.mark.slow
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import trackkit.scenario as S
-from trackkit.eval.montecarlo import run_scenario
+from trackkit.experiments.montecarlo import run_scenario
 
 pytestmark = pytest.mark.slow
 

@@ -30,8 +30,8 @@ from scipy.stats import binom
 import trackkit as tk
 import trackkit.scenario as S
 from tests.test_scenario_seed001 import filtered
-from trackkit.eval.montecarlo import plan_of
-from trackkit.sim.simulate import simulate_block
+from trackkit.experiments.montecarlo import plan_of
+from trackkit.scenario.simulate import simulate_block
 
 pytestmark = pytest.mark.slow  # about 6 s: 1 000 runs of 500 steps, three filters, two smoothers
 

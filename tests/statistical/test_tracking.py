@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import pytest
 
-from trackkit.eval.tracking_run import run_multitarget
+from trackkit.experiments.tracking_run import run_multitarget
 from trackkit.scenario.multitarget import load_multitarget
 
 pytestmark = pytest.mark.slow

@@ -5,7 +5,7 @@ Truth: ``trackkit.sim.seatrials`` at h = 0.005 s (forward Euler, 200 steps per s
 times finer than the identifier's default h = 0.02 s, so that the filter's discretisation is
 not the truth's), recorded every 0.1 s. Hulls: the reference vessel's coefficients times
 ``1 + 0.2 U``, ``U ~ uniform(-1, 1)`` each, a draw rejected unless its straight line is stable
-at every engine speed of the programme (``eval.vessel_mc.stable``); 35 hulls per programme.
+at every engine speed of the programme (``experiments.vessel_mc.stable``); 35 hulls per programme.
 Programmes (trials joined, each from the straight line at its engine speed):
 
 * ``A``: 15/15 zig-zag at 2 000 rpm (nine commands, 120 s); 20 deg starboard turn (90 s);
@@ -17,7 +17,7 @@ Programmes (trials joined, each from the straight line at its engine speed):
 Sensors: ``sim.gnss`` defaults (GPS 2 Hz, 1.5 m, 0.05 m/s; INS 10 Hz, 0.2 deg, 0.05 deg/s),
 the inputs logged at 10 Hz. Identification: the path of ``trackkit identify LOG``:
 ``io.navigation.preprocess_sim`` to the 1 s grid, the inputs at the filter's sub-steps
-(``eval.vessel_mc.inputs_at_substeps``), ``identify`` with every default.
+(``experiments.vessel_mc.inputs_at_substeps``), ``identify`` with every default.
 
 Claim: over the 105 trials the mean of the 16-coefficient NEES lies within the two-sided 99%
 band of the mean of 105 chi2(16) draws (``chi2(16 n) / n``; measured 15.9 in [14.6, 17.5]),
@@ -36,10 +36,10 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from trackkit.eval.vessel_mc import identify_recorded, inputs_at_substeps, stable
+from trackkit.experiments.vessel_mc import identify_recorded, inputs_at_substeps, stable
 from trackkit.identify import DEFAULT_SUBSTEPS, coefficient_nees, identify, run_seed
 from trackkit.io.navigation import MeasuredInputs, preprocess_sim
-from trackkit.models.vessel import reference_vessel, straight_line_speed
+from trackkit.models.manoeuvring import reference_vessel, straight_line_speed
 from trackkit.sim import seatrials
 from trackkit.sim.gnss import KHOR_MUSA, simulate_gnss
 

@@ -46,7 +46,7 @@ from trackkit.identify import (
     rmse,
     settling_step,
 )
-from trackkit.models.vessel import COEFFICIENT_NAMES
+from trackkit.models.manoeuvring import COEFFICIENT_NAMES
 from trackkit.sim import seatrials
 
 RUNS, SEED = 100, 2025

@@ -17,7 +17,7 @@ import pytest
 import trackkit as tk
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
-from trackkit.tracking.gaps import (
+from trackkit.filters.gaps import (
     HANDLER_NAMES,
     Coast,
     GapHandler,
@@ -39,7 +39,7 @@ REL = 1e-12
 
 
 # ------------------------------------------------------------------------------------------
-# A stand-in manoeuvre detector with the interface of trackkit.tracking.maneuver's detectors
+# A stand-in manoeuvre detector with the interface of trackkit.filters.maneuver's detectors
 
 
 class _DetState(NamedTuple):
@@ -604,9 +604,9 @@ def test_runner_bad_input_names_the_value(call, match):
 
 @pytest.mark.parametrize("name", ["NISDetector", "FadingMemoryDetector", "WindowDetector"])
 def test_runner_with_the_real_detectors(name):
-    """trackkit.tracking.maneuver's detectors drive P' as the stand-in does: on after the
+    """trackkit.filters.maneuver's detectors drive P' as the stand-in does: on after the
     turn at 3 s, held through the gap, and the pseudo-measurements follow the new line."""
-    maneuver = pytest.importorskip("trackkit.tracking.maneuver")
+    maneuver = pytest.importorskip("trackkit.filters.maneuver")
     motion = tk.models.ConstantVelocity(dim=1, q=0.01)
     sensor = tk.models.Position(dim=1, sigma=0.1)
     t = measurement_times(70, 0.1)

@@ -17,8 +17,7 @@ from scipy import integrate, stats
 
 import trackkit as tk
 from trackkit.belief import Gaussian, Innovation
-from trackkit.filters.run import run_filter
-from trackkit.tracking.maneuver import (
+from trackkit.filters.maneuver import (
     DetectorState,
     FadingMemoryDetector,
     NISDetector,
@@ -36,6 +35,7 @@ from trackkit.tracking.maneuver import (
     run_with_detector,
     weighted_chi2_sf,
 )
+from trackkit.filters.run import run_filter
 
 G = 9.80665
 

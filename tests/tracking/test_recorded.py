@@ -9,7 +9,7 @@ import pytest
 
 from tests.cli_helpers import trackkit
 from trackkit.io import samples
-from trackkit.report.tracks import TRACKS_PARQUET, history_table, write_tracks_parquet
+from trackkit.report.track_pages import TRACKS_PARQUET, history_table, write_tracks_parquet
 from trackkit.tracking.recorded import (
     TRACK_PROFILES,
     TrackOptions,

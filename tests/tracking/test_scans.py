@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trackkit.tracking.scans import Scan, Scans
+from trackkit.io.scans import Scan, Scans
 
 
 def _example() -> Scans:

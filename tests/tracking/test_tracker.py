@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import trackkit as tk
+from trackkit.io.scans import Scan
 from trackkit.tracking import (
     HistoryLogic,
     IdCounter,
@@ -18,7 +19,6 @@ from trackkit.tracking import (
     loglik_costs,
     predict_measurement,
 )
-from trackkit.tracking.scans import Scan
 from trackkit.tracking.tracker import GNN, JPDA, SinglePoint, Tracker, Tracks, TwoPoint
 
 CV = tk.models.ConstantVelocity(dim=2, q=0.05)

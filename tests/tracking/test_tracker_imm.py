@@ -18,9 +18,9 @@ import pytest
 
 import trackkit as tk
 from trackkit.filters.imm import IMM, IMMBelief
+from trackkit.io.scans import Scan
 from trackkit.tracking import HistoryLogic
 from trackkit.tracking.initiate import convert_range_bearing, single_point
-from trackkit.tracking.scans import Scan
 from trackkit.tracking.tracker import GNN, JPDA, SinglePoint, Tracker
 
 DT, SCANS = 1.0, 100

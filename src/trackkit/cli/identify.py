@@ -67,14 +67,14 @@ def _identify_kind(what: str) -> str:
                              f"an NMEA 0183 log ({', '.join(NMEA_SUFFIXES)}), the CSV form "
                              "(.csv) or a vessel scenario (.toml)")
         if p.is_file() and not is_vessel(what):
-            stages._parse_toml(p)
+            stages.parse_toml(p)
             raise ValueError(f"{what}: not a vessel scenario (it has no [vessel] table); see "
                              "`trackkit show vessel-turning` for a vessel scenario's fields")
         return "scenario"  # (a missing or unreadable .toml: load_vessel says so)
     if is_vessel(what):
         return "scenario"
-    others = {**stages._bundled(), **stages._bundled_multitarget()}
-    vessels = sorted(stages._bundled_vessel())
+    others = {**stages.bundled(), **stages.bundled_multitarget()}
+    vessels = sorted(stages.bundled_vessel())
     from trackkit.scenario.network import bundled_network
 
     if what in others or what in bundled_network():
@@ -177,12 +177,9 @@ def _filter_compiled(filt: str) -> bool:
     step is compiled on its first run and cached beside its module)."""
     if filt != "ekf":
         return True
-    try:
-        from trackkit.identify import fused
+    from trackkit.identify import fused
 
-        return Path(fused._step._cache._cache_file._index_path).is_file()
-    except AttributeError:  # another numba: do not guess
-        return True
+    return fused.step_is_compiled()
 
 
 def _stop_hint(err: ValueError, columns: str) -> ValueError:
@@ -210,7 +207,7 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
                   on_bad: str) -> None:
     """Read, pre-process and identify a recorded log; write its report; print the
     coefficients, the standard trials and the IMO table."""
-    from trackkit.eval.vessel_mc import identify_recorded
+    from trackkit.experiments.vessel_mc import identify_recorded
     from trackkit.io.navigation import INPUT_COLUMNS, preprocess, read_inputs_csv
     from trackkit.io.nmea import NAV_CSV_COLUMNS, read_nav_csv, read_nmea
     from trackkit.report.vessel_report import write_recorded_report
@@ -280,9 +277,9 @@ def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: floa
     print_recorded_summary(paths, log, notes)
 
 def _run_vessel(sc: Any, out: Path, **kwargs: Any) -> None:
-    """A vessel scenario's Monte Carlo (``eval.vessel_mc.run_vessel``), its report written
+    """A vessel scenario's Monte Carlo (``experiments.vessel_mc.run_vessel``), its report written
     into ``out`` and a summary printed."""
-    from trackkit.eval.vessel_mc import run_vessel
+    from trackkit.experiments.vessel_mc import run_vessel
     from trackkit.report.vessel_report import write_vessel_report
 
     runs = kwargs.get("runs") or sc.run.runs

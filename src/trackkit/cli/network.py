@@ -98,7 +98,7 @@ def network(
 
     The same scenario and seed give byte-identical results.json on one machine."""
     with user_errors() as state:
-        from trackkit.network.run import check_loss
+        from trackkit.network.inprocess import check_loss
 
         sc = _load_network(scenario)
         if compare_straight and (straight or not sc.settings.steering):
@@ -146,12 +146,12 @@ def _load_network(scenario: str) -> Any:
         p = Path(scenario)
         if p.suffix == ".toml" or p.exists():
             if p.is_file():  # (a missing or unreadable file: load_network says so)
-                stages._parse_toml(p)
+                stages.parse_toml(p)
                 raise ValueError(f"{scenario}: not a network scenario (it has no "
                                  "[[agents]] tables); run it with `trackkit run "
                                  f"{scenario}`, or see `trackkit show net-baseline` "
                                  "for a network scenario's fields")
-        elif scenario in {**stages._bundled(), **stages._bundled_multitarget()}:
+        elif scenario in {**stages.bundled(), **stages.bundled_multitarget()}:
             raise ValueError(f"{scenario!r} is not a network scenario; run it with "
                              f"`trackkit run {scenario}` (network scenarios: see "
                              "trackkit list)")
@@ -209,9 +209,9 @@ def _launchers(specs: list[str], n_agents: int) -> dict[int, list[str]]:
 
 
 def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
-    """A network scenario's Monte Carlo (``eval.network_mc``) with a progress bar of runs,
+    """A network scenario's Monte Carlo (``experiments.network_mc``) with a progress bar of runs,
     its report written into ``out`` and a per-agent summary printed."""
-    from trackkit.eval.network_mc import run_network_mc
+    from trackkit.experiments.network_mc import run_network_mc
     from trackkit.report.network_report import write_network_report
 
     compare = kwargs.pop("compare_straight", False)

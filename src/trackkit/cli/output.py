@@ -314,7 +314,7 @@ def _may_write(command: str, path: Path) -> tuple[str, ...]:
 
         return VESSEL_FILES
     if command == "track":
-        from trackkit.report.tracks import TRACK_FILES
+        from trackkit.report.track_pages import TRACK_FILES
 
         return TRACK_FILES
     if command == "sweep":

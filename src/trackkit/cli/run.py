@@ -66,7 +66,7 @@ def run(
     executor and any number of workers; another CPU agrees to rounding (see the README,
     "Determinism")."""
     with user_errors() as state:
-        sc = stages._load(scenario or stages._default_name())
+        sc = stages.load(scenario or stages.default_name())
         runner = RUNNERS[stages.kind_of(sc)]
         if runner.command is not None:
             raise ValueError(f"{scenario} is a {stages.kind_of(sc)} scenario; run it with "
@@ -85,7 +85,7 @@ def _run_comparison(sc: Any, out: Path, state: SimpleNamespace, o: RunOptions) -
     result = _run_with_progress(sc, total, runs=o.runs, seed=o.seed, workers=o.workers,
                                 scheduler=o.scheduler, max_seconds=3600.0 * o.max_hours)
     with stderr().status("writing the report"):
-        paths = stages._write(result, out)
+        paths = stages.write(result, out)
     state.interrupted = "interrupted"
     print_summary(result, paths)
 
@@ -111,7 +111,7 @@ def _run_with_progress(scenario: Any, total: int, **kwargs: Any) -> Any:
                 tuning.append(bar.add_task("tuning", total=of, unit="generations"))
             bar.update(tuning[0], completed=done, total=of)
 
-        result = stages._run(scenario, progress=progress, tuning_progress=tuning_progress,
+        result = stages.run(scenario, progress=progress, tuning_progress=tuning_progress,
                              **kwargs)
         deliver_interrupt()
         bar.update(runs, completed=final[0], total=final[0])
@@ -123,7 +123,7 @@ def _run_multitarget(sc: Any, out: Path, **kwargs: Any) -> None:
     GOSPA, OSPA and the track counts; the report written into ``out``."""
     import numpy as np
 
-    from trackkit.eval.tracking_run import run_multitarget
+    from trackkit.experiments.tracking_run import run_multitarget
     from trackkit.report.tracking_report import write_tracking_report
 
     total = kwargs.get("runs") or sc.run.runs

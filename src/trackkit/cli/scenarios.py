@@ -31,9 +31,9 @@ def list_scenarios() -> None:
         from trackkit.scenario.multitarget import bundled_multitarget
         from trackkit.scenario.network import bundled_network
 
-        scenarios = {**stages._bundled(), **bundled_multitarget(), **bundled_network(),
-                     **stages._bundled_vessel()}
-        default = stages._default_name()
+        scenarios = {**stages.bundled(), **bundled_multitarget(), **bundled_network(),
+                     **stages.bundled_vessel()}
+        default = stages.default_name()
         table = Table("scenario", "description", title="bundled scenarios",
                       title_justify="left")
         for name, description in scenarios.items():
@@ -60,9 +60,9 @@ def show(
 ) -> None:
     """Print a scenario with every default filled in (save it, edit it, run it)."""
     with user_errors():
-        sc = stages._load(scenario or stages._default_name())
+        sc = stages.load(scenario or stages.default_name())
         if fmt is Format.toml:
-            text = stages._dumps(sc)
+            text = stages.dumps(sc)
         else:
             text = json.dumps(sc.model_dump(mode="json"), indent=2)
         console = Console()

@@ -7,19 +7,19 @@ from pathlib import Path
 from typing import Any
 
 
-def _bundled() -> dict[str, str]:
+def bundled() -> dict[str, str]:
     from trackkit.scenario import bundled
 
     return bundled()
 
 
-def _default_name() -> str:
+def default_name() -> str:
     from trackkit.scenario import DEFAULT
 
     return DEFAULT
 
 
-def _load(name_or_path: str) -> Any:
+def load(name_or_path: str) -> Any:
     from trackkit.scenario import load
     from trackkit.scenario.multitarget import is_multitarget, load_multitarget
     from trackkit.scenario.network import is_network, load_network
@@ -46,37 +46,37 @@ def kind_of(scenario: Any) -> str:
     return kinds.get(type(scenario), "comparison")
 
 
-def _dumps(scenario: Any) -> str:
+def dumps(scenario: Any) -> str:
     from trackkit.scenario import dumps
 
     return dumps(scenario)
 
 
-def _run(scenario: Any, **kwargs: Any) -> Any:
-    from trackkit.eval.compare import compare
+def run(scenario: Any, **kwargs: Any) -> Any:
+    from trackkit.experiments.compare import compare
 
     return compare(scenario, **kwargs)
 
 
-def _write(result: Any, out: Path) -> dict[str, Path]:
+def write(result: Any, out: Path) -> dict[str, Path]:
     from trackkit.report.files import write_report
 
     return write_report(result, out)
 
 
-def _bundled_multitarget() -> dict[str, str]:
+def bundled_multitarget() -> dict[str, str]:
     from trackkit.scenario.multitarget import bundled_multitarget
 
     return bundled_multitarget()
 
 
-def _bundled_vessel() -> dict[str, str]:
+def bundled_vessel() -> dict[str, str]:
     from trackkit.scenario.vessel import bundled_vessel
 
     return bundled_vessel()
 
 
-def _parse_toml(path: Path) -> None:
+def parse_toml(path: Path) -> None:
     """Raise the reader's error in words (not UTF-8, not valid TOML, with line and column)
     before a file is called the wrong kind of scenario for lacking a table."""
     from trackkit.scenario import read_scenario

@@ -154,7 +154,7 @@ def print_track_summary(read: Any, job: Any, paths: dict[str, Path]) -> None:
     console.print(Text(f"tracks: {res['tracks_confirmed']} confirmed of "
                        f"{res['tracks_started']} started"), soft_wrap=True)
     if res["tracks_confirmed"] == 0:
-        from trackkit.report.tracks import NO_TRACK_CONFIRMED
+        from trackkit.report.track_pages import NO_TRACK_CONFIRMED
 
         console.print(Text(NO_TRACK_CONFIRMED, style="yellow"), soft_wrap=True)
     g = res.get("gospa")

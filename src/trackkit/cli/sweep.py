@@ -45,7 +45,7 @@ def _sweep_listener(bar: Progress, console: Console) -> Any:
     thread delivers a pending Ctrl-C."""
     import threading
 
-    from trackkit.eval.sweep import Listener
+    from trackkit.experiments.sweep import Listener
 
     class Bars(Listener):
         def start(self, campaign: Any, stored_runs: list[int], stored_blocks: list[int],
@@ -140,13 +140,13 @@ def sweep(
             raise ValueError(f"--workers {workers} and --scheduler {scheduler}: give one, "
                              "--workers for a local Dask cluster or --scheduler for a running "
                              "one")
-        sc = stages._load(scenario or stages._default_name())
+        sc = stages.load(scenario or stages.default_name())
         if stages.kind_of(sc) != "comparison":
             raise ValueError(f"{scenario}: trackkit sweep runs single-target Monte Carlo "
                              "comparisons (the scenarios of trackkit run without [scene], "
                              "[[agents]] or [vessel])")
-        from trackkit.eval.checkpoint import CampaignStore, CheckpointError
-        from trackkit.eval.sweep import BlockFailed, parse_param, plan_campaign, run_campaign
+        from trackkit.experiments.checkpoint import CampaignStore, CheckpointError
+        from trackkit.experiments.sweep import BlockFailed, parse_param, plan_campaign, run_campaign
         from trackkit.report.sweep_report import sweep_outputs, write_sweep_report
 
         params = [parse_param(p) for p in param or []]
@@ -158,7 +158,7 @@ def sweep(
             state.interrupted = f"interrupted; nothing was stored in {target}"
             say_note(where)
             store = CampaignStore(where.path, label)
-            store.open(campaign.identity(), fresh=fresh, scenario_toml=stages._dumps(campaign.base),
+            store.open(campaign.identity(), fresh=fresh, scenario_toml=stages.dumps(campaign.base),
                        outputs=sweep_outputs(where.path))
             state.interrupted = (f"interrupted; the finished blocks are stored in {target}: "
                                  "run the same command again to resume")

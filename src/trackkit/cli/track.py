@@ -183,7 +183,7 @@ def _bars(bar: Any) -> Any:
 
 def _write(result: TrackingResult, out: Path) -> dict[str, Path]:
     """The tracks and the report of ``result`` written into ``out``."""
-    from trackkit.report.tracks import TrackReport, write_track_report
+    from trackkit.report.track_pages import TrackReport, write_track_report
 
     rec, read = result.recording, result.read
     rep = TrackReport(result.history, title=rec.path.name, source=str(rec.path), fmt=rec.kind,

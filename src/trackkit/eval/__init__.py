@@ -1,4 +1,7 @@
-"""Evaluation: Monte Carlo metrics (RMSE, NEES, NIS, divergence) and the posterior CRLB.
+"""Evaluation metrics: Monte Carlo statistics (RMSE, NEES, NIS, divergence), the posterior
+CRLB, multi-target metrics (OSPA, GOSPA, track counts), innovation covariance matching and the
+IMO manoeuvring criteria. Pure functions of estimates and truths; the experiments that produce
+them live in :mod:`trackkit.experiments`.
 
     from trackkit.eval import PCRLB, MonteCarloMetrics
     bound = PCRLB(P0).predict(motion, truths_k, dt).update(sensor, truths_k1).bound

@@ -53,7 +53,7 @@ Form = Literal["auto", "information", "covariance"]
 _FORMS = ("auto", "information", "covariance")
 
 
-def _inverse(P: Array, name: str) -> Array:
+def inverse_spd(P: Array, name: str) -> Array:
     """``P^{-1}`` for symmetric positive-definite ``P`` (batched), symmetrised."""
     eye = np.broadcast_to(np.eye(P.shape[-1]), P.shape)
     return symmetrize(solve_psd(P, eye, name))
@@ -64,14 +64,14 @@ def _same_over_runs(A: Array) -> bool:
     return bool(np.all(A == A[:1]))
 
 
-def _predict_covariance(J: Array, F: Array, Q: Array, runs_axis: bool) -> Array:
+def predict_information(J: Array, F: Array, Q: Array, runs_axis: bool) -> Array:
     """``(E[F J^{-1} F^T + Q])^{-1}``; with ``runs_axis`` the mean is over the leading runs
     axis of F and Q ``(runs, ..., n, n)``, otherwise F and Q are shared by all runs."""
-    P = _inverse(J, "PCRLB information matrix J_k")
+    P = inverse_spd(J, "PCRLB information matrix J_k")
     P_pred = symmetrize(F @ P @ F.mT + Q)
     if runs_axis:
         P_pred = P_pred.mean(axis=0)
-    return _inverse(P_pred, "PCRLB predicted bound F J^-1 F^T + Q")
+    return inverse_spd(P_pred, "PCRLB predicted bound F J^-1 F^T + Q")
 
 
 def _predict_information(J: Array, F: Array, Q: Array) -> Array:
@@ -80,7 +80,7 @@ def _predict_information(J: Array, F: Array, Q: Array) -> Array:
     ``D11 = E[F^T Q^{-1} F]``, ``D12 = -E[F^T Q^{-1}]``, ``D22q = E[Q^{-1}]``, the means over
     the leading runs axis of F and Q ``(runs, ..., n, n)``; Q must be positive definite.
     """
-    Qinv = _inverse(Q, "process noise Q (information-form PCRLB needs Q positive definite)")
+    Qinv = inverse_spd(Q, "process noise Q (information-form PCRLB needs Q positive definite)")
     FtQinv = F.mT @ Qinv
     D11 = (FtQinv @ F).mean(axis=0)
     D12 = -FtQinv.mean(axis=0)
@@ -118,7 +118,7 @@ class PCRLB:
         if form not in _FORMS:
             raise ValueError(f"form = {form!r}; expected one of {_FORMS}")
         P0 = check_covariance(prior_cov, "PCRLB prior_cov")
-        self._J = _inverse(P0, "PCRLB prior_cov")
+        self._J = inverse_spd(P0, "PCRLB prior_cov")
         self.form: Form = form
         self.last_form: str | None = None
         self._warned = False
@@ -127,7 +127,7 @@ class PCRLB:
     def from_information(cls, J0: ArrayLike, form: Form = "auto") -> PCRLB:
         """Start from a prior information matrix ``J_0`` (positive definite)."""
         J0 = check_covariance(J0, "PCRLB J0")
-        out = cls(_inverse(J0, "PCRLB J0"), form)
+        out = cls(inverse_spd(J0, "PCRLB J0"), form)
         out._J = J0
         return out
 
@@ -143,7 +143,7 @@ class PCRLB:
     @property
     def bound(self) -> Array:
         """The bound ``J_k^{-1}`` on the error covariance, shape ``(..., n, n)``."""
-        return _inverse(self._J, "PCRLB information matrix J_k")
+        return inverse_spd(self._J, "PCRLB information matrix J_k")
 
     def _truths(self, truths: ArrayLike) -> Array:
         x = np.asarray(truths, dtype=float)
@@ -193,7 +193,7 @@ class PCRLB:
             else:
                 F = np.broadcast_to(F, batch + (n, n))
                 Q = np.broadcast_to(Q, batch + (n, n))
-            self._J = _predict_covariance(self._J, F, Q, runs_axis=not shared)
+            self._J = predict_information(self._J, F, Q, runs_axis=not shared)
         else:
             F = np.broadcast_to(F, batch + (n, n))
             Q = np.broadcast_to(Q, batch + (n, n))

@@ -1,9 +1,9 @@
 """Scoring of one tracker's confirmed tracks against the true targets, execution by
 execution (the agents of Jalalipoor and Kardehi Moghaddam (2021) and the centralised reference;
-``network.run.Trace``).
+``network.inprocess.Trace``).
 
 At execution e with truth positions X_e = {x_1..x_Nt} and confirmed track positions
-Y_e = {y_1..y_m} (``eval.multitarget``, d the Euclidean position distance, cut-off c,
+Y_e = {y_1..y_m} (``eval.track_metrics``, d the Euclidean position distance, cut-off c,
 order p):
 
 * ``count[e] = m``;
@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.eval.multitarget import Frames, assign, gospa_steps
+from trackkit.eval.track_metrics import Frames, assign, gospa_steps
 
 __all__ = ["TraceScore", "score_trace", "position_rmse"]
 

@@ -199,8 +199,8 @@ class FuzzyAdaptive(Filter):
 
     ``FuzzyAdaptive(EKF(), params)`` is the OFEKF; ``params`` ``(15,)`` or batched
     ``(..., 15)`` (see :func:`fis`), by default :data:`DEFAULT_PARAMS` (untuned). Tune them
-    with ``trackkit.eval.tuning``. The filter's name is "OF" + the base filter's name. See the
-    module docstring for the equations and the choices (``normalise``, ``floor``,
+    with ``trackkit.experiments.tuning``. The filter's name is "OF" + the base filter's name.
+    See the module docstring for the equations and the choices (``normalise``, ``floor``,
     ``warmup``, ``q_inputs``). The returned innovation is the base filter's.
     """
 

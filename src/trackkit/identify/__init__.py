@@ -1,5 +1,5 @@
 """Identification of the vessel model of Zolfagharnasab and Seif (2025): the 16
-coefficients of ``trackkit.models.vessel`` from sea-trial data.
+coefficients of ``trackkit.models.manoeuvring`` from sea-trial data.
 
 * ``programme``: the trial programme that generates identification data (batched, seeded
   per run), with the discrete (``substeps=1``) or near-continuous truth;

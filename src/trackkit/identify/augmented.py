@@ -3,7 +3,7 @@ augmented state.
 
 The state is ``x_a = [u, v, r, theta]`` (19): the body states in SI (m/s, m/s, rad/s) and the
 coefficients ``theta = [a1..a9, b1..b4, c1..c3]`` in the prime units of ``norm``, exactly as
-``trackkit.models.vessel.AugmentedVessel`` takes them. Between samples k - 1 and k the
+``trackkit.models.manoeuvring.AugmentedVessel`` takes them. Between samples k - 1 and k the
 prediction takes ``substeps = m`` forward-Euler steps of ``h = T / m`` (``SampledVessel``)::
 
     x <- x + h f(x, s_j, theta),   s_j = s_{k-1} + (j + 1/2) / m (s_k - s_{k-1}),
@@ -38,7 +38,7 @@ Defaults at T = 1 s, for measured inputs (``docs/vessel-comparison.md``,
 than ``identify.programme``'s, random hulls, a truth integrated at 0.005 s):
 
 * ``substeps = 50`` (h = 0.02 s), each taking the mean of the inputs measured at its ends
-  (pass ``s`` at ``T / 50``; ``eval.vessel_mc.inputs_at_substeps`` does for a log). The
+  (pass ``s`` at ``T / 50``; ``experiments.vessel_mc.inputs_at_substeps`` does for a log). The
   nozzle is rate-limited and starts and stops between samples: interpolated between 1 s
   samples its corners are smoothed, which biases c1 by -10 to -18%, c2 by -2 to -6% and c3
   by +0.4 to +2.5% (about one reported sd) whatever the noise. With the measured inputs,
@@ -69,13 +69,12 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-import trackkit as tk
 from trackkit.belief import Gaussian
+from trackkit.filters import CKF, EKF, SRCKF, UKF
 from trackkit.filters.base import Filter
 from trackkit.identify import fused
 from trackkit.identify.programme import DEFAULT_NOISE, run_seed
-from trackkit.models.motion import MotionModel
-from trackkit.models.vessel import (
+from trackkit.models.manoeuvring import (
     N_THETA,
     AugmentedVessel,
     Normalisation,
@@ -85,6 +84,8 @@ from trackkit.models.vessel import (
     step_jacobian_state,
     step_jacobian_theta,
 )
+from trackkit.models.motion import MotionModel
+from trackkit.models.sensors import Position
 
 __all__ = [
     "METHODS",
@@ -110,8 +111,7 @@ Q_BODY_SAMPLED_INPUTS = np.array([3e-4, 3e-4, 3e-6])
 #: Euler sub-steps per sample of the prediction with the inputs measured at their ends (h =
 #: 0.02 s at T = 1 s), and with the inputs known at the samples only (the module docstring)
 DEFAULT_SUBSTEPS, SUBSTEPS_SAMPLED_INPUTS = 50, 10
-_FILTERS = {"ekf": tk.filters.EKF, "ukf": tk.filters.UKF, "ckf": tk.filters.CKF,
-            "srckf": tk.filters.SRCKF}
+_FILTERS = {"ekf": EKF, "ukf": UKF, "ckf": CKF, "srckf": SRCKF}
 #: the identifiers by name: the filters on the augmented state and batch least squares
 METHODS = (*_FILTERS, "ls")
 
@@ -275,7 +275,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     f = _filter(filter)
     norm = reference_vessel().norm if norm is None else norm
     if not isinstance(norm, Normalisation):
-        raise ValueError(f"norm = {norm!r}; expected a trackkit.models.vessel.Normalisation")
+        raise ValueError(f"norm = {norm!r}; expected a trackkit.models.manoeuvring.Normalisation")
     z, s = np.asarray(z, dtype=float), np.asarray(s, dtype=float)
     if z.ndim < 2 or z.shape[-1] != 3:
         raise ValueError(f"z has shape {z.shape}; expected (..., K, 3) samples of [u, v, r]")
@@ -351,7 +351,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     if f is None:
         return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
                              s_fine)
-    sensor = tk.models.Position(dim=3, sigma=sigma_z)
+    sensor = Position(dim=3, sigma=sigma_z)
     b = None  # the filter's belief (kept, so that its checks stay cheap)
     for k in range(K):
         if starts[k]:

@@ -29,7 +29,7 @@ Joseph form of FilterPy and ``trackkit.filters.EKF`` in exact arithmetic, and sy
 construction, since only the lower triangle is kept. With one Euler step B keeps each body
 equation to its own coefficients, and its structural zeros are skipped (``Plan.pairs``).
 
-The model's equations are written once, in ``trackkit.models.vessel``, and compiled here from
+The model's equations are written once, in ``trackkit.models.manoeuvring``, and compiled here from
 the same functions, so one step's prediction is the numpy model's bits. No sum is reordered
 (no fastmath, so no FMA contraction) and each run is computed alone, so the bits do not depend
 on the number of runs, the chunk or the CPU's vector width. The compiled code is cached beside
@@ -41,12 +41,13 @@ on a stale cache).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from trackkit.models.vessel import (
+from trackkit.models.manoeuvring import (
     EQUATION,
     Normalisation,
     prime_jacobian,
@@ -340,3 +341,13 @@ def predict_update(x: Array, P: Array, s_prev: Array, s_next: Array, plan: Plan,
         raise ValueError("innovation covariance S = P_xx + R is not positive definite in "
                          f"{bad} run(s); expected SPD 3 x 3 matrices")
     return nis
+
+
+def step_is_compiled() -> bool:
+    """Whether numba's on-disk cache beside this module holds the compiled filter step already
+    (the first run compiles it, some seconds); True when this numba keeps its cache elsewhere,
+    so that nobody is told to wait for nothing."""
+    try:
+        return Path(_step._cache._cache_file._index_path).is_file()
+    except AttributeError:
+        return True

@@ -6,7 +6,7 @@ gives one linear regression per sample pair::
 
     y_k = (x_{k+1} - x_k) / T = Phi(x_k, s_m(k)) theta + eps_k,   s_m(k) = (s_k + s_{k+1}) / 2
 
-with ``Phi`` the 3 x 16 regressor matrix of ``trackkit.models.vessel.regressors`` (SI rates
+with ``Phi`` the 3 x 16 regressor matrix of ``trackkit.models.manoeuvring.regressors`` (SI rates
 per unit prime coefficient). The surge, sway and yaw rows share no coefficients (a1..a9,
 b1..b4, c1..c3), so each is its own problem ``y_i = X_i theta_i + eps_i`` with
 ``theta_i = (X_i^T X_i)^-1 X_i^T y_i``, solved for every run at once: the columns are scaled
@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.models.vessel import (
+from trackkit.models.manoeuvring import (
     EQUATION,
     N_THETA,
     Normalisation,
@@ -73,7 +73,7 @@ def least_squares(x: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation |
     joins."""
     norm = reference_vessel().norm if norm is None else norm
     if not isinstance(norm, Normalisation):
-        raise ValueError(f"norm = {norm!r}; expected a trackkit.models.vessel.Normalisation")
+        raise ValueError(f"norm = {norm!r}; expected a trackkit.models.manoeuvring.Normalisation")
     x, s = np.asarray(x, dtype=float), np.asarray(s, dtype=float)
     if x.ndim < 2 or x.shape[-1] != 3 or x.shape[-2] < 2:
         raise ValueError(f"x has shape {x.shape}; expected (..., K, 3) with K >= 2 samples")

@@ -4,7 +4,7 @@
 body state, given only the sampled inputs of a trial: ``F_T`` is the identifier's own
 discretisation (``identify.augmented.SampledVessel``: ``substeps`` Euler steps per sample,
 the input interpolated between samples; one step with the mean input is the paper's eq. 4).
-The pose then follows ``trackkit.models.vessel.integrate_pose``: over each sample interval
+The pose then follows ``trackkit.models.manoeuvring.integrate_pose``: over each sample interval
 the body velocity is held at the mean of its end samples and the pose moves on the exact
 arc, ``east' = u sin psi + v cos psi``, ``north' = u cos psi - v sin psi``, ``psi' = r``.
 
@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
 from trackkit.identify.augmented import SUBSTEPS_SAMPLED_INPUTS, SampledVessel
-from trackkit.models.vessel import N_THETA, Normalisation, advance_pose, integrate_pose
+from trackkit.models.manoeuvring import N_THETA, Normalisation, advance_pose, integrate_pose
 
 __all__ = ["Prediction", "predict", "dead_reckon", "position_error", "rmse"]
 

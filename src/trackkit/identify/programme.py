@@ -55,7 +55,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.models.vessel import N_THETA, CoefficientSet, reference_vessel
+from trackkit.models.manoeuvring import N_THETA, CoefficientSet, reference_vessel
 from trackkit.sim import seatrials
 
 __all__ = [

@@ -14,6 +14,7 @@ y north, z up, metres) at the data's median position or a given reference; times
 seconds from ``report.epoch``.
 """
 
+from trackkit.io._table import read_header
 from trackkit.io.adsb import read_opensky_csv
 from trackkit.io.ais import SOLENT, AisColumns, read_ais_csv
 from trackkit.io.detections import DetectionColumns, DetectionUnits, read_detections
@@ -25,11 +26,14 @@ from trackkit.io.frames import (
     velocity_from_course,
 )
 from trackkit.io.records import BadRecord, ReadReport, Reports
+from trackkit.io.scans import Scan, Scans
 
 __all__ = [
     "KNOT",
     "NAUTICAL_MILE",
     "SOLENT",
+    "Scan",
+    "Scans",
     "AisColumns",
     "BadRecord",
     "DetectionColumns",
@@ -40,6 +44,7 @@ __all__ = [
     "course_from_velocity",
     "read_ais_csv",
     "read_detections",
+    "read_header",
     "read_opensky_csv",
     "velocity_from_course",
 ]

@@ -539,7 +539,7 @@ class _Accumulator:
 # -- readers ----------------------------------------------------------------------------------
 
 
-def _header(path: str) -> list[str]:
+def csv_header(path: str) -> list[str]:
     # the first line only: a bad byte further down is a bad record, not a bad header
     with open(path, "rb") as fh:
         first = fh.readline()
@@ -571,7 +571,7 @@ def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str
     import pyarrow.csv as pacsv
 
     path = os.fspath(path)
-    header = _header(path)
+    header = csv_header(path)
     _check_columns(path, header, fields, ":1")
     order = {f.role: header.index(f.column) for f in fields}
     acc = _Accumulator(path, fields, order, on_bad, soft, max_listed, row_check, "line")
@@ -644,6 +644,13 @@ def _not_parquet(path: str, err: Exception, where: str = "") -> ValueError:
     return ValueError(f"{path}: not a readable Parquet file{where} ({str(err).strip()}); "
                       "expected a Parquet file as pyarrow or pandas write it, or a CSV file "
                       "named .csv")
+
+
+def read_header(path: str | os.PathLike) -> list[str]:
+    """The column names of a CSV file (its first line) or of a Parquet file (its schema)."""
+    if os.fspath(path).lower().endswith((".parquet", ".pq")):
+        return list(open_parquet(path).schema_arrow.names)
+    return csv_header(os.fspath(path))
 
 
 def open_parquet(path: str | os.PathLike):

@@ -28,7 +28,7 @@ from trackkit.io._table import (
     NAT,
     Field,
     Progress,
-    _header,
+    csv_header,
     read_csv_table,
 )
 from trackkit.io.records import ReadReport, Reports
@@ -49,7 +49,7 @@ def read_opensky_csv(path: str | os.PathLike, on_bad: str = "skip", *,
     if altitude not in ("geo", "baro"):
         raise ValueError(f"altitude = {altitude!r}; expected 'geo' or 'baro'")
     path = os.fspath(path)
-    have = set(_header(path))
+    have = set(csv_header(path))
     fields = [
         Field("time", "time", "time", time_format="unix"),
         Field("id", "icao24", "text", what="icao24"),

@@ -1,4 +1,4 @@
-"""Detection files (radar plots, sonar contacts) in, :class:`~trackkit.tracking.scans.Scans`
+"""Detection files (radar plots, sonar contacts) in, :class:`~trackkit.io.scans.Scans`
 out.
 
 One row per detection: a time, a sensor id, and either Cartesian ``x, y`` (``z``) or polar
@@ -40,7 +40,7 @@ from trackkit.io._table import (
 )
 from trackkit.io.frames import ANGLE_UNITS, DISTANCE_UNITS, unit_factor
 from trackkit.io.records import ReadReport
-from trackkit.tracking.scans import Scans
+from trackkit.io.scans import Scans
 
 __all__ = ["DetectionColumns", "DetectionUnits", "read_detections"]
 

@@ -125,3 +125,17 @@ def course_from_velocity(vx: ArrayLike, vy: ArrayLike, speed_unit: str = "kn",
     s = np.hypot(vx, vy) / unit_factor(SPEED_UNITS, speed_unit, "speed")
     c = np.mod(np.arctan2(vx, vy), 2 * np.pi) / unit_factor(ANGLE_UNITS, course_unit, "course")
     return s, c
+
+
+def ground_geodetic(frame: EnuFrame, x: Array, y: Array) -> tuple[Array, Array]:
+    """Latitude and longitude (deg) of the points at east ``x``, north ``y`` (m) of ``frame``
+    on the ellipsoid (altitude 0). A track is 2-D, so this is its ground point; the up
+    coordinate that puts it there (about -(x^2 + y^2) / 2 R, the earth's curvature) is found
+    by two corrections along the frame's up axis, exact to millimetres within 500 km."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    z = -(x * x + y * y) / (2 * 6371e3)
+    for _ in range(2):
+        lat, lon, alt = frame.to_geodetic(x, y, z)
+        z = z - alt
+    lat, lon, _ = frame.to_geodetic(x, y, z)
+    return lat, lon

@@ -41,13 +41,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.io import _reports
-from trackkit.io._table import TIME_FORMATS, Field, _header, read_csv_table
+from trackkit.io._table import TIME_FORMATS, Field, csv_header, read_csv_table
 from trackkit.io.frames import EnuFrame, velocity_from_course
-from trackkit.io.nmea import NavLog, _epoch_ns
+from trackkit.io.nmea import NavLog, epoch_ns
 from trackkit.io.records import ReadReport
 
 if TYPE_CHECKING:
-    from trackkit.sim.gnss import GpsFixes, InsSamples
+    from trackkit.io.records import GpsFixes, InsSamples
 
 __all__ = [
     "INPUT_COLUMNS",
@@ -276,7 +276,7 @@ def read_inputs_csv(path: str | os.PathLike, on_bad: str = "skip", *,
         if not (np.isfinite(value) and value > 0):
             raise ValueError(f"{name} = {value!r}; expected a positive finite number")
     path = os.fspath(path)
-    header = _header(path)
+    header = csv_header(path)
     unknown = [h for h in header if h not in INPUT_COLUMNS]
     if unknown:
         raise ValueError(f"{path}:1: column {', '.join(map(repr, unknown))} is not known; "
@@ -288,7 +288,7 @@ def read_inputs_csv(path: str | os.PathLike, on_bad: str = "skip", *,
     table = read_csv_table(path, fields, on_bad, max_listed=max_listed)
     c = table.columns
     lines = table.lines
-    ep_ns = _epoch_ns(epoch)
+    ep_ns = epoch_ns(epoch)
     if time_format == "seconds":
         if ep_ns is not None:
             raise ValueError(f"{path}: epoch given but time_format 'seconds' is relative")

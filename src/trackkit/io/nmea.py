@@ -72,12 +72,12 @@ import numpy as np
 import pynmea2
 from numpy.typing import NDArray
 
-from trackkit.io._table import BLANK, TIME_FORMATS, Field, _header, parse_epoch, read_csv_table
+from trackkit.io._table import BLANK, TIME_FORMATS, Field, csv_header, parse_epoch, read_csv_table
 from trackkit.io.frames import KNOT
 from trackkit.io.records import BadRecord, ReadReport
 
 if TYPE_CHECKING:
-    from trackkit.sim.gnss import GpsFixes, InsSamples
+    from trackkit.io.records import GpsFixes, InsSamples
 
 __all__ = [
     "NAV_CSV_COLUMNS",
@@ -226,7 +226,7 @@ def format_sentence(address: str, fields: Sequence[str], tag_time_ms: int | None
     return out
 
 
-def _epoch_ns(epoch) -> int | None:
+def epoch_ns(epoch) -> int | None:
     if epoch is None:
         return None
     if isinstance(epoch, _dt.datetime) and epoch.tzinfo is not None:
@@ -237,7 +237,7 @@ def _epoch_ns(epoch) -> int | None:
 
 def _start_ns(start) -> int:
     """A start time (ISO text, datetime, datetime64, unix seconds) as int ns since 1970 UTC."""
-    ns = _epoch_ns(start)
+    ns = epoch_ns(start)
     if ns is None:
         raise ValueError("start = None; expected the absolute UTC time of t = 0")
     return ns
@@ -281,7 +281,7 @@ def _check_record(name: str, rec, fields: Sequence[str]) -> int:
         a = np.asarray(getattr(rec, f), dtype=float)
         if a.shape != t.shape:
             raise ValueError(f"{name}.{f} has shape {a.shape}; expected {t.shape} (one run: "
-                             "select it with trackkit.sim.gnss.one_run)")
+                             "select it with trackkit.io.records.one_run)")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{name}.{f} holds non-finite values; expected finite values")
     return t.shape[0]
@@ -696,7 +696,7 @@ def read_nmea(path: str | os.PathLike, on_bad: str = "skip", *, date=None, epoch
             ref0 = (d - _dt.date(1970, 1, 1)).days * DAY_NS + DAY_NS // 2
         else:
             relative, ref0 = True, DAY_NS // 2
-    ep_ns = _epoch_ns(epoch)
+    ep_ns = epoch_ns(epoch)
     if relative and ep_ns is not None:
         raise ValueError(f"{path}: epoch given but the log has no date (no RMC, no TAG "
                          "block time); pass date= to date it")
@@ -781,7 +781,7 @@ def read_nav_csv(path: str | os.PathLike, on_bad: str = "skip", *, time_format: 
         raise ValueError(f"time_format = {time_format!r}; expected one of "
                          f"{', '.join(map(repr, TIME_FORMATS))} or a strptime pattern")
     path = os.fspath(path)
-    header = _header(path)
+    header = csv_header(path)
     unknown = [h for h in header if h not in NAV_CSV_COLUMNS]
     if unknown:
         raise ValueError(f"{path}:1: column {', '.join(map(repr, unknown))} is not known; "
@@ -832,7 +832,7 @@ def read_nav_csv(path: str | os.PathLike, on_bad: str = "skip", *, time_format: 
     acc.skipped = Counter(table.skipped)
     acc.skipped_lines = list(table.skipped_lines)
     acc.bad = list(table.bad)
-    ep_ns = _epoch_ns(epoch)
+    ep_ns = epoch_ns(epoch)
     if time_format == "seconds":
         if ep_ns is not None:
             raise ValueError(f"{path}: epoch given but time_format 'seconds' is relative")

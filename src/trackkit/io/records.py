@@ -13,13 +13,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from trackkit.io.frames import EnuFrame
 
-__all__ = ["BadRecord", "ReadReport", "Reports"]
+__all__ = ["BadRecord", "GpsFixes", "InsSamples", "ReadReport", "Reports", "one_run"]
 
 Array = NDArray[np.float64]
 
@@ -216,3 +217,31 @@ class Reports:
         if k >= len(self.ids) or self.ids[k] != ident:
             raise KeyError(f"{self.source}: no object {ident!r}")
         return self.select(self.code == k)
+
+
+class GpsFixes(NamedTuple):
+    """GPS fixes: ``t`` ``(N,)`` s; ``lat``, ``lon`` ``(..., N)`` WGS-84 degrees (the unit
+    :class:`~trackkit.io.frames.EnuFrame` takes); ``sog`` m/s; ``cog`` rad clockwise from
+    north in [0, 2 pi)."""
+
+    t: Array
+    lat: Array
+    lon: Array
+    sog: Array
+    cog: Array
+
+
+class InsSamples(NamedTuple):
+    """INS output: ``t`` ``(M,)`` s; ``heading`` ``(..., M)`` rad clockwise from north in
+    [0, 2 pi); ``rate`` ``(..., M)`` yaw rate, rad/s, positive clockwise."""
+
+    t: Array
+    heading: Array
+    rate: Array
+
+
+def one_run(record: GpsFixes | InsSamples, index: int | tuple[int, ...]
+            ) -> GpsFixes | InsSamples:
+    """The record of one run: ``index`` applied to the leading axes of every field but ``t``
+    (e.g. to write one run of a batch as an NMEA log)."""
+    return type(record)(record[0], *(np.asarray(x)[index] for x in record[1:]))

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.models.motion import _turn_terms
+from trackkit.models.motion import turn_coefficients
 
 __all__ = [
     "SpeedLikelihood",
@@ -213,7 +213,7 @@ def turn_terms(omega: ArrayLike, dt: float) -> tuple[Array, Array, Array, Array]
     """``(sin(omega T)/omega, (1 - cos(omega T))/omega, cos(omega T), sin(omega T))`` for
     the step ``T = dt``; the ratios tend to ``(T, 0)`` as omega -> 0 (a Taylor series near 0,
     trackkit.models.motion)."""
-    s, c, _, _, cos, sin = _turn_terms(np.asarray(omega, dtype=float), np.asarray(dt, float))
+    s, c, _, _, cos, sin = turn_coefficients(np.asarray(omega, dtype=float), np.asarray(dt, float))
     return s, c, cos, sin
 
 

@@ -52,7 +52,7 @@ def _per_axis(value: ArrayLike, dim: int, name: str) -> Array:
     return v
 
 
-def _blocks(B: Array, per_axis: Array) -> Array:
+def interleave_axes(B: Array, per_axis: Array) -> Array:
     """Interleave a per-axis block into the state ordering [pos..., vel..., acc...].
 
     ``B`` has shape ``(..., k, k)`` (one axis's block, e.g. [[1, dt], [0, 1]]) and the result
@@ -202,7 +202,7 @@ class _NearlyConstant(MotionModel):
         for i in range(k):
             for j in range(i, k):
                 B[..., i, j] = dt ** (j - i) / factorial(j - i)
-        return _blocks(B, np.ones(self.dim))
+        return interleave_axes(B, np.ones(self.dim))
 
     def f(self, x: Array, dt: ArrayLike) -> Array:
         return _apply(self._F(dt), x)
@@ -220,7 +220,7 @@ class _NearlyConstant(MotionModel):
             for j in range(k):
                 p = 2 * k - 1 - i - j
                 B[..., i, j] = dt**p / (factorial(k - 1 - i) * factorial(k - 1 - j) * p)
-        return _blocks(B, self.q)
+        return interleave_axes(B, self.q)
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,10 +290,10 @@ class Singer(MotionModel):
         return _apply(self.jacobian(x, dt), x)
 
     def jacobian(self, x: Array, dt: ArrayLike) -> Array:
-        return _memo(self, "F", dt, lambda t: _blocks(self._axis(t)[0], np.ones(self.dim)))
+        return _memo(self, "F", dt, lambda t: interleave_axes(self._axis(t)[0], np.ones(self.dim)))
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
-        return _memo(self, "Q", dt, lambda t: _blocks(self._axis(t)[1], self.sigma**2))
+        return _memo(self, "Q", dt, lambda t: interleave_axes(self._axis(t)[1], self.sigma**2))
 
 
 def _singer_closed_form(T: Array, a: float) -> tuple[Array, Array]:
@@ -316,7 +316,7 @@ def _singer_closed_form(T: Array, a: float) -> tuple[Array, Array]:
     return F, Q
 
 
-def _turn_terms(w: Array, dt: Array) -> tuple[Array, Array, Array, Array, Array, Array]:
+def turn_coefficients(w: Array, dt: Array) -> tuple[Array, Array, Array, Array, Array, Array]:
     """``s = sin(w dt)/w``, ``c = (1 - cos(w dt))/w``, their w-derivatives, cos and sin.
 
     Near ``w = 0`` the ratios are evaluated by their Taylor series (to w^3), so CT is smooth
@@ -333,8 +333,8 @@ def _turn_terms(w: Array, dt: Array) -> tuple[Array, Array, Array, Array, Array,
     return s, c, ds, dc, cos, sin
 
 
-def _turn_F(w: Array, dt: Array) -> Array:
-    s, c, _, _, cos, sin = _turn_terms(w, dt)
+def turn_transition(w: Array, dt: Array) -> Array:
+    s, c, _, _, cos, sin = turn_coefficients(w, dt)
     one, zero = np.ones_like(s), np.zeros_like(s)
     return np.stack(
         [
@@ -366,7 +366,8 @@ class KnownTurnRate(MotionModel):
         return _apply(self.jacobian(x, dt), x)
 
     def jacobian(self, x: Array, dt: ArrayLike) -> Array:
-        return _memo(self, "F", dt, lambda t: _turn_F(np.asarray(float(self.omega)), _dt(t)))
+        return _memo(self, "F", dt,
+                     lambda t: turn_transition(np.asarray(float(self.omega)), _dt(t)))
 
     def noise(self, x: Array, dt: ArrayLike) -> Array:
         return _memo(self, "Q", dt, lambda t: ConstantVelocity(2, self.q).noise(x, t))
@@ -394,7 +395,7 @@ class CoordinatedTurn(MotionModel):
     def f(self, x: Array, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         px, py, vx, vy, w = (x[..., i] for i in range(5))
-        s, c, _, _, cos, sin = _turn_terms(w, dt)
+        s, c, _, _, cos, sin = turn_coefficients(w, dt)
         return np.stack(
             [px + s * vx - c * vy, py + c * vx + s * vy, cos * vx - sin * vy,
              sin * vx + cos * vy, w + 0 * dt],
@@ -404,9 +405,9 @@ class CoordinatedTurn(MotionModel):
     def jacobian(self, x: Array, dt: ArrayLike) -> Array:
         dt = _dt(dt)
         vx, vy, w = x[..., 2], x[..., 3], x[..., 4]
-        s, c, ds, dc, cos, sin = _turn_terms(w, dt)
+        s, c, ds, dc, cos, sin = turn_coefficients(w, dt)
         J = np.zeros(np.broadcast_shapes(w.shape, dt.shape) + (5, 5))
-        J[..., :4, :4] = _turn_F(w, dt)
+        J[..., :4, :4] = turn_transition(w, dt)
         J[..., 0, 4] = ds * vx - dc * vy
         J[..., 1, 4] = dc * vx + ds * vy
         J[..., 2, 4] = -dt * (sin * vx + cos * vy)

@@ -90,7 +90,7 @@ def _bearing_gradient(u: Array, v: Array, r2: Array, convention: str, out_u: Arr
         np.divide(u, r2, out=out_v)
 
 
-def _check_convention(convention: str) -> None:
+def check_convention(convention: str) -> None:
     if convention not in ("nautical", "math"):
         raise ValueError(f"convention = {convention!r}; expected 'nautical' or 'math'")
 
@@ -255,7 +255,7 @@ class Bearing(SensorModel):
         object.__setattr__(self, "origin", _pose(self.origin, "origin", 2))
         object.__setattr__(self, "velocity", _pose(self.velocity, "velocity", 2))
         object.__setattr__(self, "sigma", float(_positive(self.sigma, "sigma")))
-        _check_convention(self.convention)
+        check_convention(self.convention)
 
     def _noise(self) -> Array:
         return np.array([[self.sigma**2]])
@@ -307,7 +307,7 @@ class RangeBearing(SensorModel):
         object.__setattr__(
             self, "sigma_bearing", float(_positive(self.sigma_bearing, "sigma_bearing"))
         )
-        _check_convention(self.convention)
+        check_convention(self.convention)
 
     def _noise(self) -> Array:
         return np.diag([self.sigma_range**2, self.sigma_bearing**2])
@@ -369,7 +369,7 @@ class AzimuthElevation(SensorModel):
         object.__setattr__(self, "origin", _pose(self.origin, "origin", 3))
         object.__setattr__(self, "sigma_az", float(_positive(self.sigma_az, "sigma_az")))
         object.__setattr__(self, "sigma_el", float(_positive(self.sigma_el, "sigma_el")))
-        _check_convention(self.convention)
+        check_convention(self.convention)
 
     def _noise(self) -> Array:
         return np.diag([self.sigma_az**2, self.sigma_el**2])

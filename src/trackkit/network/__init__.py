@@ -1,10 +1,10 @@
 """Decentralised cooperative tracking (Jalalipoor and Kardehi Moghaddam 2021).
 
 The agents' program and an in-process network run (:mod:`~trackkit.network.agents`,
-:mod:`~trackkit.network.run`), built on composite measurements from asynchronous bearings
+:mod:`~trackkit.network.inprocess`), built on composite measurements from asynchronous bearings
 (:mod:`~trackkit.network.composite`), diffusion Kalman filtering over a network of agents
 (:mod:`~trackkit.network.diffusion`), randomised initiation from bearings
-(:mod:`~trackkit.network.initiate`), the agents' course control
+(:mod:`~trackkit.tracking.initiate`), the agents' course control
 (:mod:`~trackkit.network.steering`), and tracks across agents: similarity, matching,
 duplicate pruning and the memory of neighbours' messages (:mod:`~trackkit.network.tracks`).
 """
@@ -35,8 +35,7 @@ from trackkit.network.diffusion import (
     neighbourhood,
     uniform_weights,
 )
-from trackkit.network.initiate import Initiation, initiate
-from trackkit.network.run import NetworkResult, Trace, run_network
+from trackkit.network.inprocess import NetworkResult, Trace, run_network
 from trackkit.network.steering import (
     TURN_RATE,
     CourseCommand,
@@ -78,8 +77,6 @@ __all__ = [
     "move",
     "steer",
     "swarm_neighbours",
-    "Initiation",
-    "initiate",
     "Matches",
     "Message",
     "MessageMemory",

@@ -42,7 +42,8 @@ Per execution at time t (the order of Fig. 2, with the reconstruction's choices)
 7. **Initiation** (eqs. 7-8). Bearings no track claimed (own and neighbours') stay in a pool
    for ``init_window_s``. Each unclaimed bearing new at this execution (own or a
    neighbour's, so that a target only neighbours measure can be started; up to
-   ``max_initiations`` per execution, in random order) seeds ``initiate`` over the pool.
+   ``max_initiations`` per execution, in random order) seeds
+   ``initiate_from_bearing`` over the pool.
    *Support rule* (the paper has none; ours): the best candidate is accepted only when at
    least ``min_support`` pool bearings lie within 2 sigma of it, from at least
    ``min_sources`` different sensors (two separated sensors observe a CV target without
@@ -83,10 +84,8 @@ from scipy.stats import chi2
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
 from trackkit.models.sensors import Bearing
-from trackkit.network.bearings import BearingSet, concat_bearings, empty_bearings
 from trackkit.network.composite import CONVERGED, composite_measurement
 from trackkit.network.diffusion import COMBINATIONS, adapt, combine
-from trackkit.network.initiate import initiate
 from trackkit.network.steering import Steering, steer
 from trackkit.network.tracks import (
     DEFAULT_GATE,
@@ -96,6 +95,8 @@ from trackkit.network.tracks import (
     match_tracks,
 )
 from trackkit.tracking import IdCounter, TimerLogic, gate, gnn, predict_measurement, seed004_costs
+from trackkit.tracking.bearings import BearingSet, concat_bearings, empty_bearings
+from trackkit.tracking.initiate import initiate_from_bearing
 from trackkit.tracking.logic import TimerState, TrackStatus
 
 __all__ = [
@@ -755,7 +756,7 @@ class Agent:
             sub = np.flatnonzero(~used)
             kk = int(np.searchsorted(sub, k))
             part = pool.take(sub)
-            ini = initiate(kk, part, s.r_min, r_max,
+            ini = initiate_from_bearing(kk, part, s.r_min, r_max,
                            s.v_max, self.rng, s.n_candidates, s.k1, s.k2)
             sup = _support(ini.mean, float(part.t[kk]), part)
             if sup.sum() < s.min_support or np.unique(part.source[sup]).size < s.min_sources:

@@ -68,7 +68,7 @@ from trackkit.belief import Gaussian
 from trackkit.filters import CKF, EKF, IEKF, UKF
 from trackkit.models import Bearing, ConstantVelocity
 from trackkit.network.composite import CONVERGED, composite_measurement
-from trackkit.sim.network import NetworkRun
+from trackkit.sim.sensor_network import NetworkRun
 
 __all__ = [
     "FILTERS",
@@ -328,7 +328,7 @@ def central_fusion(
 
 def central_from_run(run: NetworkRun, *, q: float = 0.0,
                      settings: CentralSettings | None = None) -> CentralFusion:
-    """:func:`central_fusion` on the bearings of a ``sim.network`` run batch (straight
+    """:func:`central_fusion` on the bearings of a ``sim.sensor_network`` run batch (straight
     agents: the bearings ``run_network`` gives them)."""
     b = run.bearings
     return central_fusion(b.z, b.time, b.sensor, b.sigma, q=q, settings=settings)

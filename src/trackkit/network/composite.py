@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
 from trackkit.linalg import symmetrize
-from trackkit.models.sensors import _check_convention, _wrap_small
+from trackkit.models.sensors import _wrap_small, check_convention
 
 __all__ = [
     "CONVERGED",
@@ -367,7 +367,7 @@ def _prepare(
         for a in (dt, w, zz, xs, ys):
             a[missing] = 0.0
         pad = missing.astype(float)
-    _check_convention(convention)
+    check_convention(convention)
     X = np.array(np.broadcast_to(X, batch + (4,)).reshape(N, 4).T, order="C")
     p = _Problem(zz, dt, xs, ys, w, pad, 1.0 if convention == "nautical" else -1.0,
                  np.empty((6, M * N)), np.empty(16 * N))

@@ -1,8 +1,9 @@
 """the agents of Jalalipoor and Kardehi Moghaddam (2021) as separate operating-system processes
 talking over ZeroMQ.
 
-:func:`run_network_processes` runs the same network as :func:`trackkit.network.run.run_network`
-(same arguments, same :class:`~trackkit.network.run.NetworkResult`), but every agent lives in
+:func:`run_network_processes` runs the same network as
+:func:`trackkit.network.inprocess.run_network`
+(same arguments, same :class:`~trackkit.network.inprocess.NetworkResult`), but every agent lives in
 its own process (``python -m trackkit.network.processes agent ...``, a fresh interpreter, so
 nothing depends on the caller's ``__main__``) holding its own
 :class:`~trackkit.network.agents.Agent`; the calling process is the **environment**: it owns
@@ -113,7 +114,7 @@ from trackkit.network.agents import (
     own_bearings,
 )
 from trackkit.network.central import CentralSettings
-from trackkit.network.run import (
+from trackkit.network.inprocess import (
     NetworkResult,
     _central_trace,
     _Motion,
@@ -125,7 +126,7 @@ from trackkit.network.run import (
 )
 from trackkit.network.steering import Steering
 from trackkit.network.tracks import Message
-from trackkit.sim.network import bearings_at, disk_graph
+from trackkit.sim.sensor_network import bearings_at, disk_graph
 
 __all__ = ["PROTOCOL_VERSION", "AgentError", "CurveKeys", "ProcessNetworkResult", "decode",
            "decode_payload", "encode", "is_loopback", "run_network_processes",

@@ -1,7 +1,7 @@
 """Report: summary tables, figures, results.json, metrics.parquet and a self-contained HTML page.
 
     from trackkit.report import write_report, rich_table
-    paths = write_report(result, "out/")       # result: trackkit.eval.results.MonteCarloResult
+    paths = write_report(result, "out/")       # result: experiments.results.MonteCarloResult
     rich.print(rich_table(result))
     for table in matching_rich_tables(result):   # Naseri Solhdar's J1-J4 / tuning tables, if any
         rich.print(table)

@@ -37,7 +37,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from trackkit.eval.results import MonteCarloResult
+from trackkit.experiments.results import MonteCarloResult
 from trackkit.report import plots
 from trackkit.report.html import render_html
 from trackkit.report.tables import averaging_window
@@ -84,10 +84,10 @@ _CLASSIFICATION_UNITS = (
     "which it stays above threshold")
 
 
-def _finite_or_none(obj: Any) -> Any:
+def finite_or_none(obj: Any) -> Any:
     """JSON has no NaN/Infinity: non-finite floats become null."""
     if isinstance(obj, dict):
-        return {k: _finite_or_none(v) for k, v in obj.items()}
+        return {k: finite_or_none(v) for k, v in obj.items()}
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
@@ -121,7 +121,7 @@ def results_document(result: MonteCarloResult) -> dict:
         entry.pop("seconds", None)
     head = {k: doc.pop(k) for k in ("scenario", "runs", "seed", "steps", "dt") if k in doc}
     ordered = {**head, "window": averaging_window(result), "units": _units(result, doc), **doc}
-    return _finite_or_none(ordered)
+    return finite_or_none(ordered)
 
 
 def timings_document(result: MonteCarloResult) -> dict:
@@ -137,10 +137,10 @@ def timings_document(result: MonteCarloResult) -> dict:
     if result.tuning:
         doc["tuning_seconds"] = {name: float(getattr(t, "seconds", math.nan))
                                  for name, t in result.tuning.items()}
-    return _finite_or_none(doc)
+    return finite_or_none(doc)
 
 
-def _write_json(doc: dict, path: str | Path) -> Path:
+def write_json(doc: dict, path: str | Path) -> Path:
     path = Path(path)
     text = json.dumps(doc, indent=2, allow_nan=False)
     path.write_text(text + "\n", encoding="utf-8")
@@ -149,12 +149,12 @@ def _write_json(doc: dict, path: str | Path) -> Path:
 
 def write_results_json(result: MonteCarloResult, path: str | Path) -> Path:
     """Write ``results.json`` (strict JSON, UTF-8, indented; see :func:`results_document`)."""
-    return _write_json(results_document(result), path)
+    return write_json(results_document(result), path)
 
 
 def write_timings_json(result: MonteCarloResult, path: str | Path) -> Path:
     """Write ``timings.json`` (see :func:`timings_document`)."""
-    return _write_json(timings_document(result), path)
+    return write_json(timings_document(result), path)
 
 
 def _column(values: Any, steps: int, name: str) -> np.ndarray:
@@ -367,7 +367,7 @@ def _write_manifest(folder: Path, run: CommandRun, written: dict[str, Path],
     doc = {"command": run.command, "arguments": run.arguments, "trackkit": _version(),
            "time": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
            "files": files, "kept": sorted(kept)}
-    return _write_json(doc, folder / MANIFEST_JSON)
+    return write_json(doc, folder / MANIFEST_JSON)
 
 
 def _kept(out: Path, written: Iterable[str], removed: Iterable[str]) -> list[str]:

@@ -83,13 +83,13 @@ def glossary_markdown() -> str:
     return "\n".join(lines)
 
 
-def _code_spans(text: str) -> str:
+def code_spans(text: str) -> str:
     # escape first, then turn the (already escaped) backtick spans into <code>
     return re.sub(r"`([^`]*)`", r"<code>\1</code>", html.escape(text))
 
 
 def glossary_html() -> str:
     """The glossary as an HTML definition list."""
-    items = [f"<dt>{html.escape(term)}</dt><dd>{_code_spans(text)}</dd>"
+    items = [f"<dt>{html.escape(term)}</dt><dd>{code_spans(text)}</dd>"
              for term, text in GLOSSARY]
     return '<dl class="glossary">\n' + "\n".join(items) + "\n</dl>"

@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from trackkit import __version__
-from trackkit.eval.results import MonteCarloResult
+from trackkit.experiments.results import MonteCarloResult
 from trackkit.report.glossary import glossary_html
 from trackkit.report.tables import (
     classification_summary,
@@ -46,7 +46,7 @@ _CAPTIONS = {
                    "the independent runs with the min-max band.",
 }
 
-_CSS = """
+CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 2em auto;
        max-width: 1100px; padding: 0 1em; color: #222; }
 h1 { font-size: 1.5em; margin-bottom: 0.2em; }
@@ -111,7 +111,7 @@ def render_html(result: MonteCarloResult, images: Mapping[str, str | Path | byte
         '<head><meta charset="utf-8">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         f"<title>trackkit: {esc(result.scenario)}</title>",
-        f"<style>{_CSS}</style></head>",
+        f"<style>{CSS}</style></head>",
         "<body>",
         f"<h1>{esc(result.scenario)}</h1>",
     ]

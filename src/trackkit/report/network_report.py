@@ -18,11 +18,11 @@ directory with ``report.files.write_atomically``:
   mean number of confirmed tracks against the number of targets.
 * ``courses.png`` and a ``courses`` entry in ``results.json``, when the same runs on
   straight courses are given (``straight=``): position RMSE against time, steered and
-  straight, and the paired comparison over the last window (``eval.network_compare``) with
+  straight, and the paired comparison over the last window (``experiments.network_compare``) with
   the verdict whether steering pays.
 * ``report.html``: one self-contained page (inline CSS, PNGs as data URIs, no scripts).
 
-    mc = run_network_mc(scenario)                     # trackkit.eval.network_mc
+    mc = run_network_mc(scenario)                     # trackkit.experiments.network_mc
     paths = write_network_report(mc, scenario, "trackkit-out/net-baseline")
     flat = run_network_mc(scenario, steering=False)   # the same runs on straight courses
     paths = write_network_report(mc, scenario, "trackkit-out/net-baseline", straight=flat)
@@ -40,17 +40,17 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from trackkit import __version__
-from trackkit.eval.network_compare import PairedComparison, compare_networks
-from trackkit.eval.network_mc import NetworkMonteCarlo
+from trackkit.experiments.network_compare import PairedComparison, compare_networks
+from trackkit.experiments.network_mc import NetworkMonteCarlo
 from trackkit.report.files import (
     REPORT_HTML,
     RESULTS_JSON,
     TIMINGS_JSON,
-    _write_json,
     write_atomically,
+    write_json,
 )
-from trackkit.report.html import _CSS, notes_and_figures
-from trackkit.report.plots import _distance_scale, _save, finish_gospa_panels, gospa_panels
+from trackkit.report.html import CSS, notes_and_figures
+from trackkit.report.plots import distance_scale, finish_gospa_panels, gospa_panels, save_figure
 
 __all__ = ["NETWORK_FILES", "network_results_document", "network_timings_document",
            "paths_figure", "errors_figure", "gospa_figure", "courses_figure",
@@ -320,7 +320,7 @@ def paths_figure(mc: NetworkMonteCarlo, scenario) -> Figure:
     truth = ex.agents[k].truth  # (E, Nt, 4): the targets at that agent's executions
     pts = np.concatenate([*agent_xy, truth[:, :, :2].reshape(-1, 2)])
     lo, hi = pts.min(0), pts.max(0)
-    unit, s = _distance_scale(float((hi - lo).max()) or 1000.0)
+    unit, s = distance_scale(float((hi - lo).max()) or 1000.0)
     for a, xy in enumerate(agent_xy):
         ax.plot(xy[:, 0] * s, xy[:, 1] * s, color=f"C{a}", lw=1.8, label=f"agent {a + 1}")
         ax.plot(xy[0, 0] * s, xy[0, 1] * s, "^", color=f"C{a}", ms=7)
@@ -547,7 +547,7 @@ def render_network_html(doc: Mapping[str, Any], scenario,
     parts = [
         "<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
-        f"<title>trackkit: {esc(scenario.name)}</title>", f"<style>{_CSS}</style></head>",
+        f"<title>trackkit: {esc(scenario.name)}</title>", f"<style>{CSS}</style></head>",
         "<body>", f"<h1>{esc(scenario.name)}</h1>",
     ]
     if scenario.description:
@@ -569,21 +569,22 @@ def _write_all(mc: NetworkMonteCarlo, scenario, folder: Path,
                straight: NetworkMonteCarlo | None) -> dict[str, Path]:
     images: dict[str, Path] = {}
     if mc.example is not None:
-        images["paths"] = _save(paths_figure(mc, scenario), folder / PATHS_PNG)
-    images["errors"] = _save(errors_figure(mc, scenario), folder / ERRORS_PNG)
-    images["gospa"] = _save(gospa_figure(mc, scenario), folder / GOSPA_PNG)
+        images["paths"] = save_figure(paths_figure(mc, scenario), folder / PATHS_PNG)
+    images["errors"] = save_figure(errors_figure(mc, scenario), folder / ERRORS_PNG)
+    images["gospa"] = save_figure(gospa_figure(mc, scenario), folder / GOSPA_PNG)
     courses = None
     if straight is not None:
-        images["courses"] = _save(courses_figure(mc, straight, scenario), folder / COURSES_PNG)
+        images["courses"] = save_figure(courses_figure(mc, straight, scenario),
+                                        folder / COURSES_PNG)
         courses = tuple(compare_networks(mc, straight, label_a="steered", label_b="straight",
                                          which=w) for w in ("last", "all"))
     written: dict[str, Path] = dict(images)
     doc = network_results_document(mc, scenario, courses)
     written["html"] = folder / REPORT_HTML
     written["html"].write_text(render_network_html(doc, scenario, images), encoding="utf-8")
-    written["timings"] = _write_json(network_timings_document(mc, scenario),
+    written["timings"] = write_json(network_timings_document(mc, scenario),
                                      folder / TIMINGS_JSON)
-    written["results"] = _write_json(doc, folder / RESULTS_JSON)
+    written["results"] = write_json(doc, folder / RESULTS_JSON)
     return written
 
 

@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse
 from matplotlib.ticker import LogFormatter, MaxNLocator
 
-from trackkit.eval.results import MonteCarloResult
+from trackkit.experiments.results import MonteCarloResult
 from trackkit.filters.fuzzy import INPUT_SETS, OUTPUT_SETS, fis
 from trackkit.report.tables import channel_labels, display_unit
 
@@ -35,14 +35,14 @@ PLOT_FILES = {"geometry": "geometry.png", "rmse": "rmse.png", "nees": "nees.png"
 _DPI = 110
 
 
-def _save(fig: Figure, path: str | Path) -> Path:
+def save_figure(fig: Figure, path: str | Path) -> Path:
     path = Path(path)
     FigureCanvasAgg(fig)  # render with Agg whatever the session's backend
     fig.savefig(path, dpi=_DPI, format="png")
     return path
 
 
-def _distance_scale(extent: float) -> tuple[str, float]:
+def distance_scale(extent: float) -> tuple[str, float]:
     return ("km", 1e-3) if extent > 5e3 else ("m", 1.0)
 
 
@@ -90,7 +90,7 @@ def geometry_figure(result: MonteCarloResult, every: int | None = None,
     pts = np.concatenate([truth, obs])
     pts = pts[np.all(np.isfinite(pts), axis=1)]
     extent = float(np.ptp(pts, axis=0).max()) if len(pts) else 1.0
-    unit, s = _distance_scale(extent)
+    unit, s = distance_scale(extent)
 
     fig = Figure(figsize=(7.5, 6.5), layout="constrained")
     ax = fig.add_subplot()
@@ -127,7 +127,7 @@ def plot_geometry(result: MonteCarloResult, path: str | Path, every: int | None 
                   nsigma: float = 2.0) -> Path | None:
     """Write :func:`geometry_figure` as a PNG; None (nothing written) without an example run."""
     fig = geometry_figure(result, every, nsigma)
-    return None if fig is None else _save(fig, path)
+    return None if fig is None else save_figure(fig, path)
 
 
 class _PlainLog(LogFormatter):
@@ -188,7 +188,7 @@ def rmse_figure(result: MonteCarloResult) -> Figure:
 
 def plot_rmse(result: MonteCarloResult, path: str | Path) -> Path:
     """Write :func:`rmse_figure` as a PNG."""
-    return _save(rmse_figure(result), path)
+    return save_figure(rmse_figure(result), path)
 
 
 def _same(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> bool:
@@ -228,7 +228,7 @@ def nees_figure(result: MonteCarloResult) -> Figure:
 
 def plot_nees(result: MonteCarloResult, path: str | Path) -> Path:
     """Write :func:`nees_figure` as a PNG."""
-    return _save(nees_figure(result), path)
+    return save_figure(nees_figure(result), path)
 
 
 # --- Naseri Solhdar's thesis: covariance matching, fuzzy membership functions, optimiser
@@ -289,7 +289,7 @@ def matching_figure(result: MonteCarloResult) -> Figure | None:
 def plot_matching(result: MonteCarloResult, path: str | Path) -> Path | None:
     """Write :func:`matching_figure` as a PNG; None (nothing written) without logs."""
     fig = matching_figure(result)
-    return None if fig is None else _save(fig, path)
+    return None if fig is None else save_figure(fig, path)
 
 
 def _levels(x: np.ndarray, span: float, near: float = 0.07, depth: int = 3) -> np.ndarray:
@@ -361,7 +361,7 @@ def membership_figure(result: MonteCarloResult, points: int = 600) -> Figure | N
 def plot_membership(result: MonteCarloResult, path: str | Path) -> Path | None:
     """Write :func:`membership_figure` as a PNG; None (nothing written) without tuning."""
     fig = membership_figure(result)
-    return None if fig is None else _save(fig, path)
+    return None if fig is None else save_figure(fig, path)
 
 
 def _band(history: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -409,7 +409,7 @@ def convergence_figure(result: MonteCarloResult) -> Figure | None:
 def plot_convergence(result: MonteCarloResult, path: str | Path) -> Path | None:
     """Write :func:`convergence_figure` as a PNG; None (nothing written) without tuning."""
     fig = convergence_figure(result)
-    return None if fig is None else _save(fig, path)
+    return None if fig is None else save_figure(fig, path)
 
 
 def _shade_gaps(ax, result: MonteCarloResult) -> None:
@@ -460,7 +460,7 @@ def time_figure(result: MonteCarloResult) -> Figure | None:
 def plot_time(result: MonteCarloResult, path: str | Path) -> Path | None:
     """Write :func:`time_figure` as a PNG; None (nothing written) without an example run."""
     fig = time_figure(result)
-    return None if fig is None else _save(fig, path)
+    return None if fig is None else save_figure(fig, path)
 
 
 def classes_figure(result: MonteCarloResult) -> Figure | None:
@@ -506,7 +506,7 @@ def plot_classes(result: MonteCarloResult, path: str | Path) -> Path | None:
     """Write :func:`classes_figure` as a PNG; None (nothing written) when no filter
     classifies."""
     fig = classes_figure(result)
-    return None if fig is None else _save(fig, path)
+    return None if fig is None else save_figure(fig, path)
 
 
 def _wants_time_plot(result: MonteCarloResult) -> bool:

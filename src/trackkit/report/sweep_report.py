@@ -51,9 +51,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from trackkit.eval.sweep import factor_of
+from trackkit.experiments.sweep import factor_of
 from trackkit.report.files import write_atomically
-from trackkit.report.html import _CSS, data_uri
+from trackkit.report.html import CSS, data_uri
 from trackkit.report.tables import display_unit
 from trackkit.scenario.schema import PublishedSpec
 
@@ -592,7 +592,7 @@ def published_rows(campaign: Any, table: pa.Table, published: Sequence[Published
 # --- the page -----------------------------------------------------------------------------
 
 # the reports' page and figure styles, and the sweep table's own
-_SWEEP_CSS = _CSS + """
+_SWEEP_CSS = CSS + """
 table.sweep { border-collapse: collapse; margin: 1em 0; font-size: 0.85em; }
 table.sweep th, table.sweep td { border-bottom: 1px solid #ddd; padding: 0.25em 0.6em; }
 table.sweep td { text-align: right; font-variant-numeric: tabular-nums; }
@@ -643,7 +643,7 @@ def render_sweep_html(campaign: Any, table: pa.Table, images: dict[str, Path | b
     """The campaign's page: settings, parameters, the headline table, our ratios beside the
     published ones (``beside``, from ``published_rows``) and the figures."""
     from trackkit import __version__
-    from trackkit.eval.checkpoint import code_version
+    from trackkit.experiments.checkpoint import code_version
 
     esc = html.escape
     code = code_version()

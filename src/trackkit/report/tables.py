@@ -24,7 +24,7 @@ from rich.console import Group
 from rich.table import Table
 from rich.text import Text
 
-from trackkit.eval.results import MonteCarloResult
+from trackkit.experiments.results import MonteCarloResult
 
 __all__ = [
     "averaging_window", "display_unit", "Summary", "summary", "rich_table", "html_table", "short",

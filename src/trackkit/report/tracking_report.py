@@ -17,7 +17,7 @@ directory like ``report.files.write_report``:
 * ``report.html``: one self-contained page (inline CSS, PNGs as data URIs, no scripts, no
   links): the scenario, the tables, the pictures, the notes and a short glossary.
 
-    result, example = run_multitarget(scenario)          # trackkit.eval.tracking_run
+    result, example = run_multitarget(scenario)          # trackkit.experiments.tracking_run
     paths = write_tracking_report(result, scenario, example, "trackkit-out/radar-crossing")
 """
 
@@ -36,22 +36,22 @@ import pyarrow.parquet as pq
 from matplotlib.figure import Figure
 
 from trackkit import __version__
-from trackkit.eval.multitarget import Frames
-from trackkit.eval.tracking_mc import TrackingResult
-from trackkit.eval.tracking_run import TrackingExample
+from trackkit.eval.track_metrics import Frames
+from trackkit.experiments.tracking_mc import TrackingResult
+from trackkit.experiments.tracking_run import TrackingExample
 from trackkit.report.files import (
     METRICS_PARQUET,
     REPORT_HTML,
     RESULTS_JSON,
     TIMINGS_JSON,
     TRACKKIT_FILES,
-    _finite_or_none,
-    _write_json,
+    finite_or_none,
     write_atomically,
+    write_json,
 )
-from trackkit.report.glossary import _code_spans
-from trackkit.report.html import _CSS, notes_and_figures
-from trackkit.report.plots import _distance_scale, _save, finish_gospa_panels, gospa_panels
+from trackkit.report.glossary import code_spans
+from trackkit.report.html import CSS, notes_and_figures
+from trackkit.report.plots import distance_scale, finish_gospa_panels, gospa_panels, save_figure
 from trackkit.scenario.multitarget import MultiTargetScenario, build_scene
 
 __all__ = [
@@ -249,13 +249,13 @@ def tracking_results_document(result: TrackingResult, scenario: MultiTargetScena
         "units": {**_TOP_UNITS, "trackers": dict(_TRACKER_UNITS)},
         "trackers": {name: _tracker_entry(result, name) for name in result.trackers},
     }
-    return _finite_or_none(doc)
+    return finite_or_none(doc)
 
 
 def tracking_timings_document(result: TrackingResult,
                               scenario: MultiTargetScenario) -> dict[str, Any]:
     """The ``timings.json`` document: tracking seconds per scan of each tracker."""
-    return _finite_or_none({
+    return finite_or_none({
         "scenario": scenario.name, "runs": int(result.runs), "seed": int(result.seed),
         "units": {"seconds_per_scan": "s of tracking (all of a tracker's steps) per run and "
                                       "scan; simulation and metrics not included"},
@@ -357,7 +357,7 @@ def xy_figure(example: TrackingExample, scenario: MultiTargetScenario,
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     half = 0.55 * max(float((hi - lo).max()), 1000.0)
     mid = 0.5 * (lo + hi)
-    unit, s = _distance_scale(2 * half)
+    unit, s = distance_scale(2 * half)
     plots = _plot_positions(example, scene) * s
     ncols = min(len(names), 2)
     nrows = -(-len(names) // ncols)
@@ -471,7 +471,7 @@ def _settings_table(scenario: MultiTargetScenario) -> str:
 
 
 def _glossary_html() -> str:
-    items = [f"<dt>{html.escape(term)}</dt><dd>{_code_spans(text)}</dd>"
+    items = [f"<dt>{html.escape(term)}</dt><dd>{code_spans(text)}</dd>"
              for term, text in TRACKING_GLOSSARY]
     return '<dl class="glossary">\n' + "\n".join(items) + "\n</dl>"
 
@@ -491,7 +491,7 @@ def render_tracking_html(doc: Mapping[str, Any], scenario: MultiTargetScenario,
         '<head><meta charset="utf-8">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         f"<title>trackkit: {esc(scenario.name)}</title>",
-        f"<style>{_CSS}</style></head>",
+        f"<style>{CSS}</style></head>",
         "<body>",
         f"<h1>{esc(scenario.name)}</h1>",
     ]
@@ -519,15 +519,15 @@ def _write_all(result: TrackingResult, scenario: MultiTargetScenario,
     pq.write_table(tracking_metrics_table(result, scenario, truths), written["metrics"])
     images: dict[str, Path] = {}
     if example is not None:
-        images["xy"] = _save(xy_figure(example, scenario, scene), folder / XY_PNG)
-    images["gospa"] = _save(gospa_figure(result, scenario, truths), folder / GOSPA_PNG)
+        images["xy"] = save_figure(xy_figure(example, scenario, scene), folder / XY_PNG)
+    images["gospa"] = save_figure(gospa_figure(result, scenario, truths), folder / GOSPA_PNG)
     written.update(images)
     doc = tracking_results_document(result, scenario, scene)
     written["html"] = folder / REPORT_HTML
     written["html"].write_text(render_tracking_html(doc, scenario, images), encoding="utf-8")
-    written["timings"] = _write_json(tracking_timings_document(result, scenario),
+    written["timings"] = write_json(tracking_timings_document(result, scenario),
                                      folder / TIMINGS_JSON)
-    written["results"] = _write_json(doc, folder / RESULTS_JSON)
+    written["results"] = write_json(doc, folder / RESULTS_JSON)
     return written
 
 

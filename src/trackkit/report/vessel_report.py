@@ -1,5 +1,6 @@
 """The report of a vessel identification (Zolfagharnasab and Seif 2025): a scenario's Monte Carlo
-(``eval.vessel_mc.run_vessel``) or a recorded log (``eval.vessel_mc.identify_recorded``),
+(``experiments.vessel_mc.run_vessel``) or a recorded log
+(``experiments.vessel_mc.identify_recorded``),
 written atomically into one directory with ``report.files.write_atomically``:
 
 * ``results.json``: the identified coefficients with their standard deviations; per filter
@@ -39,23 +40,23 @@ from matplotlib.figure import Figure
 
 from trackkit import __version__
 from trackkit.eval.manoeuvres import IMO_NOTE, Criterion, TurningMetrics, ZigZagMetrics
-from trackkit.eval.vessel_mc import (
+from trackkit.experiments.vessel_mc import (
     REL_SD_LIMIT,
     ModelTrials,
     RecordedIdentification,
     VesselResult,
     nees_band,
 )
-from trackkit.models.vessel import COEFFICIENT_NAMES, KNOT, Normalisation
+from trackkit.models.manoeuvring import COEFFICIENT_NAMES, KNOT, Normalisation
 from trackkit.report.files import (
     REPORT_HTML,
     RESULTS_JSON,
     TIMINGS_JSON,
-    _write_json,
     write_atomically,
+    write_json,
 )
-from trackkit.report.html import _CSS, notes_and_figures
-from trackkit.report.plots import _save
+from trackkit.report.html import CSS, notes_and_figures
+from trackkit.report.plots import save_figure
 
 __all__ = [
     "VESSEL_FILES", "convergence_figure", "track_figure", "heading_figure", "trials_figure",
@@ -555,7 +556,7 @@ def render_vessel_html(doc: Mapping[str, Any], title: str, description: str,
     esc = html.escape
     parts = ["<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
              '<meta name="viewport" content="width=device-width, initial-scale=1">',
-             f"<title>trackkit: {esc(title)}</title>", f"<style>{_CSS}</style></head>",
+             f"<title>trackkit: {esc(title)}</title>", f"<style>{CSS}</style></head>",
              "<body>", f"<h1>{esc(title)}</h1>"]
     if description:
         parts.append(f"<p>{esc(description)}</p>")
@@ -676,24 +677,24 @@ def _scenario_images(res: VesselResult, folder: Path) -> dict[str, Path]:
     images: dict[str, Path] = {}
     f = res.filters[res.shown]
     if f.history is not None:
-        images["convergence"] = _save(convergence_figure(
+        images["convergence"] = save_figure(convergence_figure(
             res.t, f.history, f.history_std, res.truth.theta,
             f"{res.scenario}: {f.name} run 0, coefficients with +-2 sigma"),
             folder / CONVERGENCE_PNG)
     d = res.trial
     if d is not None:
-        images["track"] = _save(track_figure(
+        images["track"] = save_figure(track_figure(
             d.gps[0], None if d.filtered_pose is None else d.filtered_pose[0],
             d.model_pose[0], d.truth_pose, f"{res.scenario}: the {d.kind} trial, run 0"),
             folder / TRACK_PNG)
-        images["heading"] = _save(heading_figure(
+        images["heading"] = save_figure(heading_figure(
             d.t, d.heading[0], d.model_pose[0, :, 2], d.inputs[:, 0], d.truth_pose[:, 2],
             f"{res.scenario}: heading and nozzle, run 0"), folder / HEADING_PNG)
-    images["trials"] = _save(trials_figure(res.model, res.model_truth,
+    images["trials"] = save_figure(trials_figure(res.model, res.model_truth,
                                            f"{res.scenario}: {res.shown} run 0's model"),
                              folder / TRIALS_PNG)
     if res.runs > 1:
-        images["errors"] = _save(errors_figure(res), folder / ERRORS_PNG)
+        images["errors"] = save_figure(errors_figure(res), folder / ERRORS_PNG)
     return images
 
 
@@ -704,8 +705,8 @@ def _write_scenario(res: VesselResult, scenario, folder: Path) -> dict[str, Path
     written["html"] = folder / REPORT_HTML
     written["html"].write_text(render_vessel_html(doc, scenario.name, scenario.description,
                                                   scenario.notes, images), encoding="utf-8")
-    written["timings"] = _write_json(vessel_timings_document(res), folder / TIMINGS_JSON)
-    written["results"] = _write_json(doc, folder / RESULTS_JSON)
+    written["timings"] = write_json(vessel_timings_document(res), folder / TIMINGS_JSON)
+    written["results"] = write_json(doc, folder / RESULTS_JSON)
     return written
 
 
@@ -721,25 +722,25 @@ def _write_recorded(rec: RecordedIdentification, title: str, notes: Sequence[str
                     log_read: Any, inputs_read: Any, folder: Path) -> dict[str, Path]:
     images: dict[str, Path] = {}
     if rec.history is not None:
-        images["convergence"] = _save(convergence_figure(
+        images["convergence"] = save_figure(convergence_figure(
             rec.t - rec.t[0], rec.history, rec.history_std, None,
             f"{title}: {rec.filter}, coefficients with +-2 sigma"), folder / CONVERGENCE_PNG)
     filtered = None if rec.filter == "ls" else rec.filtered_pose
-    images["track"] = _save(track_figure(rec.pose[:, :2], filtered, rec.model_pose, None,
+    images["track"] = save_figure(track_figure(rec.pose[:, :2], filtered, rec.model_pose, None,
                                          f"{title}: measured against the identified model"),
                             folder / TRACK_PNG)
-    images["heading"] = _save(heading_figure(rec.t - rec.t[0], rec.pose[:, 2],
+    images["heading"] = save_figure(heading_figure(rec.t - rec.t[0], rec.pose[:, 2],
                                              rec.model_pose[:, 2], rec.s[:, 0], None,
                                              f"{title}: heading and nozzle"),
                               folder / HEADING_PNG)
-    images["trials"] = _save(trials_figure(rec.trials, None, f"{title}: the identified model"),
-                             folder / TRIALS_PNG)
+    images["trials"] = save_figure(
+        trials_figure(rec.trials, None, f"{title}: the identified model"), folder / TRIALS_PNG)
     doc = recorded_results_document(rec, log_read, inputs_read)
     written: dict[str, Path] = dict(images)
     written["html"] = folder / REPORT_HTML
     written["html"].write_text(render_vessel_html(doc, title, "", notes, images),
                                encoding="utf-8")
-    written["results"] = _write_json(doc, folder / RESULTS_JSON)
+    written["results"] = write_json(doc, folder / RESULTS_JSON)
     return written
 
 

@@ -69,13 +69,13 @@ def _pydantic_problems(err: ValidationError) -> list[tuple[str, Any, str]]:
         if e["type"] == "extra_forbidden":
             msg = "unknown field (not allowed here)"
         if e["type"] == "missing":
-            out.append((loc, _Missing(), "required field"))
+            out.append((loc, Missing(), "required field"))
             continue
         out.append((loc, value, msg))
     return out
 
 
-class _Missing:
+class Missing:
     def __repr__(self) -> str:
         return "(missing)"
 

@@ -13,8 +13,10 @@ from numpy.typing import NDArray
 from trackkit import filters as tkf
 from trackkit import models
 from trackkit.belief import Gaussian
+from trackkit.filters.gaps import WithGaps
 from trackkit.scenario.options import make_filter
 from trackkit.scenario.schema import (
+    CHANNELS,
     KNOT,
     FilterSpec,
     Kinematics,
@@ -23,9 +25,9 @@ from trackkit.scenario.schema import (
     PriorSpec,
     Scenario,
     SensorSpec,
+    channels,
 )
 from trackkit.sim.kinematics import LegPlan, propagate
-from trackkit.tracking.gaps import WithGaps
 
 Array = NDArray[np.float64]
 
@@ -167,23 +169,6 @@ def build_sensor(spec: SensorSpec, position: Array, velocity: Array, sigma: list
                                  sigma=sigma, c=spec.c_mps)
 
 
-_CHANNELS = {
-    "Bearing": ["bearing"],
-    "RangeBearing": ["range", "bearing"],
-    "AzimuthElevation": ["bearing", "elevation"],
-    "BearingFrequency": ["bearing", "frequency"],
-    "MultipathDelay": ["delay", "delay"],
-    "Sine": ["signal"],
-}
-
-
-def channels(spec: SensorSpec, dim: int) -> int:
-    """Number of measurement channels of the sensor."""
-    if spec.model == "Position":
-        return len(spec.r_diag_si) if spec.r_diag_si is not None else dim
-    return len(_CHANNELS[spec.model])
-
-
 def _channel_field(spec: SensorSpec, dim: int) -> list[str]:
     """The scenario field that sets each channel's noise."""
     if spec.r_diag_si is not None:
@@ -194,7 +179,7 @@ def _channel_field(spec: SensorSpec, dim: int) -> list[str]:
         return ["sigma_m"] * channels(spec, dim)
     by_kind = {"bearing": "sigma_deg", "elevation": "sigma_deg", "range": "sigma_m",
                "frequency": "sigma_hz", "delay": "sigma_s"}
-    return [by_kind[c] for c in _CHANNELS[spec.model]]
+    return [by_kind[c] for c in CHANNELS[spec.model]]
 
 
 def _unit_sigma(spec: SensorSpec, dim: int) -> list[float] | None:
@@ -212,7 +197,7 @@ def _unit_sigma(spec: SensorSpec, dim: int) -> list[float] | None:
     by_kind = {"bearing": spec.sigma_deg and math.radians(spec.sigma_deg),
                "elevation": spec.sigma_deg and math.radians(spec.sigma_deg),
                "range": spec.sigma_m, "frequency": spec.sigma_hz, "delay": spec.sigma_s}
-    return [by_kind[c] for c in _CHANNELS[spec.model]]
+    return [by_kind[c] for c in CHANNELS[spec.model]]
 
 
 def legs_si(legs: list[Leg]) -> list[LegPlan]:
@@ -409,7 +394,7 @@ _CHANNEL_UNITS = {"bearing": "rad", "elevation": "rad", "range": "m", "frequency
 def _channel_kinds(spec: SensorSpec, dim: int) -> list[str]:
     if spec.model == "Position":
         return ["position"] * channels(spec, dim)
-    return _CHANNELS[spec.model]
+    return CHANNELS[spec.model]
 
 
 def _motion_field(spec: MotionSpec) -> str:

@@ -2,7 +2,7 @@
 runs and the report settings, as a TOML file validated with pydantic .
 
     sc = load_multitarget("radar-crossing")       # bundled by name, or a path to a .toml file
-    scene, trackers = build(sc)                   # trackkit.sim.multitarget.Scene, {name: Tracker}
+    scene, trackers = build(sc)                   # trackkit.sim.scene.Scene, {name: Tracker}
 
 The file (units in the field names as in the single-target schema; ``q`` in m^2/s^3)::
 
@@ -59,7 +59,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from trackkit.scenario import (
-    _Missing,
+    Missing,
     descriptions,
     holds_table,
     read_scenario,
@@ -68,10 +68,10 @@ from trackkit.scenario import (
 from trackkit.scenario.schema import (
     NonNegFloat,
     PositiveFloat,
-    _Strict,
-    _unit,
+    Strict,
     check_plain_name,
     raise_at,
+    unit,
 )
 
 __all__ = [
@@ -95,8 +95,8 @@ Probability = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
 OpenProbability = Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)]
 
 
-class SceneSpec(_Strict):
-    """The simulated scene: one of the bundled builders of ``trackkit.sim.multitarget`` with
+class SceneSpec(Strict):
+    """The simulated scene: one of the bundled builders of ``trackkit.sim.scene`` with
     its detection probability, clutter and the targets' process noise."""
 
     builder: Literal["radar_crossing", "radar_clutter", "radar_dense"] = Field(
@@ -104,12 +104,12 @@ class SceneSpec(_Strict):
         "scans); radar_clutter: ten aircraft through an air surveillance radar's coverage "
         "(4 s scans); radar_dense: n targets over the same radar's coverage, for scale")
     pd: Probability = Field(0.9, description="probability that a target in view is "
-                            "detected at a scan", json_schema_extra=_unit("1"))
+                            "detected at a scan", json_schema_extra=unit("1"))
     clutter_per_scan: NonNegFloat = Field(20.0, description="mean number of false plots per "
                                           "scan (Poisson, uniform in the field of view)",
-                                          json_schema_extra=_unit("plots"))
+                                          json_schema_extra=unit("plots"))
     q: NonNegFloat = Field(description="the targets' process noise: spectral density of a "
-                           "white acceleration per axis", json_schema_extra=_unit("m^2/s^3"))
+                           "white acceleration per axis", json_schema_extra=unit("m^2/s^3"))
     n: Annotated[int, Field(ge=1)] | None = Field(None, description="number of targets "
                                                   "(radar_dense only; default 200)")
 
@@ -121,7 +121,7 @@ class SceneSpec(_Strict):
         return self
 
 
-class TrackerSpec(_Strict):
+class TrackerSpec(Strict):
     """One tracker to compare: filter and constant-velocity model, associator, track logic,
     initiator and gate (``trackkit.tracking.Tracker``)."""
 
@@ -131,7 +131,7 @@ class TrackerSpec(_Strict):
         "EKF", description="the filter (KF needs a linear, position radar)")
     q: NonNegFloat = Field(description="process noise of the tracker's constant-velocity "
                            "model: spectral density of a white acceleration per axis",
-                           json_schema_extra=_unit("m^2/s^3"))
+                           json_schema_extra=unit("m^2/s^3"))
     associator: Literal["GNN", "JPDA"] = Field(description="global nearest neighbour or "
                                                "joint probabilistic data association")
     cost: Literal["loglik", "distance", "seed004"] | None = Field(
@@ -140,7 +140,7 @@ class TrackerSpec(_Strict):
     missed_distance: PositiveFloat | None = Field(
         None, description="GNN with cost distance only: the Mahalanobis distance a missed "
         "detection costs, which is also the gate (default: the gate's edge, "
-        "sqrt(chi2.ppf(p_gate)))", json_schema_extra=_unit("1"))
+        "sqrt(chi2.ppf(p_gate)))", json_schema_extra=unit("1"))
     star: bool | None = Field(None, description="JPDA only: JPDA* (prune the joint events "
                               "that a swap of two tracks' detections would make more likely, "
                               "against track coalescence; default false)")
@@ -148,13 +148,13 @@ class TrackerSpec(_Strict):
                                                "and deletion: SPRT score or M-of-N history")
     alpha: OpenProbability | None = Field(None, description="score logic: probability of "
                                           "confirming a false track (SPRT; default 0.01)",
-                                          json_schema_extra=_unit("1"))
+                                          json_schema_extra=unit("1"))
     beta: OpenProbability | None = Field(None, description="score logic: probability of "
                                          "deleting a true track (SPRT; default 0.001)",
-                                         json_schema_extra=_unit("1"))
+                                         json_schema_extra=unit("1"))
     new_target_density: PositiveFloat | None = Field(
         None, description="score logic: density of new targets per unit of measurement space "
-        "per scan (default 4e-7)", json_schema_extra=_unit("1/(m rad) per scan"))
+        "per scan (default 4e-7)", json_schema_extra=unit("1/(m rad) per scan"))
     confirm: list[int] | None = Field(None, description="history logic: [M, N], confirm on "
                                       "M hits in the last N scans (default [2, 3])")
     delete: list[int] | None = Field(None, description="history logic: [P, R], delete a "
@@ -171,13 +171,13 @@ class TrackerSpec(_Strict):
     margin_m: NonNegFloat | None = Field(None, description="two-point: extra distance allowed "
                                          "between the two plots (default 0)")
     p_gate: OpenProbability = Field(0.99, description="gate probability (the ellipsoidal "
-                                    "gate's chi-square quantile)", json_schema_extra=_unit("1"))
+                                    "gate's chi-square quantile)", json_schema_extra=unit("1"))
     pd: Probability | None = Field(None, description="the detection probability the tracker "
-                                   "assumes (default: the scene's)", json_schema_extra=_unit("1"))
+                                   "assumes (default: the scene's)", json_schema_extra=unit("1"))
     clutter_density: PositiveFloat | None = Field(
         None, description="the clutter density the tracker assumes, false plots per unit of "
         "measurement space per scan (default: the scene's; required when the scene has no "
-        "clutter)", json_schema_extra=_unit("1/(m rad) per scan"))
+        "clutter)", json_schema_extra=unit("1/(m rad) per scan"))
 
     @field_validator("confirm", "delete")
     @classmethod
@@ -237,7 +237,7 @@ class TrackerSpec(_Strict):
         return c, d  # type: ignore[return-value]
 
 
-class RunSpec(_Strict):
+class RunSpec(Strict):
     """The Monte Carlo runs."""
 
     runs: Annotated[int, Field(ge=1)] = Field(20, description="Monte Carlo runs")
@@ -247,20 +247,20 @@ class RunSpec(_Strict):
         10, description="runs per block: the unit of work (results do not depend on it)")
 
 
-class ReportSpec(_Strict):
+class ReportSpec(Strict):
     """The metrics' settings."""
 
     c_m: PositiveFloat = Field(500.0, description="cut-off of OSPA and GOSPA, and of the "
                                "truth-to-track assignment of the track counts")
     ospa_p: Annotated[float, Field(ge=1, allow_inf_nan=False)] = Field(
         1.0, description="order p of OSPA (GOSPA uses p = 2, alpha = 2)",
-        json_schema_extra=_unit("1"))
+        json_schema_extra=unit("1"))
     confirm_within_scans: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
         5.0, description="a target counts as confirmed in time if a track is assigned to it "
-        "within this many scan periods of its birth", json_schema_extra=_unit("scans"))
+        "within this many scan periods of its birth", json_schema_extra=unit("scans"))
 
 
-class MultiTargetScenario(_Strict):
+class MultiTargetScenario(Strict):
     """A multi-target scenario: the scene, the trackers compared, the runs and the report."""
 
     name: str = Field(max_length=255, description="the scenario's name; the report goes to "
@@ -290,7 +290,7 @@ class MultiTargetScenario(_Strict):
                          f"a linear (position) radar; {self.scene.builder}'s radar measures "
                          "range and bearing: use EKF, UKF or CKF")
             if t.clutter_density is None and self.scene.clutter_per_scan == 0:
-                raise_at(("trackers", i, "clutter_density"), _Missing(), f"tracker {t.name!r}: "
+                raise_at(("trackers", i, "clutter_density"), Missing(), f"tracker {t.name!r}: "
                          "the scene has no clutter (scene.clutter_per_scan = 0), so give the "
                          "clutter density the tracker assumes (> 0, false plots per m rad per "
                          "scan)")
@@ -330,8 +330,8 @@ def load_multitarget(name_or_path: str | Path) -> MultiTargetScenario:
 
 
 def build_scene(scenario: MultiTargetScenario):
-    """The ``trackkit.sim.multitarget.Scene`` of ``scenario.scene``."""
-    from trackkit.sim import multitarget as mt
+    """The ``trackkit.sim.scene.Scene`` of ``scenario.scene``."""
+    from trackkit.sim import scene as mt
 
     s = scenario.scene
     kw: dict[str, Any] = {"pd": s.pd, "clutter": s.clutter_per_scan, "q": s.q}

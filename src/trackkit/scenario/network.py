@@ -83,7 +83,7 @@ from numpy.typing import NDArray
 from pydantic import Field, field_validator, model_validator
 
 from trackkit.scenario import (
-    _Missing,
+    Missing,
     descriptions,
     holds_table,
     read_scenario,
@@ -93,10 +93,10 @@ from trackkit.scenario.schema import (
     Finite,
     NonNegFloat,
     PositiveFloat,
-    _Strict,
-    _unit,
+    Strict,
     check_plain_name,
     raise_at,
+    unit,
 )
 
 __all__ = [
@@ -143,12 +143,12 @@ def _v_max() -> float:
     return float(AgentSettings().v_max)
 
 
-class NetworkSpec(_Strict):
+class NetworkSpec(Strict):
     """The run's length, the agents' execution schedule, the targets' motion and the
     channel."""
 
     duration_s: PositiveFloat = Field(1000.0, description="length of a run",
-                                      json_schema_extra=_unit("s"))
+                                      json_schema_extra=unit("s"))
     period_s: PositiveFloat = Field(5.0, description="execution period: every agent runs "
                                     "its program once per period (the same for all agents)")
     jitter_s: NonNegFloat | None = Field(None, description="each execution is delayed from "
@@ -156,9 +156,9 @@ class NetworkSpec(_Strict):
                                          "synchronous agents; default: the period)")
     q: NonNegFloat = Field(0.0, description="the targets' process noise: spectral density of "
                            "a white acceleration per axis (0: straight lines)",
-                           json_schema_extra=_unit("m^2/s^3"))
+                           json_schema_extra=unit("m^2/s^3"))
     loss: Probability = Field(0.0, description="probability that one message delivery is "
-                              "lost", json_schema_extra=_unit("1"))
+                              "lost", json_schema_extra=unit("1"))
 
     @model_validator(mode="after")
     def _schedule(self) -> NetworkSpec:
@@ -177,7 +177,7 @@ class NetworkSpec(_Strict):
         return self.period_s if self.jitter_s is None else self.jitter_s
 
 
-class AgentSpec(_Strict):
+class AgentSpec(Strict):
     """One agent: where it starts, how it moves, what it measures and how far it talks."""
 
     x_m: Finite = Field(description="initial position, east")
@@ -189,15 +189,15 @@ class AgentSpec(_Strict):
         2.0, description="bearing standard deviation (the paper assumes at most 5 degrees, "
         "2 in its simulations)")
     meas_range_m: float = Field(math.inf, description="measurement range (inf: unlimited)",
-                                json_schema_extra=_unit("m"))
+                                json_schema_extra=unit("m"))
     comm_range_m: float = Field(math.inf, description="communication range (inf: unlimited)",
-                                json_schema_extra=_unit("m"))
+                                json_schema_extra=unit("m"))
 
     _ranges = field_validator("meas_range_m", "comm_range_m")(
         classmethod(lambda cls, v: _range(v)))
 
 
-class TargetSpec(_Strict):
+class TargetSpec(Strict):
     """One constant-velocity target's state at t = 0."""
 
     x_m: Finite = Field(description="initial position, east")
@@ -221,7 +221,7 @@ def _interval(v: list[float]) -> list[float]:
     return v
 
 
-class RandomTargetsSpec(_Strict):
+class RandomTargetsSpec(Strict):
     """Targets drawn afresh in every run (module docstring: the draw)."""
 
     count: Annotated[int, Field(ge=1, le=100)] = Field(description="number of targets")
@@ -243,7 +243,7 @@ class RandomTargetsSpec(_Strict):
         return v
 
 
-class SettingsSpec(_Strict):
+class SettingsSpec(Strict):
     """The agents' program settings exposed here (the rest: ``AgentSettings``' defaults)."""
 
     steering: bool = Field(True, description="course control (Jalalipoor and Kardehi "
@@ -252,10 +252,10 @@ class SettingsSpec(_Strict):
         "information", description="the diffusion combination rule (information: covariance "
         "intersection with the uniform weights; paper: eqs. 49-50 as printed)")
     q: NonNegFloat | None = Field(None, description="the agents' CV process noise (default: "
-                                  "AgentSettings')", json_schema_extra=_unit("m^2/s^3"))
+                                  "AgentSettings')", json_schema_extra=unit("m^2/s^3"))
 
 
-class NetworkRunSpec(_Strict):
+class NetworkRunSpec(Strict):
     """The Monte Carlo runs."""
 
     runs: Annotated[int, Field(ge=1)] = Field(20, description="Monte Carlo runs")
@@ -265,15 +265,15 @@ class NetworkRunSpec(_Strict):
                           "that receives every agent's bearings)")
 
 
-class NetworkReportSpec(_Strict):
+class NetworkReportSpec(Strict):
     """The metrics' settings."""
 
     c_m: PositiveFloat = Field(2000.0, description="cut-off of GOSPA and of the "
                                "target-to-track assignment behind the errors")
     first_fraction: Fraction = Field(0.2, description="the early RMSE window: the first "
-                                     "fraction of the run", json_schema_extra=_unit("1"))
+                                     "fraction of the run", json_schema_extra=unit("1"))
     last_fraction: Fraction = Field(0.2, description="the late RMSE window: the last "
-                                    "fraction of the run", json_schema_extra=_unit("1"))
+                                    "fraction of the run", json_schema_extra=unit("1"))
     example_agent: Annotated[int, Field(ge=1)] = Field(1, description="the agent (numbered "
                                                        "from 1) whose tracks the picture "
                                                        "shows")
@@ -283,7 +283,7 @@ class NetworkReportSpec(_Strict):
                                              "velocity standard deviation per axis")
 
 
-class NetworkScenario(_Strict):
+class NetworkScenario(Strict):
     """A network scenario: agents, targets, the agents' settings, runs and report."""
 
     name: str = Field(max_length=255, description="the scenario's name; the report goes to "
@@ -311,7 +311,7 @@ class NetworkScenario(_Strict):
     @model_validator(mode="after")
     def _consistent(self) -> NetworkScenario:
         if self.targets is None and self.random_targets is None:
-            raise_at(("targets",), _Missing(), "give the targets: [[targets]] tables (fixed) "
+            raise_at(("targets",), Missing(), "give the targets: [[targets]] tables (fixed) "
                      "or one [random_targets] table (drawn in every run)")
         if self.targets is not None and self.random_targets is not None:
             raise_at(("random_targets",), "{...}", "give either [[targets]] or "
@@ -323,7 +323,7 @@ class NetworkScenario(_Strict):
                      f"expected an agent number from 1 to {len(self.agents)}")
         return self
 
-    # -- SI arrays for trackkit.network.run.run_network --------------------------------------
+    # -- SI arrays for trackkit.network.inprocess.run_network --------------------------------------
 
     @property
     def n_targets(self) -> int:

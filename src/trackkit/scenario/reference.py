@@ -22,7 +22,7 @@ from pydantic_core import PydanticUndefined
 
 from trackkit.scenario.options import FILTER_TYPES, Option
 from trackkit.scenario.schema import Scenario
-from trackkit.scenario.toml_writer import _value
+from trackkit.scenario.toml_writer import toml_value
 
 __all__ = ["reference", "COMMAND"]
 
@@ -123,7 +123,7 @@ def _words(tp: Any, constraints: list[Any], plural: bool, bounds: bool) -> str:
     if origin is Literal:
         if not bounds:
             return _literal_noun(args, plural)
-        return ("each one of " if plural else "one of ") + ", ".join(_value(a) for a in args)
+        return ("each one of " if plural else "one of ") + ", ".join(toml_value(a) for a in args)
     if origin in (typing.Union, types.UnionType):
         return " or ".join(type_words(a, plural, bounds) for a in args)
     if tp is Any:
@@ -172,11 +172,11 @@ def _allowed(info: FieldInfo) -> str:
     parts = _bounds(list(info.metadata) + constraints,
                     "characters" if tp is str else "items")
     if typing.get_origin(tp) is Literal:
-        parts.append(", ".join(_value(a) for a in typing.get_args(tp)))
+        parts.append(", ".join(toml_value(a) for a in typing.get_args(tp)))
     elif typing.get_origin(tp) is list:
         item, inner, _ = _strip(typing.get_args(tp)[0])
         if typing.get_origin(item) is Literal:
-            parts.append("each one of " + ", ".join(_value(a) for a in typing.get_args(item)))
+            parts.append("each one of " + ", ".join(toml_value(a) for a in typing.get_args(item)))
         else:
             parts += [f"each {b}" for b in _bounds(inner)]
     return "; ".join(parts)
@@ -193,8 +193,8 @@ def _default(info: FieldInfo) -> str:
         return "none"
     if isinstance(value, BaseModel):
         value = value.model_dump(exclude_defaults=True)
-        return "all defaults" if not value else _value(value)
-    return _value(value)
+        return "all defaults" if not value else toml_value(value)
+    return toml_value(value)
 
 
 def _models(model: type[BaseModel], path: str, seen: dict[type, list[str]]) -> None:

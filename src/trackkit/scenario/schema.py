@@ -77,16 +77,16 @@ def raise_at(loc: tuple[str | int, ...], value: Any, message: str) -> None:
         "Scenario", [InitErrorDetails(type=error, loc=loc, input=value)])
 
 
-def _unit(unit: str) -> dict[str, str]:
+def unit(unit: str) -> dict[str, str]:
     """The unit of a field whose name carries no unit suffix (for the reference)."""
     return {"unit": unit}
 
 
-class _Strict(BaseModel):
+class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class TimeSpec(_Strict):
+class TimeSpec(Strict):
     """Scenario time: ``duration_s`` and ``step_s``; measurements at every step after 0."""
 
     duration_s: PositiveFloat = Field(description="length of the scenario")
@@ -107,7 +107,7 @@ class TimeSpec(_Strict):
         return int(round(self.duration_s / self.step_s))
 
 
-class Kinematics(_Strict):
+class Kinematics(Strict):
     """Initial position and velocity: position in metres, velocity as course and speed
     (nautical course, clockwise from north) or as components; ``z_m`` and ``vz_mps`` for 3-D.
     """
@@ -144,7 +144,7 @@ class Kinematics(_Strict):
         return self.vx_mps or 0.0, self.vy_mps or 0.0
 
 
-class Leg(_Strict):
+class Leg(Strict):
     """A manoeuvre from ``start_s``: a new course and/or speed at once; a constant turn at
     ``turn_rate_deg_s`` (positive to starboard, i.e. clockwise) until ``end_s``; or a
     tangential ``acceleration_mps2`` until ``end_s``."""
@@ -181,7 +181,7 @@ class Leg(_Strict):
         return self
 
 
-class MotionSpec(_Strict):
+class MotionSpec(Strict):
     """A motion model by name with its parameters (SI)."""
 
     model: Literal["ConstantVelocity", "ConstantAcceleration", "Singer", "CoordinatedTurn",
@@ -190,33 +190,33 @@ class MotionSpec(_Strict):
         "E[w w^T] = Qc delta(t), discretised exactly (Van Loan) for the step")
     q: NonNegFloat = Field(0.0, description="spectral density of the white process noise: of "
                            "the acceleration (ConstantVelocity, CoordinatedTurn) or of the "
-                           "jerk (ConstantAcceleration; m^2/s^5)", json_schema_extra=_unit(
+                           "jerk (ConstantAcceleration; m^2/s^5)", json_schema_extra=unit(
                                "m^2/s^3"))
     q_diag: list[NonNegFloat] | None = Field(
         None, description="Q per step as a diagonal, in state order, instead of from q: the "
         "additive Q = q I of Naseri Solhdar (ConstantVelocity and Linear)",
-        json_schema_extra=_unit("SI squared"))
+        json_schema_extra=unit("SI squared"))
     F: list[list[Finite]] | None = Field(
         None, description="the transition matrix per step of a Linear model (any state, e.g. "
-        "Naseri Solhdar's chapter 3)", json_schema_extra=_unit("SI"))
+        "Naseri Solhdar's chapter 3)", json_schema_extra=unit("SI"))
     A: list[list[Finite]] | None = Field(
         None, description="the continuous-time system matrix of a ContinuousLinear model",
-        json_schema_extra=_unit("SI"))
+        json_schema_extra=unit("SI"))
     L: list[list[Finite]] | None = Field(
         None, description="the noise gain of a ContinuousLinear model (n rows, one column "
-        "per noise input)", json_schema_extra=_unit("SI"))
+        "per noise input)", json_schema_extra=unit("SI"))
     Qc: list[list[Finite]] | None = Field(
         None, description="the spectral density of the white noise w of a ContinuousLinear "
-        "model (symmetric, positive semi-definite)", json_schema_extra=_unit("SI squared"))
+        "model (symmetric, positive semi-definite)", json_schema_extra=unit("SI squared"))
     q_omega: NonNegFloat = Field(1e-6, description="spectral density of the turn rate "
-                                 "(CoordinatedTurn)", json_schema_extra=_unit("rad^2/s^3"))
+                                 "(CoordinatedTurn)", json_schema_extra=unit("rad^2/s^3"))
     q_extra: NonNegFloat = Field(0.0, description="random-walk density of the constant "
                                  "extras (e.g. f0), for filters' models",
-                                 json_schema_extra=_unit("SI^2/s"))
+                                 json_schema_extra=unit("SI^2/s"))
     tau: PositiveFloat = Field(20.0, description="manoeuvre time constant (Singer)",
-                               json_schema_extra=_unit("s"))
+                               json_schema_extra=unit("s"))
     sigma: NonNegFloat = Field(1.0, description="standard deviation of the acceleration "
-                               "(Singer)", json_schema_extra=_unit("m/s^2"))
+                               "(Singer)", json_schema_extra=unit("m/s^2"))
 
     @model_validator(mode="after")
     def _linear(self) -> MotionSpec:
@@ -269,7 +269,7 @@ class MotionSpec(_Strict):
                              f"{low:.3g}); expected a spectral density")
 
 
-class Target(_Strict):
+class Target(Strict):
     """The target's truth: initial kinematics (or a full initial state), its motion model and
     process noise, scripted manoeuvres and constant extra state components."""
 
@@ -277,7 +277,7 @@ class Target(_Strict):
                                 description="initial position and velocity")
     state: list[Finite] | None = Field(
         None, description="the full initial state in state order, instead of initial "
-        "(required with motion model Linear or ContinuousLinear)", json_schema_extra=_unit("SI"))
+        "(required with motion model Linear or ContinuousLinear)", json_schema_extra=unit("SI"))
     motion: MotionSpec = Field(default_factory=lambda: MotionSpec(model="ConstantVelocity"),
                                description="the truth's motion model and process noise (also "
                                "the filters' unless a filter has its own)")
@@ -285,10 +285,10 @@ class Target(_Strict):
     extras: list[Finite] = Field(
         default_factory=list, description="constant extra state components appended after "
         "the kinematics (e.g. the tone frequency f0 for Doppler-bearing tracking)",
-        json_schema_extra=_unit("SI"))
+        json_schema_extra=unit("SI"))
 
 
-class SensorSpec(_Strict):
+class SensorSpec(Strict):
     """A sensor model by name. Noise as a standard deviation with units in the field name,
     or as ``snr_db`` (noise variance per channel = mean square of the noise-free measurement
     over the nominal truth / 10^(snr/10))."""
@@ -310,7 +310,7 @@ class SensorSpec(_Strict):
     r_diag_si: list[PositiveFloat] | None = Field(
         None, description="the noise covariance's diagonal per channel (m^2, rad^2, Hz^2, "
         "s^2) instead of the sigmas; for Position it also sets the dimension (H = [I 0], "
-        "e.g. Naseri Solhdar's chapter 3)", json_schema_extra=_unit("SI squared"))
+        "e.g. Naseri Solhdar's chapter 3)", json_schema_extra=unit("SI squared"))
     snr_db: Finite | None = Field(None, description="signal-to-noise ratio instead of the "
                                   "sigmas: noise variance per channel = mean square of the "
                                   "noise-free measurement over the nominal truth / "
@@ -358,7 +358,7 @@ class SensorSpec(_Strict):
         return self
 
 
-class Observer(_Strict):
+class Observer(Strict):
     """A sensor platform: its initial kinematics, its manoeuvres and its sensor."""
 
     initial: Kinematics = Field(default_factory=Kinematics,
@@ -367,7 +367,7 @@ class Observer(_Strict):
     sensor: SensorSpec = Field(description="what it measures and how noisily")
 
 
-class GAInitSpec(_Strict):
+class GAInitSpec(Strict):
     """The GA initialiser of Hashemi and Alfi (2019) (``trackkit.filters.initialise``): per run, a
     genetic algorithm searches the initial target position that minimises an auxiliary EKF's
     normalised residuals over the first ``measurements`` measurements; every filter then
@@ -379,21 +379,21 @@ class GAInitSpec(_Strict):
     measurements: Annotated[int, Field(ge=1)] = Field(
         800, description="K, the first measurements the GA's auxiliary filter sees (range is "
         "not observable from a few tens: about 600 to 800 are needed for the paper's "
-        "< 1000 m, see trackkit.filters.initialise)", json_schema_extra=_unit("measurements"))
+        "< 1000 m, see trackkit.filters.initialise)", json_schema_extra=unit("measurements"))
     block: Annotated[int, Field(ge=1)] = Field(
         25, description="average blocks of this many measurements (odd, dividing K) before "
         "the auxiliary filter runs: the same information at a 25th of the cost",
-        json_schema_extra=_unit("measurements"))
+        json_schema_extra=unit("measurements"))
     population: Annotated[int, Field(ge=2)] = Field(50, description="GA population (the "
                                                     "paper's 50)",
-                                                    json_schema_extra=_unit("candidates"))
+                                                    json_schema_extra=unit("candidates"))
     generations: Annotated[int, Field(ge=0)] = Field(200, description="GA generations (the "
                                                      "paper's 200)",
-                                                     json_schema_extra=_unit("generations"))
+                                                     json_schema_extra=unit("generations"))
     crossover: float = Field(0.8, ge=0, le=1, description="GA crossover rate (the paper's "
-                             "0.8)", json_schema_extra=_unit("probability"))
+                             "0.8)", json_schema_extra=unit("probability"))
     mutation: float = Field(0.05, ge=0, le=1, description="GA per-gene mutation rate (the "
-                            "paper's 0.05)", json_schema_extra=_unit("probability"))
+                            "paper's 0.05)", json_schema_extra=unit("probability"))
     cost: Literal["nis", "nll"] = Field(
         "nis", description="the auxiliary filter's cost: the sum of the NIS (the paper's "
         "residual, normalised) or twice the negative log likelihood (NIS + log det S)")
@@ -406,14 +406,14 @@ class GAInitSpec(_Strict):
         default_factory=lambda: [200.0, 200.0, 10.0, 10.0, 5.0],
         description="the auxiliary filter's prior standard deviations [x, y, vx, vy, f0]: "
         "small in position so that the cost scores the candidate position itself",
-        json_schema_extra=_unit("SI"))
+        json_schema_extra=unit("SI"))
     std: list[PositiveFloat] = Field(
         default_factory=lambda: [1000.0, 1000.0, 10.0, 10.0, 5.0],
         description="the filters' initial standard deviations [x, y, vx, vy, f0] after a GA "
         "start: P0 = diag(std^2). Default: 1000 m, the accuracy the paper claims (Fig. 17), "
         "10 m/s around the velocity guess (a ship's speed) and 5 Hz around the first measured "
         "frequency (the Doppler shift f0 v / c is 5 Hz at 15 kn and 500 Hz)",
-        json_schema_extra=_unit("SI"))
+        json_schema_extra=unit("SI"))
 
     @model_validator(mode="after")
     def _block_divides(self) -> GAInitSpec:
@@ -436,7 +436,7 @@ class GAInitSpec(_Strict):
         return self
 
 
-class PriorSpec(_Strict):
+class PriorSpec(Strict):
     """Filter prior: ``std`` (SI, state order) gives P0 = diag(std^2), or ``cov`` gives P0 in
     full (symmetric positive definite). Without ``mean`` the prior mean of each run is the
     truth plus a draw from N(0, P0) (a consistent prior); with ``mean``, every run starts
@@ -444,13 +444,13 @@ class PriorSpec(_Strict):
 
     std: list[PositiveFloat] | None = Field(
         None, description="standard deviations in state order: P0 = diag(std^2)",
-        json_schema_extra=_unit("SI"))
+        json_schema_extra=unit("SI"))
     cov: list[list[Finite]] | None = Field(
         None, description="P0 in full (symmetric positive definite), instead of std",
-        json_schema_extra=_unit("SI squared"))
+        json_schema_extra=unit("SI squared"))
     mean: list[Finite] | None = Field(
         None, description="the prior mean of every run; without it, each run's is the truth "
-        "plus a draw from N(0, P0)", json_schema_extra=_unit("SI"))
+        "plus a draw from N(0, P0)", json_schema_extra=unit("SI"))
     @model_validator(mode="after")
     def _one_cov(self) -> PriorSpec:
         if (self.std is None) == (self.cov is None):
@@ -508,7 +508,7 @@ class ScenarioPriorSpec(PriorSpec):
         return self.ga if self.ga is not None else GAInitSpec()
 
 
-class GapsSpec(_Strict):
+class GapsSpec(Strict):
     """Missing measurements (the missing-measurements thesis, chapter 4): every listed interval is
     masked out of the simulated measurements of every filter (nan, as if the radar saw nothing).
     Intervals by time, by sample index or by count, several of each, combined (their union);
@@ -524,10 +524,10 @@ class GapsSpec(_Strict):
         default_factory=list, description="[first, last] measurement indices, 0-based, both "
         "included (the missing-measurements thesis's samples 50 to 90, counted from 1, are "
         "[49, 89])",
-        json_schema_extra=_unit("index"))
+        json_schema_extra=unit("index"))
     counts: list[tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=1)]]] = Field(
         default_factory=list, description="[start, count]: count consecutive measurements "
-        "from index start (0-based)", json_schema_extra=_unit("index, samples"))
+        "from index start (0-based)", json_schema_extra=unit("index, samples"))
 
     @model_validator(mode="after")
     def _some(self) -> GapsSpec:
@@ -548,7 +548,7 @@ class GapsSpec(_Strict):
         """The (steps,) bool mask of missing measurements (True = missing)."""
         import numpy as np
 
-        from trackkit.tracking.gaps import (
+        from trackkit.filters.gaps import (
             mask_by_count,
             mask_by_samples,
             mask_by_time,
@@ -566,22 +566,22 @@ class GapsSpec(_Strict):
         return out
 
 
-class DetectorSpec(_Strict):
+class DetectorSpec(Strict):
     """The manoeuvre detector that switches a P' handler to its short window
-    (``trackkit.tracking.maneuver``); fed the innovations of real measurements only."""
+    (``trackkit.filters.maneuver``); fed the innovations of real measurements only."""
 
     type: Literal["NIS", "fading", "window"] = Field(
         description="NIS: eps = nu^T S^-1 nu against the chi-square quantile; fading: rho = "
         "alpha rho + eps (Imhof threshold); window: the sum of the last L residuals")
     pfa: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)] = Field(
         0.01, description="false-alarm probability per step of the on threshold",
-        json_schema_extra=_unit("-"))
+        json_schema_extra=unit("-"))
     alpha: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)] | None = Field(
         None, description="fading memory's factor (fading only; default 0.8)",
-        json_schema_extra=_unit("-"))
+        json_schema_extra=unit("-"))
     L: Annotated[int, Field(ge=1)] | None = Field(
         None, description="window length (window only; default 5)",
-        json_schema_extra=_unit("steps"))
+        json_schema_extra=unit("steps"))
 
     @model_validator(mode="after")
     def _fields_of_type(self) -> DetectorSpec:
@@ -593,7 +593,7 @@ class DetectorSpec(_Strict):
         return self
 
     def build(self, dim_z: int) -> Any:
-        from trackkit.tracking import maneuver as mv
+        from trackkit.filters import maneuver as mv
 
         if self.type == "NIS":
             return mv.NISDetector(pfa=self.pfa, dim_z=dim_z)
@@ -611,9 +611,9 @@ _HANDLER_OPTIONS = {
 }
 
 
-class GapHandlerSpec(_Strict):
+class GapHandlerSpec(Strict):
     """What a filter is fed at a missing measurement (the missing-measurements thesis, chapter 4;
-    ``trackkit.tracking.gaps``): B0 nothing (coast on the prediction), B1 the last real
+    ``trackkit.filters.gaps``): B0 nothing (coast on the prediction), B1 the last real
     measurement, B2 the mean of the last n, P a least-squares fit through the last ``window``
     real measurements extrapolated over the gap (a polynomial in time of ``degree``, or the
     sine ``y = a sin(theta0 + omega tau)`` of a [theta, omega(, a)] state), and P' the same fit
@@ -623,23 +623,23 @@ class GapHandlerSpec(_Strict):
     handler: Literal["B0", "B1", "B2", "P", "P'"] = Field(
         "B0", description="the handler (B0: the plain nan convention)")
     n: Annotated[int, Field(ge=1)] | None = Field(
-        None, description="B2: measurements averaged (default 5)", json_schema_extra=_unit(
+        None, description="B2: measurements averaged (default 5)", json_schema_extra=unit(
             "samples"))
     function: Literal["polynomial", "sine"] | None = Field(
         None, description="P, P': the fitted function (default polynomial; sine needs a "
         "one-channel sensor and the state's theta, omega at indices 0, 1)")
     degree: Annotated[int, Field(ge=0)] | None = Field(
         None, description="P, P' polynomial: its degree (default 1: 1 for a CV target, 2 for "
-        "CA)", json_schema_extra=_unit("-"))
+        "CA)", json_schema_extra=unit("-"))
     window: Annotated[int, Field(ge=1)] | None = Field(
         None, description="P, P': real measurements fitted (default 10 polynomial, 30 sine)",
-        json_schema_extra=_unit("samples"))
+        json_schema_extra=unit("samples"))
     amplitude: Annotated[int, Field(ge=0)] | None = Field(
         None, description="P, P' sine: the state index of the amplitude a, fitted too "
-        "(default none: a = 1)", json_schema_extra=_unit("index"))
+        "(default none: a = 1)", json_schema_extra=unit("index"))
     short_window: Annotated[int, Field(ge=1)] | None = Field(
         None, description="P' (required): the window while the detector is on",
-        json_schema_extra=_unit("samples"))
+        json_schema_extra=unit("samples"))
     detector: DetectorSpec | None = Field(None, description="P' (required): the manoeuvre "
                                           "detector")
 
@@ -674,8 +674,8 @@ class GapHandlerSpec(_Strict):
         return self
 
     def build(self) -> Any:
-        """The ``trackkit.tracking.gaps`` handler."""
-        from trackkit.tracking.gaps import make_handler
+        """The ``trackkit.filters.gaps`` handler."""
+        from trackkit.filters.gaps import make_handler
 
         opts = {k: getattr(self, k) for k in ("n", "degree", "window", "amplitude",
                                                "short_window")
@@ -685,7 +685,7 @@ class GapHandlerSpec(_Strict):
         return make_handler(self.handler, **opts)
 
 
-class TuneSpec(_Strict):
+class TuneSpec(Strict):
     """Off-line tuning of a fuzzy-adaptive filter's membership functions (Naseri Solhdar, section
     3-2):
     ``runs`` independent optimiser runs on the DOM cost of ``realisations`` simulated runs of
@@ -722,7 +722,7 @@ def motion_dim(spec: MotionSpec, dim: int) -> int:
             "CoordinatedTurn": 5}[spec.model]
 
 
-class IMMModelSpec(_Strict):
+class IMMModelSpec(Strict):
     """One model of an IMM: its motion and the filter that runs it."""
 
     motion: MotionSpec = Field(description="the model's motion (its state is the first "
@@ -749,7 +749,7 @@ class IMMModelSpec(_Strict):
         return out
 
 
-class IMMSpec(_Strict):
+class IMMSpec(Strict):
     """The models of an IMM filter, the mode transition matrix and the initial mode
     probabilities; ``extra_std`` (and ``extra_mean``) is the prior of the union state's
     components beyond the scenario's state (a CT model's turn rate omega), which the truth
@@ -759,17 +759,17 @@ class IMMSpec(_Strict):
                                        "and its filter")
     transition: list[list[Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]]] = Field(
         description="p_ij = P(model j at k | model i at k-1): r x r, rows summing to 1",
-        json_schema_extra=_unit("probability"))
+        json_schema_extra=unit("probability"))
     mu0: list[Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]] | None = Field(
         None, description="initial mode probabilities (r values summing to 1); default: "
-        "equal", json_schema_extra=_unit("probability"))
+        "equal", json_schema_extra=unit("probability"))
     extra_std: list[PositiveFloat] = Field(
         default_factory=list, description="prior standard deviations of the union state's "
         "components after the scenario's state, in order (omega of a CT model: rad/s)",
-        json_schema_extra=_unit("SI"))
+        json_schema_extra=unit("SI"))
     extra_mean: list[Finite] | None = Field(
         None, description="prior means of those components (default: zeros)",
-        json_schema_extra=_unit("SI"))
+        json_schema_extra=unit("SI"))
 
     @model_validator(mode="after")
     def _probabilities(self) -> IMMSpec:
@@ -804,7 +804,7 @@ class IMMSpec(_Strict):
         return max(motion_dim(m.motion, dim) for m in self.models)
 
 
-class FilterSpec(_Strict):
+class FilterSpec(Strict):
     """A filter to compare: its type, its options (see the table of each type's options),
     and optionally its own motion model, prior, believed R and fuzzy-system tuning."""
 
@@ -820,7 +820,7 @@ class FilterSpec(_Strict):
                                     "scenario's")
     r0_diag_si: list[PositiveFloat] | None = Field(
         None, description="the R the filter believes (diagonal per channel) instead of the "
-        "true R", json_schema_extra=_unit("SI squared"))
+        "true R", json_schema_extra=unit("SI squared"))
     tune: TuneSpec | None = Field(None, description="tune the fuzzy system off-line "
                                   "(fuzzy-adaptive types without options.params)")
     gaps: GapHandlerSpec | None = Field(None, description="what the filter is fed at a "
@@ -891,7 +891,7 @@ def parse_range(text: str) -> tuple[float, float, bool] | None:
     return low, high, log
 
 
-class SweepSpec(_Strict):
+class SweepSpec(Strict):
     """A parameter sweep for ``trackkit sweep`` (ignored by ``trackkit run``): each swept
     field by its dotted path, as ``trackkit show`` prints it (``observers.0.sensor.sigma_deg``,
     ``sensor.sigma_deg`` for every observer's sensor, ``filters.EKF.motion.q`` for a filter's
@@ -901,13 +901,13 @@ class SweepSpec(_Strict):
     params: dict[str, list[Any] | str] = Field(
         description="path -> values (a list) or a range \"LOW:HIGH\" (uniform) or "
         "\"log:LOW:HIGH\" (log-uniform); a grid takes `points` evenly spaced values of a range",
-        json_schema_extra=_unit("the field's"))
+        json_schema_extra=unit("the field's"))
     design: Literal["grid", "random", "lhs"] = Field(
         "grid", description="the full grid of the values, or `points` points drawn at random "
         "or by Latin hypercube (seeded by the campaign seed)")
     points: Annotated[int, Field(ge=1)] | None = Field(
         None, description="random, lhs: the number of points; grid: the values per range",
-        json_schema_extra=_unit("points"))
+        json_schema_extra=unit("points"))
 
     @model_validator(mode="after")
     def _ranges(self) -> SweepSpec:
@@ -933,7 +933,7 @@ class SweepSpec(_Strict):
         return self
 
 
-class RunSpec(_Strict):
+class RunSpec(Strict):
     """The Monte Carlo runs."""
 
     runs: Annotated[int, Field(ge=1)] = Field(100, description="Monte Carlo runs")
@@ -948,7 +948,7 @@ ErrorGroup = Literal["position", "velocity", "speed", "course", "x", "y", "z", "
                     "x1", "x2", "x3", "frequency", "bearing"]
 
 
-class PublishedSpec(_Strict):
+class PublishedSpec(Strict):
     """A paper's error table for this scenario, as the paper prints it: a report marks its
     ratios (each filter's error over the reference filter's, derived, never typed in) beside
     ours."""
@@ -976,7 +976,7 @@ class PublishedSpec(_Strict):
         return [f for f in self.rmse if f != self.versus]
 
 
-class ReportSpec(_Strict):
+class ReportSpec(Strict):
     """What the report shows."""
 
     groups: list[ErrorGroup] = Field(
@@ -991,13 +991,13 @@ class ReportSpec(_Strict):
         "RMSE/PCRLB, ANEES and ANIS over the measurement times start_s <= t < end_s (a window "
         "ending at duration_s includes the last measurement), reported beside the average "
         "from average_from_s; e.g. { transient = [600, 1000], steady = [1000, 2000] }",
-        json_schema_extra=_unit("s"))
+        json_schema_extra=unit("s"))
     published: list[PublishedSpec] = Field(
         default_factory=list, description="a paper's error tables for this scenario "
         "({ group, versus, rmse = { FILTER = RMSE, ... }, source }): the sweep report marks "
         "the paper's ratios beside ours")
     matching: bool = Field(False, description="report Naseri Solhdar's J1-J4 and the per-step R, "
-                           "S, C, DOM of run 0 (trackkit.eval.matching)")
+                           "S, C, DOM of run 0 (trackkit.eval.covariance_matching)")
     dom_alpha: PositiveFloat = Field(1000.0, description="the alpha of J4 = alpha sum_i "
                                      "RMS(DOM(i,i)) (Naseri Solhdar: 1000 in chapter 3, 5000 "
                                      "after)")
@@ -1005,12 +1005,12 @@ class ReportSpec(_Strict):
         default_factory=list, description="state indices (0-based) whose errors are angles, "
         "wrapped to (-pi, pi] in every metric (e.g. the phase theta of the sine of the "
         "missing-measurements thesis, which "
-        "a measurement of sin(theta) cannot tell from theta + 2 pi)", json_schema_extra=_unit(
+        "a measurement of sin(theta) cannot tell from theta + 2 pi)", json_schema_extra=unit(
             "index"))
     true_class: Literal[tuple(CLASSES)] | None = Field(  # type: ignore[valid-type]
         None, description="the target's class, for the filters that classify (JTC, "
         "MultiFilterJTC): the report gives the probability they put on it against time and "
-        "the runs that end above 0.9", json_schema_extra=_unit("class name"))
+        "the runs that end above 0.9", json_schema_extra=unit("class name"))
     after_gap_s: NonNegFloat = Field(1.0, description="with [gaps]: the window after each "
                                      "gap over which the recovery's RMSE is reported (the "
                                      "round(after_gap_s / step_s) measurements that follow "
@@ -1034,7 +1034,7 @@ class ReportSpec(_Strict):
         return windows
 
 
-class Scenario(_Strict):
+class Scenario(Strict):
     """A scenario: the truth, the observers and their sensors, the filters to compare, the
     Monte Carlo runs and the report."""
 
@@ -1275,8 +1275,6 @@ class Scenario(_Strict):
                              f"holds no measurement time (t = {self.time.step_s:g} .. "
                              f"{T * self.time.step_s:g} s, every {self.time.step_s:g} s); "
                              "expected start_s <= t < stop_s for at least one")
-        from trackkit.scenario.build import channels
-
         dim_z = sum(channels(o.sensor, self.dim) for o in self.observers)
         for i, f in enumerate(self.filters):
             g = f.gaps
@@ -1297,3 +1295,21 @@ class Scenario(_Strict):
             m = self.target.motion
             return len(m.F if m.model == "Linear" else m.A)
         return 2 * self.dim + len(self.target.extras)
+
+
+#: the measurement channels of each sensor model but Position (whose count is its dimension)
+CHANNELS = {
+    "Bearing": ["bearing"],
+    "RangeBearing": ["range", "bearing"],
+    "AzimuthElevation": ["bearing", "elevation"],
+    "BearingFrequency": ["bearing", "frequency"],
+    "MultipathDelay": ["delay", "delay"],
+    "Sine": ["signal"],
+}
+
+
+def channels(spec: SensorSpec, dim: int) -> int:
+    """Number of measurement channels of the sensor."""
+    if spec.model == "Position":
+        return len(spec.r_diag_si) if spec.r_diag_si is not None else dim
+    return len(CHANNELS[spec.model])

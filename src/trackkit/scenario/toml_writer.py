@@ -33,12 +33,12 @@ def dumps(scenario: BaseModel) -> str:
         if isinstance(value, dict) or (_is_tables(value) and value):
             tables.append((key, value))
         else:
-            lines.append(f"{_key(key)} = {_value(value, multiline=True)}")
+            lines.append(f"{_key(key)} = {toml_value(value, multiline=True)}")
     for key, value in tables:
         for table in value if isinstance(value, list) else [value]:
             header = f"[[{_key(key)}]]" if isinstance(value, list) else f"[{_key(key)}]"
             lines += ["", header]
-            lines += [f"{_key(k)} = {_value(v, multiline=True)}" for k, v in table.items()]
+            lines += [f"{_key(k)} = {toml_value(v, multiline=True)}" for k, v in table.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -81,7 +81,7 @@ def _float(v: float) -> str:
     return text if any(c in text for c in ".en") else text + ".0"
 
 
-def _value(v: Any, multiline: bool = False) -> str:
+def toml_value(v: Any, multiline: bool = False) -> str:
     """A TOML value; ``multiline`` puts a list of tables or of long strings one per line (an
     inline table must stay on one line; an array may span lines)."""
     if isinstance(v, bool):
@@ -95,9 +95,9 @@ def _value(v: Any, multiline: bool = False) -> str:
     if isinstance(v, dict):
         if not v:
             return "{}"
-        return "{ " + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + " }"
+        return "{ " + ", ".join(f"{_key(k)} = {toml_value(x)}" for k, x in v.items()) + " }"
     if isinstance(v, list | tuple):
-        items = [_value(x) for x in v]
+        items = [toml_value(x) for x in v]
         long = any(isinstance(x, dict) for x in v) or sum(map(len, items)) > 80
         if multiline and long and items:
             return "[\n" + "".join(f"  {item},\n" for item in items) + "]"

@@ -69,7 +69,7 @@ from numpy.typing import NDArray
 from pydantic import Field, field_validator, model_validator
 
 from trackkit.identify import METHODS
-from trackkit.models.vessel import KNOT, CoefficientSet, reference_vessel
+from trackkit.models.manoeuvring import KNOT, CoefficientSet, reference_vessel
 from trackkit.scenario import (
     descriptions,
     holds_table,
@@ -79,10 +79,10 @@ from trackkit.scenario import (
 from trackkit.scenario.schema import (
     NonNegFloat,
     PositiveFloat,
-    _Strict,
-    _unit,
+    Strict,
     check_plain_name,
     raise_at,
+    unit,
 )
 
 __all__ = [
@@ -107,29 +107,29 @@ FILTERS = METHODS
 MAX_SPEED_KN = 44.0
 
 
-class VesselSpec(_Strict):
+class VesselSpec(Strict):
     """The truth: the coefficient set and how finely the sea trials are simulated."""
 
     coefficients: Literal["reference"] = Field(
         "reference", description="the true coefficients: trackkit's stable reference set "
-        "(the paper's Tables 3-5 are unstable in any units, models.vessel)")
+        "(the paper's Tables 3-5 are unstable in any units, models.manoeuvring)")
     substeps: Annotated[int, Field(ge=1, le=100)] = Field(
         10, description="the truth's forward-Euler sub-steps per sample (1: the identifier's "
         "own discrete model, paper eq. 4; 10: close to the continuous model)",
-        json_schema_extra=_unit("1"))
+        json_schema_extra=unit("1"))
 
     def truth(self) -> CoefficientSet:
         return reference_vessel()
 
 
-class TrialSpec(_Strict):
+class TrialSpec(Strict):
     """The demonstrated sea trial of the reference vessel (SI conversion in
     :meth:`VesselScenario.trial_kwargs`)."""
 
     kind: Literal["zigzag", "turn"] = Field(description="a zig-zag or a turning circle")
     rpm: Annotated[float, Field(gt=0, le=5000, allow_inf_nan=False)] = Field(
         2000.0, description="engine speed (the reference set is calibrated at 2000 rpm, "
-        "18 kn)", json_schema_extra=_unit("rpm"))
+        "18 kn)", json_schema_extra=unit("rpm"))
     speed_kn: Annotated[float, Field(gt=0, le=MAX_SPEED_KN, allow_inf_nan=False)] | None = (
         Field(None, description="approach speed (default: the reference set's straight-line "
               "speed at rpm)"))
@@ -156,7 +156,7 @@ class TrialSpec(_Strict):
         return self
 
 
-class SensorsSpec(_Strict):
+class SensorsSpec(Strict):
     """Simulated GPS and INS (``trackkit.sim.gnss``; the defaults are its own, explained
     there)."""
 
@@ -193,7 +193,7 @@ def _q_body(v: list[float]) -> list[float]:
     return v
 
 
-class IdentificationSpec(_Strict):
+class IdentificationSpec(Strict):
     """What is identified from which data, by which filters, with which prior and noise."""
 
     data: Literal["programme", "trial"] = Field(
@@ -209,24 +209,24 @@ class IdentificationSpec(_Strict):
         "'500 recursive steps' in 500 s suggest 1 s)")
     substeps: Annotated[int, Field(ge=1, le=100)] = Field(
         10, description="the identifier's Euler sub-steps per sample (1: paper eq. 4)",
-        json_schema_extra=_unit("1"))
+        json_schema_extra=unit("1"))
     theta0: Literal["zero", "guess"] = Field(
         "zero", description="the coefficients' prior mean: zero, or the reference set "
         "perturbed per run by up to +-guess_spread (identify.initial_guess)")
     guess_spread: Annotated[float, Field(ge=0, le=2, allow_inf_nan=False)] = Field(
-        0.5, description="relative perturbation of the guess", json_schema_extra=_unit("1"))
+        0.5, description="relative perturbation of the guess", json_schema_extra=unit("1"))
     theta_sd0: PositiveFloat = Field(1.0, description="the coefficients' prior standard "
-                                     "deviation", json_schema_extra=_unit("prime units"))
+                                     "deviation", json_schema_extra=unit("prime units"))
     q_body: list[float] = Field(
         default_factory=lambda: [3e-4, 3e-4, 3e-6], description="random-walk densities of "
         "the body states (the programme's inputs are known at the samples only, and this Q "
         "covers their interpolation; identify.DEFAULT_Q_BODY is for measured inputs)",
-        json_schema_extra=_unit("m^2/s^3, m^2/s^3, rad^2/s^3"))
+        json_schema_extra=unit("m^2/s^3, m^2/s^3, rad^2/s^3"))
     q_theta: NonNegFloat = Field(0.0, description="random-walk density of every coefficient "
-                                 "(0: constant)", json_schema_extra=_unit("prime units^2/s"))
+                                 "(0: constant)", json_schema_extra=unit("prime units^2/s"))
     settle_tol: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = Field(
         0.2, description="a coefficient has settled from the step after which it stays "
-        "within this fraction of the truth", json_schema_extra=_unit("1"))
+        "within this fraction of the truth", json_schema_extra=unit("1"))
 
     _q = field_validator("q_body")(classmethod(lambda cls, v: _q_body(v)))
 
@@ -243,7 +243,7 @@ class IdentificationSpec(_Strict):
         return next((f for f in self.filters if f != "ls"), self.filters[0])
 
 
-class VesselRunSpec(_Strict):
+class VesselRunSpec(Strict):
     """The Monte Carlo runs: every run its own sensor noise (and prior guess)."""
 
     runs: Annotated[int, Field(ge=1, le=100_000)] = Field(10, description="Monte Carlo runs")
@@ -251,7 +251,7 @@ class VesselRunSpec(_Strict):
                                               "SeedSequence(seed, spawn_key=(r, ...))")
 
 
-class VesselScenario(_Strict):
+class VesselScenario(Strict):
     """A vessel identification scenario: truth, trial, sensors, identification and runs."""
 
     name: str = Field(max_length=255, description="the scenario's name; the report goes to "
@@ -283,7 +283,7 @@ class VesselScenario(_Strict):
     def speed(self) -> float:
         """The trial's approach speed (m/s): ``speed_kn``, else the truth's straight-line
         speed at the trial's (or the design) rpm."""
-        from trackkit.models.vessel import straight_line_speed
+        from trackkit.models.manoeuvring import straight_line_speed
 
         truth = self.vessel.truth()
         if self.trial is not None and self.trial.speed_kn is not None:

@@ -55,16 +55,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.io.frames import EnuFrame, course_from_velocity
+from trackkit.io.records import GpsFixes, InsSamples
 
 Array = NDArray[np.float64]
 
 __all__ = [
     "KHOR_MUSA",
-    "GpsFixes",
     "GpsModel",
     "InsModel",
-    "InsSamples",
-    "one_run",
     "sample_truth",
     "sensor_times",
     "simulate_gnss",
@@ -75,34 +73,6 @@ __all__ = [
 #: A default local origin: the Khor Musa channel off Bandar Imam Khomeini, where the SAR boat
 #: Naji 7 of Zolfagharnasab and Seif (2025) operates (latitude, longitude in degrees).
 KHOR_MUSA = (30.43, 49.07)
-
-
-class GpsFixes(NamedTuple):
-    """GPS fixes: ``t`` ``(N,)`` s; ``lat``, ``lon`` ``(..., N)`` WGS-84 degrees (the unit
-    :class:`~trackkit.io.frames.EnuFrame` takes); ``sog`` m/s; ``cog`` rad clockwise from
-    north in [0, 2 pi)."""
-
-    t: Array
-    lat: Array
-    lon: Array
-    sog: Array
-    cog: Array
-
-
-class InsSamples(NamedTuple):
-    """INS output: ``t`` ``(M,)`` s; ``heading`` ``(..., M)`` rad clockwise from north in
-    [0, 2 pi); ``rate`` ``(..., M)`` yaw rate, rad/s, positive clockwise."""
-
-    t: Array
-    heading: Array
-    rate: Array
-
-
-def one_run(record: GpsFixes | InsSamples, index: int | tuple[int, ...]
-            ) -> GpsFixes | InsSamples:
-    """The record of one run: ``index`` applied to the leading axes of every field but ``t``
-    (e.g. to write one run of a batch as an NMEA log)."""
-    return type(record)(record[0], *(np.asarray(x)[index] for x in record[1:]))
 
 
 class Truth(NamedTuple):

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from trackkit.models.motion import _turn_F
+from trackkit.models.motion import turn_transition
 
 Array = NDArray[np.float64]
 
@@ -62,7 +62,7 @@ def step(x: Array, t: float, dt: float, legs: Sequence[LegPlan], dim: int) -> Ar
     out = np.empty_like(x)
     if rate != 0.0:
         # trackkit's turn transition is counter-clockwise positive; a starboard turn is -rate
-        F = _turn_F(np.asarray(-rate), np.asarray(dt))
+        F = turn_transition(np.asarray(-rate), np.asarray(dt))
         ph = np.concatenate([p[..., :2], v[..., :2]], -1) @ F.T
         out[..., :2], out[..., dim:dim + 2] = ph[..., :2], ph[..., 2:]
     else:

@@ -9,7 +9,7 @@ samples ``t_k = k T`` it takes ``substeps`` forward-Euler steps of ``h = T / sub
 
 so ``substeps=1`` is exactly the paper's discrete model (eq. 4) on the recorded samples, and
 more substeps approach the continuous model. The pose follows the exact arc with the body
-velocity held at the mean of each sub-step's ends (``models.vessel.integrate_pose``).
+velocity held at the mean of each sub-step's ends (``models.manoeuvring.integrate_pose``).
 
 The applied nozzle angle follows its command at a limited rate: ``rate_limit`` defaults to
 15 deg/s, our choice for a hydraulic waterjet nozzle (hard over to hard over, 2 x 30 deg, in
@@ -32,7 +32,13 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.models.vessel import N_THETA, Normalisation, _advance, _rhs, straight_line_speed
+from trackkit.models.manoeuvring import (
+    N_THETA,
+    Normalisation,
+    advance_pose_unchecked,
+    rhs_unchecked,
+    straight_line_speed,
+)
 
 __all__ = ["Trial", "turning_circle", "zigzag", "acceleration_run"]
 
@@ -143,8 +149,8 @@ def _run(theta: Array, norm: Normalisation, batch: tuple[int, ...], speed: Array
             d1 = d + np.clip(dc - d, -rate_limit * h, rate_limit * h)
             n1 = n + np.clip(nc - n, -rpm_rate * h, rpm_rate * h)
             s_m = np.stack([0.5 * (d + d1), 0.5 * (n + n1)], -1)
-            x1 = x + h * _rhs(x, s_m, theta, norm) + noise.draw()
-            pose = _advance(pose, 0.5 * (x + x1), h)
+            x1 = x + h * rhs_unchecked(x, s_m, theta, norm) + noise.draw()
+            pose = advance_pose_unchecked(pose, 0.5 * (x + x1), h)
             x, d, n = x1, d1, n1
         rec.append((d, n, x, pose))
     D, N, X, P = (np.stack(a, -1) for a in zip(*rec, strict=True))
@@ -162,7 +168,7 @@ def _setup(theta: ArrayLike, norm: Normalisation, rpm: ArrayLike, speed: ArrayLi
     if theta.ndim < 1 or theta.shape[-1] != N_THETA or not np.all(np.isfinite(theta)):
         raise ValueError(f"theta has shape {theta.shape}; expected finite (..., {N_THETA})")
     if not isinstance(norm, Normalisation):
-        raise ValueError(f"norm = {norm!r}; expected a trackkit.models.vessel.Normalisation")
+        raise ValueError(f"norm = {norm!r}; expected a trackkit.models.manoeuvring.Normalisation")
     rpm = _finite(rpm, rpm_name)
     if np.any(rpm < 0):
         raise ValueError(f"{rpm_name} = {rpm.tolist()!r}; expected engine speeds >= 0")

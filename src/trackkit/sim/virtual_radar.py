@@ -41,10 +41,10 @@ Plots. An object in range is detected with probability ``pd``; its plot is
 p from the site, e standard normal). Clutter: ``N ~ Poisson(clutter)`` false plots per
 scan, uniform in range on ``[min_range, max_range]`` and in bearing on ``[-pi, pi)`` (the
 spatial density the tracker needs is ``clutter_density = clutter / ((max_range - min_range)
-2 pi)`` per metre radian, as ``sim.multitarget.Radar.clutter_density``). Within a scan the
+2 pi)`` per metre radian, as ``sim.scene.Radar.clutter_density``). Within a scan the
 plots are in bearing order, as a rotating radar delivers them.
 
-Determinism. Everything is drawn from ``run_rng(seed, 0)`` (``sim.simulate``), in this order:
+Determinism. Everything is drawn from ``run_rng(seed, 0)`` (``sim.streams``), in this order:
 detection uniforms ``(P,)`` and measurement noise ``(P, 2)`` for the P (scan, object) pairs in
 range (scan-major, then object code), clutter counts ``(S,)``, clutter uniforms ``(C, 2)``
 (scan after scan). The same reports, radar and seed give the same plots, bit for bit.
@@ -59,11 +59,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
-from trackkit.eval.multitarget import Frames
+from trackkit.eval.track_metrics import Frames
 from trackkit.io.records import Reports
+from trackkit.io.scans import Scans
 from trackkit.models.sensors import RangeBearing
-from trackkit.sim.simulate import run_rng
-from trackkit.tracking.scans import Scans
+from trackkit.sim.streams import run_rng
 
 __all__ = ["VirtualRadar", "VirtualRadarRun", "interpolate_positions", "scan_times",
            "virtual_radar"]

@@ -10,9 +10,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from trackkit.eval.multitarget import Frames
+from trackkit.eval.track_metrics import Frames
+from trackkit.io.scans import Scan
 from trackkit.tracking.logic import TrackStatus
-from trackkit.tracking.scans import Scan
 from trackkit.tracking.tracker import Tracker, Tracks
 
 Array = NDArray[np.float64]

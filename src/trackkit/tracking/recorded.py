@@ -23,6 +23,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from trackkit.io import read_header
+
 __all__ = ["TRACK_PROFILES", "Recording", "TrackOptions", "TrackProfile", "TrackingResult",
            "open_recording", "track_recording"]
 
@@ -135,16 +137,6 @@ def resolve_input(file: Path) -> Path:
     return file
 
 
-def _header_of(path: Path) -> list[str]:
-    if path.suffix.lower() in (".parquet", ".pq"):
-        from trackkit.io._table import open_parquet
-
-        return list(open_parquet(path).schema_arrow.names)
-    from trackkit.io._table import _header
-
-    return _header(str(path))
-
-
 def guess_format(path: Path, header: list[str]) -> Kind:
     """The input's kind from its columns: AIS (MMSI), OpenSky (icao24) or detections."""
     names = {h.strip().lower() for h in header}
@@ -163,7 +155,7 @@ def guess_format(path: Path, header: list[str]) -> Kind:
 def open_recording(path: Path | str, options: TrackOptions) -> Recording:
     """``path`` (or a bundled sample's name) with its kind, checked against the options."""
     file = resolve_input(Path(path))
-    header = _header_of(file)
+    header = read_header(file)
     kind = options.fmt or guess_format(file, header)
     if kind != "detections" and not options.as_radar:
         raise ValueError(f"{file}: {kind} position reports are tracked through a "
@@ -256,15 +248,16 @@ def _read_input(rec: Recording, progress: Callable[[float, float], None]
 def _tracker(sensor: Any, pd: float, clutter_density: float, q: float, v_std: float,
              associator: str, filt: str) -> tuple[Any, dict[str, Any]]:
     """The tracker of ``trackkit track``, and its description for the report."""
-    import trackkit as tk
+    from trackkit.filters import EKF, UKF
+    from trackkit.models import ConstantVelocity
     from trackkit.tracking import GNN, JPDA, ScoreLogic, SinglePoint, Tracker
 
     # one new object per hundred false plots: a track is confirmed after two or three hits
     birth = clutter_density / 100
     logic = ScoreLogic.from_sprt(alpha=1e-2, beta=1e-3, pd=pd, clutter_density=clutter_density,
                                  new_target_density=birth)
-    f = tk.filters.EKF() if filt == "ekf" else tk.filters.UKF()
-    tracker = Tracker(f, tk.models.ConstantVelocity(dim=2, q=q), sensor, pd=pd,
+    f = EKF() if filt == "ekf" else UKF()
+    tracker = Tracker(f, ConstantVelocity(dim=2, q=q), sensor, pd=pd,
                       clutter_density=clutter_density,
                       associator=GNN() if associator == "gnn" else JPDA(),
                       logic=logic, initiator=SinglePoint(v_std=v_std))
@@ -295,7 +288,7 @@ def _limit_scans(scans: Any, until: float | None, max_scans: int | None) -> Any:
     """The first scans: up to ``until`` s after the first, at most ``max_scans``."""
     import numpy as np
 
-    from trackkit.tracking.scans import Scans
+    from trackkit.io.scans import Scans
 
     n = len(scans)
     if until is not None and n:
@@ -312,7 +305,7 @@ def _radar_job(rec: Recording, reports: Any, read: Any) -> dict[str, Any]:
     """The virtual radar's plots of AIS or ADS-B reports, and the truth to score against."""
     import numpy as np
 
-    from trackkit.report.tracks import ground_geodetic
+    from trackkit.io.frames import ground_geodetic
     from trackkit.sim.virtual_radar import VirtualRadar, virtual_radar
 
     s, o = rec.settings, rec.options
@@ -368,8 +361,8 @@ def _detections_job(rec: Recording, scans: Any, read: Any, polar: bool) -> dict[
     """A detections file's plots, tracked as they are (no truth)."""
     import numpy as np
 
-    import trackkit as tk
     from trackkit.io import EnuFrame
+    from trackkit.models import Position, RangeBearing
 
     s, o = rec.settings, rec.options
     if len(scans) == 0:
@@ -381,13 +374,13 @@ def _detections_job(rec: Recording, scans: Any, read: Any, polar: bool) -> dict[
     scans = _limit_scans(scans, o.until, o.max_scans)
     z = scans.z
     if polar:  # range, bearing (rad, nautical, as the reader gives them) from x, y = 0, 0
-        sensor = tk.models.RangeBearing(origin=(0.0, 0.0), sigma_range=s.sigma_range,
+        sensor = RangeBearing(origin=(0.0, 0.0), sigma_range=s.sigma_range,
                                         sigma_bearing=math.radians(s.sigma_bearing_deg))
         volume = max(float(z[:, 0].max()), 1.0) * 2 * math.pi if len(z) else 2 * math.pi
         points = np.stack([z[:, 0] * np.sin(z[:, 1]), z[:, 0] * np.cos(z[:, 1])], axis=-1)
         site: tuple[float, float] | None = (0.0, 0.0)
     else:
-        sensor = tk.models.Position(dim=2, sigma=s.sigma_pos)
+        sensor = Position(dim=2, sigma=s.sigma_pos)
         volume = float(max(np.ptp(z[:, 0]), 1.0) * max(np.ptp(z[:, 1]), 1.0)) if len(z) else 1.0
         points = z
         site = None

@@ -33,6 +33,7 @@ from trackkit.angles import wrap
 from trackkit.belief import Gaussian
 from trackkit.filters.base import register
 from trackkit.filters.kalman import EKF, KF
+from trackkit.io.scans import Scan
 from trackkit.models.sensors import Position, RangeBearing
 from trackkit.tracking.association import (
     JPDA_MAX_EVENTS,
@@ -55,7 +56,6 @@ from trackkit.tracking.logic import (
     select,
     to_delete,
 )
-from trackkit.tracking.scans import Scan
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]

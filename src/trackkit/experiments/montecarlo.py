@@ -1,7 +1,7 @@
 """Monte Carlo comparison of filters on a scenario: simulate, estimate, evaluate, streamed.
 
 The runs are cut into fixed blocks (``scenario.run.block`` runs each). A block is simulated
-(``trackkit.sim.simulate``) and filtered as one batch. Its statistics are accumulated as it
+(``trackkit.scenario.simulate``) and filtered as one batch. Its statistics are accumulated as it
 streams (``MonteCarloMetrics``, fed a window of steps at a time): each step's terms are summed
 in float64 over the block, and only these block totals enter an exact accumulator, so the
 blocks merge exactly and in any order. Its PCRLB information sums are added in block order.
@@ -33,13 +33,13 @@ from numpy.typing import NDArray
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation
 from trackkit.eval import metrics as _metrics
+from trackkit.eval.covariance_matching import MatchingMetrics, measurement_noise_rms, noise_in_use
 from trackkit.eval.crlb import PCRLB, rmse_bound
-from trackkit.eval.matching import MatchingMetrics, measurement_noise_rms, noise_in_use
 from trackkit.eval.metrics import MonteCarloMetrics
-from trackkit.eval.results import Example, FilterResult, MonteCarloResult
+from trackkit.experiments.results import Example, FilterResult, MonteCarloResult
 from trackkit.scenario.build import Plan, compile_scenario
 from trackkit.scenario.schema import Scenario, window_steps
-from trackkit.sim.simulate import BlockData, simulate_block
+from trackkit.scenario.simulate import BlockData, simulate_block
 
 Array = NDArray[np.float64]
 
@@ -419,7 +419,7 @@ def _gap_windows(plan: Plan) -> tuple[Array, Array] | None:
     without [gaps]."""
     if plan.gap_mask is None:
         return None
-    from trackkit.tracking.gaps import gap_and_after
+    from trackkit.filters.gaps import gap_and_after
 
     after = int(round(plan.scenario.report.after_gap_s / plan.dt))
     mask = plan.gap_mask
@@ -744,9 +744,9 @@ def run_scenario(
     done (fractional within a block) every few seconds. A run count whose per-run results do
     not fit in memory is refused at once; with ``max_seconds``, the first block is timed and a
     run count whose estimate exceeds it is refused (``RunBudgetError``). Fuzzy filters with a
-    ``tune`` block must be tuned first: ``trackkit.eval.compare`` does both.
+    ``tune`` block must be tuned first: ``trackkit.experiments.compare`` does both.
     """
-    from trackkit.eval.executors import execute
+    from trackkit.experiments.executors import execute
 
     if runs is not None and runs < 1:
         raise ValueError(f"runs = {runs}; expected at least 1")
@@ -756,7 +756,7 @@ def run_scenario(
     untuned = [f.name for f in s.filters if f.tune is not None]
     if untuned:
         raise ValueError(f"filters {untuned} have a tune block and are not tuned yet; run the "
-                         "scenario with trackkit.eval.compare, which tunes them first")
+                         "scenario with trackkit.experiments.compare, which tunes them first")
     check_memory(s)
     plan_of(s)  # compile (and so validate models) before any work is sent out
     total, size = s.run.runs, s.run.block

@@ -1,4 +1,4 @@
-"""Randomised track initiation (trackkit.network.initiate, seed 004 section 2.5)."""
+"""Randomised track initiation (trackkit.tracking.initiate, seed 004 section 2.5)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from trackkit.angles import wrap
-from trackkit.network.bearings import BearingSet
 from trackkit.network.composite import CONVERGED, composite_measurement
-from trackkit.network.initiate import candidates, congruity, initiate
+from trackkit.tracking.bearings import BearingSet
+from trackkit.tracking.initiate import candidates, congruity, initiate_from_bearing
 
 SIGMA = math.radians(2.0)
 X0 = np.array([8000.0, 15000.0, -10.0, -5.0])  # the target at t = 0
@@ -69,7 +69,7 @@ def test_initiation_seeds_the_composite_measurement():
         rng = np.random.default_rng(seed)
         b = _two_sensors(rng)
         k = 11  # the fixed sensor's last bearing
-        ini = initiate(k, b, 100.0, 30000.0, 30.0, rng)
+        ini = initiate_from_bearing(k, b, 100.0, 30000.0, 30.0, rng)
         truth = X0[:2] + b.t[k] * X0[2:]
         errors.append(np.hypot(*(ini.mean[:2] - truth)))
         assert ini.support >= 12
@@ -94,7 +94,7 @@ def test_initiation_is_not_drawn_to_another_targets_bearings():
     both = BearingSet(np.concatenate([a.z, zb]), np.concatenate([a.t, a.t]),
                       np.concatenate([a.sensor, a.sensor]), np.concatenate([a.sigma, a.sigma]),
                       np.concatenate([a.source, a.source]))
-    ini = initiate(11, both, 100.0, 30000.0, 30.0, rng)
+    ini = initiate_from_bearing(11, both, 100.0, 30000.0, 30.0, rng)
     truth = X0[:2] + a.t[11] * X0[2:]
     assert np.hypot(*(ini.mean[:2] - truth)) < 1500.0
     assert 12 <= ini.support <= 26
@@ -109,7 +109,8 @@ def test_initiation_is_not_drawn_to_another_targets_bearings():
      r"states have shape \(3,\)"),
     (lambda r: congruity(np.zeros(4), 0.0, BearingSet([0.0], [0.0], [[0, 0]], [0.0], [-1])),
      "bearings.sigma has entries <= 0"),
-    (lambda r: initiate(3, BearingSet([0.0], [0.0], [[0, 0]], [SIGMA], [-1]), 1.0, 5.0, 1.0, r),
+    (lambda r: initiate_from_bearing(3, BearingSet([0.0], [0.0], [[0, 0]], [SIGMA], [-1]),
+                                     1.0, 5.0, 1.0, r),
      "bearing = 3; expected an index into the 1 bearings"),
 ])
 def test_bad_input_is_named(call, message):

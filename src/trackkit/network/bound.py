@@ -45,11 +45,11 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.eval.crlb import _inverse, _predict_covariance, rmse_bound
+from trackkit.eval.crlb import inverse_spd, predict_information, rmse_bound
 from trackkit.linalg import check_covariance, symmetrize
 from trackkit.models.motion import ConstantVelocity
-from trackkit.models.sensors import Bearing, _check_convention
-from trackkit.sim.network import NetworkRun
+from trackkit.models.sensors import Bearing, check_convention
+from trackkit.sim.sensor_network import NetworkRun
 
 __all__ = [
     "NetworkBound",
@@ -95,7 +95,7 @@ def _check_q(q: float) -> float:
 def _rmse(J: Array, have_prior: bool) -> tuple[Array, Array]:
     """Position and velocity RMSE bounds of J ``(..., 4, 4)``; inf where J is singular."""
     if have_prior:  # J >= P0^-1 is positive definite
-        P = _inverse(J, "PCRLB information matrix J_k")
+        P = inverse_spd(J, "PCRLB information matrix J_k")
         return rmse_bound(P, [0, 1]), rmse_bound(P, [2, 3])
     # without a prior, judge singularity on the unit-diagonal scale, where metres and m/s
     # weigh alike (J's raw eigenvalues span the squared ratio of ranges to times)
@@ -149,7 +149,7 @@ def _recursion(
         except ValueError:
             raise ValueError(f"prior_cov has shape {P0.shape}; expected (4, 4) or a batch "
                              f"broadcastable to {shape}") from None
-        J = _inverse(np.ascontiguousarray(P0), "prior_cov")
+        J = inverse_spd(np.ascontiguousarray(P0), "prior_cov")
     else:
         J = np.zeros(shape)
 
@@ -169,7 +169,7 @@ def _recursion(
                 Jp = symmetrize(Finv.mT @ J @ Finv)
             else:
                 F, Q = cv.jacobian(None, step), cv.noise(None, step)
-                Jp = _predict_covariance(J, F, Q, runs_axis=False)
+                Jp = predict_information(J, F, Q, runs_axis=False)
             J = np.where(moved[..., None, None, None], Jp, J)
         J = symmetrize(J + info_at(order[..., k]))
         pos[..., k, :], vel[..., k, :] = _rmse(J, have_prior)
@@ -292,7 +292,7 @@ def network_pcrlb(
     Returns:
         ``NetworkBound``.
     """
-    _check_convention(convention)
+    check_convention(convention)
     t = np.asarray(time, dtype=float)
     S = np.asarray(sensor_pos, dtype=float)
     x = np.asarray(truth, dtype=float)
@@ -328,7 +328,7 @@ def network_run_pcrlb(
     history: bool = False,
     convention: str = "nautical",
 ) -> NetworkBound:
-    """The bound of a ``sim.network`` run from the bearings of ``agents`` (default all: the
+    """The bound of a ``sim.sensor_network`` run from the bearings of ``agents`` (default all: the
     centralised-fusion bound; ``[i]``: agent i alone), prior at t = 0, batch axis runs.
 
     ``q`` should be the run's; out-of-range slots carry no information.

@@ -3,9 +3,9 @@
 
 One run, one multi-target problem:
 
-* truth and execution schedule from ``sim.network.simulate_network`` (seed, run): the target
+* truth and execution schedule from ``sim.sensor_network.simulate_network`` (seed, run): the target
   states at every execution, the execution times and the standard-normal bearing noise
-  (the same draws as ``sim.network.schedule``);
+  (the same draws as ``sim.sensor_network.schedule``);
 * the agents execute one at a time in time order (ties: lower agent index first). At its
   execution the agent is moved from its previous execution on its last commanded course
   (``steering.move``; without steering, the straight line ``p0 + t v`` exactly, so that the
@@ -60,7 +60,7 @@ from trackkit.network.agents import (
 from trackkit.network.central import CentralFusion, CentralSettings, central_fusion
 from trackkit.network.steering import TURN_RATE, Steering, move
 from trackkit.network.tracks import Message
-from trackkit.sim.network import (
+from trackkit.sim.sensor_network import (
     NetworkRun,
     bearings_at,
     disk_graph,

@@ -198,7 +198,7 @@ def _prime(x: Array, s: Array, norm: Normalisation):
     return x[..., 0] / U0, x[..., 1] / U0, x[..., 2] * (L / U0), s[..., 0], s[..., 1] / norm.rpm
 
 
-def _rhs(x: Array, s: Array, th: Array, norm: Normalisation) -> Array:
+def rhs_unchecked(x: Array, s: Array, th: Array, norm: Normalisation) -> Array:
     """Unchecked f in SI: ``D f(x', s', theta)`` (elementwise, so batches are bitwise equal
     to single rows)."""
     f1, f2, f3 = prime_rates(*_prime(x, s, norm), [th[..., i] for i in range(N_THETA)])
@@ -221,7 +221,8 @@ def regressors(x: ArrayLike, s: ArrayLike, norm: Normalisation = IDENTITY) -> Ar
 def rhs(x: ArrayLike, s: ArrayLike, theta: ArrayLike, norm: Normalisation = IDENTITY) -> Array:
     """``dx/dt = f(x, s, theta)`` in SI (..., 3) for SI ``x`` and ``s`` and ``theta`` in
     ``norm``'s prime units."""
-    return _rhs(_array(x, 3, "x"), _array(s, 2, "s"), _array(theta, N_THETA, "theta"), norm)
+    return rhs_unchecked(_array(x, 3, "x"), _array(s, 2, "s"), _array(theta, N_THETA, "theta"),
+                         norm)
 
 
 def _jac(x: Array, s: Array, th: Array, norm: Normalisation) -> Array:
@@ -274,8 +275,8 @@ def step(x: ArrayLike, s_m: ArrayLike, theta: ArrayLike, T: ArrayLike,
     """Forward Euler ``x_{k+1} = x_k + T f(x_k, s_m, theta)``."""
     x = _array(x, 3, "x")
     T = _finite_step(T)
-    return x + T[..., None] * _rhs(x, _array(s_m, 2, "s_m"), _array(theta, N_THETA, "theta"),
-                                   norm)
+    return x + T[..., None] * rhs_unchecked(x, _array(s_m, 2, "s_m"),
+                                            _array(theta, N_THETA, "theta"), norm)
 
 
 def step_jacobian_state(x: ArrayLike, s_m: ArrayLike, theta: ArrayLike, T: ArrayLike,
@@ -369,7 +370,7 @@ def pose_rate(pose: ArrayLike, x: ArrayLike) -> Array:
     return np.stack(np.broadcast_arrays(u * sp + v * cp, u * cp - v * sp, r), -1)
 
 
-def _advance(pose: Array, x: Array, dt: float | Array) -> Array:
+def advance_pose_unchecked(pose: Array, x: Array, dt: float | Array) -> Array:
     """Exact pose after ``dt`` with constant body velocity ``x``: the body displacement
     ``(u S - v C, u C + v S)`` (forward, starboard) with ``S = sin(r dt)/r`` and
     ``C = (1 - cos(r dt))/r`` rotated to east/north by the initial heading."""
@@ -388,7 +389,8 @@ def _advance(pose: Array, x: Array, dt: float | Array) -> Array:
 
 def advance_pose(pose: ArrayLike, x: ArrayLike, dt: float) -> Array:
     """Pose after ``dt`` seconds at constant body velocity ``x = [u, v, r]`` (an exact arc)."""
-    return _advance(_array(pose, 3, "pose"), _array(x, 3, "x"), float(_finite_step(dt, "dt")))
+    return advance_pose_unchecked(_array(pose, 3, "pose"), _array(x, 3, "x"),
+                                  float(_finite_step(dt, "dt")))
 
 
 def integrate_pose(x: ArrayLike, dt: float, pose0: ArrayLike = (0.0, 0.0, 0.0)) -> Array:
@@ -402,7 +404,7 @@ def integrate_pose(x: ArrayLike, dt: float, pose0: ArrayLike = (0.0, 0.0, 0.0)) 
     pose = np.broadcast_to(_array(pose0, 3, "pose0"), x.shape[:-2] + (3,))
     out = [pose]
     for k in range(x.shape[-2] - 1):
-        pose = _advance(pose, 0.5 * (x[..., k, :] + x[..., k + 1, :]), dt)
+        pose = advance_pose_unchecked(pose, 0.5 * (x[..., k, :] + x[..., k + 1, :]), dt)
         out.append(pose)
     return np.stack(out, -2)
 

@@ -1,9 +1,9 @@
 """Monte Carlo of multi-target trackers on a simulated scene: simulate, track, evaluate.
 
-Run r of a scene is simulated from ``run_rng(seed, r)`` alone (``sim.multitarget``), every
+Run r of a scene is simulated from ``run_rng(seed, r)`` alone (``sim.scene``), every
 tracker sees the same plots, and each run is evaluated on its own: GOSPA and OSPA per scan
 (against the true positions, cut-off ``c``) and the track-level counts
-(``eval.multitarget.track_counts``). Runs go in fixed blocks to an executor (in-process or
+(``eval.track_metrics.track_counts``). Runs go in fixed blocks to an executor (in-process or
 Dask, as the single-target engine); per-run numbers are kept and reduced in run order, so a
 result is bit-identical whatever the chunking and the executor, on one machine.
 """
@@ -17,14 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from trackkit.eval.multitarget import (
+from trackkit.eval.track_metrics import (
     TrackCounts,
     gospa_steps,
     ospa_steps,
     track_counts,
     track_summary,
 )
-from trackkit.sim.multitarget import Scene, simulate_scene
+from trackkit.sim.scene import Scene, simulate_scene
 from trackkit.tracking.history import run_tracker
 from trackkit.tracking.tracker import Tracker
 
@@ -128,7 +128,7 @@ def run_tracking(scene: Scene, trackers: dict[str, Tracker], runs: int, seed: in
     """Every tracker of ``trackers`` on runs 0..runs-1 of ``scene``: GOSPA (c, p = 2) and
     OSPA (c, ``ospa_p``) per scan, track counts (a truth counts as confirmed within
     ``within`` seconds of its birth), in blocks of ``block`` runs on an executor."""
-    from trackkit.eval.executors import execute
+    from trackkit.experiments.executors import execute
 
     if not trackers:
         raise ValueError("trackers is empty; expected at least one named tracker")

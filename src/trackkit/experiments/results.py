@@ -33,8 +33,8 @@ class FilterResult:
     nis_in_bounds: float
     diverged: int  # runs diverged (rule: trackkit.eval.metrics docstring)
     seconds_per_step: float  # wall time per run-step (filter only, not simulation)
-    #: Naseri Solhdar's per-run metrics (trackkit.eval.matching): "J2" (runs, m), "J3" (runs, n),
-    #: "J4" (runs,)
+    #: Naseri Solhdar's per-run metrics (trackkit.eval.covariance_matching): "J2" (runs, m),
+    #: "J3" (runs, n), "J4" (runs,)
     matching: dict[str, Array] = field(default_factory=dict)
     #: missing measurements (scenario [gaps], filter gaps handlers): "handler" (label or
     #: None), per-run sums of squared errors per group over the gap steps "gap_sse" and the
@@ -66,7 +66,7 @@ class Example:
     estimates: dict[str, tuple[Array, Array]]  # filter -> (means (steps, n), covs (steps, n, n))
     measurements: Array | None = None  # (steps, m), nan where missing
     #: filter -> {"R", "S", "C", "DOM"}: diagonals per step (steps, m) of the innovation
-    #: covariance matching (trackkit.eval.matching)
+    #: covariance matching (trackkit.eval.covariance_matching)
     logs: dict[str, dict[str, Array]] = field(default_factory=dict)
     #: filter -> the pseudo-measurements it was fed (steps, m), nan elsewhere (gap handlers)
     pseudo: dict[str, Array] = field(default_factory=dict)
@@ -92,7 +92,7 @@ class MonteCarloResult:
     notes: list[str] = field(default_factory=list)  # assumptions and skipped items to report
     j1: Array | None = None  # (runs, m) raw measurement noise RMS of each run (J1)
     dom_alpha: float = 1000.0  # the alpha of J4
-    #: filter -> tuning summary of its fuzzy system (trackkit.eval.tuning.TuningResult)
+    #: filter -> tuning summary of its fuzzy system (trackkit.experiments.tuning.TuningResult)
     tuning: dict[str, object] = field(default_factory=dict)
     #: the step indices [gaps] hides, and the ones after them (``after_gap_s``) where the
     #: recovery is scored; None without [gaps]

@@ -23,7 +23,7 @@ design points) to a campaign reuses every point already computed.
 
 A block file is a line naming the format, a line of JSON (the block's point key, index, runs
 and the structure of its value) and an ``.npz`` archive of its arrays
-(``trackkit.eval.safestore``): reading it builds numbers, strings, containers, arrays and
+(``trackkit.experiments.safestore``): reading it builds numbers, strings, containers, arrays and
 trackkit's block types only, and runs no code of the file's, so a campaign directory from
 someone else is safe to open. Block files of older trackkit versions were pickles, which
 can run code when read; they are refused, never opened.
@@ -43,7 +43,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from trackkit.eval import safestore
+from trackkit.experiments import safestore
 
 __all__ = ["CampaignStore", "CampaignMismatch", "CheckpointError", "atomic_write",
            "code_version", "MANIFEST", "POINTS_DIR", "STORE_FORMAT"]
@@ -72,11 +72,11 @@ _NAMES = {"format": "store format", "scenario": "scenario", "parameters": "swept
 
 @lru_cache(maxsize=1)
 def _block_types() -> tuple[type, ...]:
-    """The classes a block file may hold (``trackkit.eval.montecarlo.BlockResult`` and what it
-    is made of); a block file naming any other is refused."""
+    """The classes a block file may hold (``experiments.montecarlo.BlockResult`` and what it is
+    made of); a block file naming any other is refused."""
     from trackkit.eval.metrics import MonteCarloMetrics
-    from trackkit.eval.montecarlo import BearingError, BlockResult, CourseError, SpeedError
-    from trackkit.eval.results import Example
+    from trackkit.experiments.montecarlo import BearingError, BlockResult, CourseError, SpeedError
+    from trackkit.experiments.results import Example
 
     return (BlockResult, MonteCarloMetrics, Example, SpeedError, CourseError, BearingError)
 

@@ -1,5 +1,5 @@
 """Monte Carlo of a network scenario (Jalalipoor and Kardehi Moghaddam 2021): runs of
-``network.run.run_network``, each agent scored against the true targets beside the
+``network.inprocess.run_network``, each agent scored against the true targets beside the
 centralised reference and the centralised PCRLB of that run.
 
     sc = load_network("net-baseline")
@@ -13,13 +13,13 @@ Python loop (each run is one multi-target problem whose agents execute one at a 
 With ``agents="processes"`` a run is ``network.processes.run_network_processes`` instead
 (every agent its own OS process over ZeroMQ; the same numbers when the scenario has no loss).
 
-**Time axis.** Every agent executes exactly once per period (``sim.network.schedule``), so
+**Time axis.** Every agent executes exactly once per period (``sim.sensor_network.schedule``), so
 execution e of every agent lies in slot e, ``[e P, (e + 1) P)``; series are indexed by e and
 plotted at the slot's expected time ``e P + jitter / 2``.
 
 **Scores** of one tracker's confirmed tracks at one execution (``eval.network_score``, cut-off
 ``report.c_m``, GOSPA p = 2, alpha = 2): the number of confirmed tracks, GOSPA, and for every
-target assigned a track (the optimal assignment of ``eval.multitarget.assign``, pairs closer
+target assigned a track (the optimal assignment of ``eval.track_metrics.assign``, pairs closer
 than c), the position error ``|p_hat - p|``, the velocity error ``|v_hat - v|`` and the range
 error ``| |p_hat - s| - |p - s| |`` (s: the agent's position); nan where the target has no
 track.
@@ -30,9 +30,9 @@ at time t is compared with the last central execution at that time (``searchsort
 jitter 0 several agents share a time, and the reference then holds all their bearings), and
 its range error is taken from agent a's position.
 
-**The bound.** The centralised bearings-only PCRLB of the run (``eval.network_bound
+**The bound.** The centralised bearings-only PCRLB of the run (``network.bound
 .network_pcrlb``) on the agents' *actual* paths (steered, not the straight lines of
-``sim.network``): one event per agent execution with that agent's position, bearing std and
+``sim.sensor_network``): one event per agent execution with that agent's position, bearing std and
 the targets in its measurement range, the prior ``diag(sp^2, sp^2, sv^2, sv^2)`` at t = 0
 (``report.prior_pos_std_m``, ``prior_vel_std_mps``) and the scenario's q. Agent a's entry at
 execution e is the bound after that event, per target (position and velocity).
@@ -56,10 +56,10 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from trackkit.eval.multitarget import Frames, assign
-from trackkit.eval.network_bound import network_pcrlb
 from trackkit.eval.network_score import score_trace
-from trackkit.network.run import NetworkResult, Trace, run_network
+from trackkit.eval.track_metrics import Frames, assign
+from trackkit.network.bound import network_pcrlb
+from trackkit.network.inprocess import NetworkResult, Trace, run_network
 
 __all__ = ["NetworkMonteCarlo", "RunScores", "run_network_mc", "score_run"]
 

@@ -1,7 +1,7 @@
 """Timestamped bearings as the network's agents hold and exchange them (Jalalipoor and Kardehi
 Moghaddam 2021): one record for an agent's scans, its unclaimed pool, the bearings in a message and
-the initiation's input. (``trackkit.sim.network.Bearings`` is the simulation's padded record of
-every bearing slot of a run batch, a different thing.)"""
+the initiation's input. (``trackkit.sim.sensor_network.Bearings`` is the simulation's padded
+record of every bearing slot of a run batch, a different thing.)"""
 
 from __future__ import annotations
 

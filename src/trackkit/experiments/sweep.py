@@ -1,7 +1,7 @@
 """Campaigns: a full Monte Carlo comparison at every point of a sweep over scenario fields.
 
-    from trackkit.eval.sweep import parse_param, plan_campaign, run_campaign
-    from trackkit.eval.checkpoint import CampaignStore
+    from trackkit.experiments.sweep import parse_param, plan_campaign, run_campaign
+    from trackkit.experiments.checkpoint import CampaignStore
     c = plan_campaign(load("bo-cv"), [parse_param("sensor.sigma_deg=1,2,4"),
                                      parse_param("filters.EKF.motion.q=1e-5,1e-4,1e-3")],
                       runs=200, seed=7, block=50)
@@ -47,7 +47,7 @@ numbers).
 
 **Execution.** Every (point, block) is one task, in this process or on Dask (a local cluster
 with ``workers``, or the scheduler at ``scheduler``), with one client for the whole campaign.
-Each finished block is stored at once (``trackkit.eval.checkpoint``); a point is combined
+Each finished block is stored at once (``trackkit.experiments.checkpoint``); a point is combined
 (``combine``) from its stored blocks once they are all there, so a result is the same bits
 whether its blocks came from one process, several workers, a worker that died, or a campaign
 interrupted and resumed. A block that fails ``attempts`` times stops the campaign with
@@ -71,10 +71,10 @@ from typing import Any
 
 import numpy as np
 
-from trackkit.eval.checkpoint import CampaignStore, code_version
-from trackkit.eval.executors import dask_client
-from trackkit.eval.montecarlo import check_memory, combine, plan_of, run_blocks, with_run
-from trackkit.eval.results import MonteCarloResult
+from trackkit.experiments.checkpoint import CampaignStore, code_version
+from trackkit.experiments.executors import dask_client
+from trackkit.experiments.montecarlo import check_memory, combine, plan_of, run_blocks, with_run
+from trackkit.experiments.results import MonteCarloResult
 from trackkit.scenario.schema import Scenario, parse_range
 
 __all__ = ["Param", "Point", "Campaign", "BlockFailed", "Listener", "parse_param",

@@ -2,7 +2,7 @@
 steered against straight courses, or a lossy network against a lossless one.
 
 Both must be the same scenario's runs 0 .. R-1 from the same seed, so that run r has the
-same targets and bearing noise in both (``eval.network_mc``): the comparison is paired. Per
+same targets and bearing noise in both (``experiments.network_mc``): the comparison is paired. Per
 agent and run, the position MSE over the window (executions where a target is held, pooled
 over the targets) gives ``d_r = MSE_a,r - MSE_b,r``; the paired t statistic
 
@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from trackkit.eval.network_mc import NetworkMonteCarlo
+from trackkit.experiments.network_mc import NetworkMonteCarlo
 
 __all__ = ["PairedComparison", "compare_networks", "run_mse"]
 

@@ -89,7 +89,7 @@ from trackkit.identify import (
     settling_step,
 )
 from trackkit.io.navigation import BodyMeasurements, MeasuredInputs, inputs_on_grid
-from trackkit.models.vessel import (
+from trackkit.models.manoeuvring import (
     N_THETA,
     CoefficientSet,
     Normalisation,

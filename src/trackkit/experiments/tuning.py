@@ -32,7 +32,7 @@ from trackkit.optimize import GA, ICA, PSO
 from trackkit.optimize.base import Optimizer, repeat
 from trackkit.scenario.build import Plan, compile_scenario
 from trackkit.scenario.schema import FilterSpec, RunSpec, Scenario, TuneSpec
-from trackkit.sim.simulate import simulate_block
+from trackkit.scenario.simulate import simulate_block
 
 Array = NDArray[np.float64]
 

@@ -5,7 +5,7 @@ run the Monte Carlo, and track run 0 once more for the report's example picture.
     result, example = run_multitarget(scenario, runs=20, workers=2)
     write_tracking_report(result, scenario, example, "trackkit-out/radar-crossing")
 
-The Monte Carlo is ``trackkit.eval.tracking_mc.run_tracking`` (per-run simulation, fixed
+The Monte Carlo is ``trackkit.experiments.tracking_mc.run_tracking`` (per-run simulation, fixed
 blocks of runs on an executor, per-run numbers reduced in run order, so a result is
 bit-identical whatever the block size and the executor on one machine).
 """
@@ -16,9 +16,9 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
-from trackkit.eval.tracking_mc import TrackingResult, run_tracking
+from trackkit.experiments.tracking_mc import TrackingResult, run_tracking
 from trackkit.scenario.multitarget import MultiTargetScenario, build, scan_period
-from trackkit.sim.multitarget import SceneRun, simulate_scene
+from trackkit.sim.scene import SceneRun, simulate_scene
 from trackkit.tracking.history import TrackHistory, run_tracker
 
 __all__ = ["TrackingExample", "run_multitarget"]

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from trackkit.eval.montecarlo import run_scenario, with_run
-from trackkit.eval.results import MonteCarloResult
-from trackkit.eval.tuning import tune_scenario
+from trackkit.experiments.montecarlo import run_scenario, with_run
+from trackkit.experiments.results import MonteCarloResult
+from trackkit.experiments.tuning import tune_scenario
 from trackkit.scenario.schema import Scenario
 
 __all__ = ["compare"]

@@ -2,9 +2,9 @@
 
 A :class:`Scene` is a set of :class:`Target` s (each present for ``birth <= t < death``) seen by
 one or more :class:`Radar` s. :func:`simulate_scene` gives, per Monte Carlo run, the radar
-plots as :class:`~trackkit.tracking.scans.Scans` (scans of all radars merged in time order,
+plots as :class:`~trackkit.io.scans.Scans` (scans of all radars merged in time order,
 ``sensor`` = the radar's index), the origin of every plot (target id, or -1 for clutter) and
-the truth as :class:`~trackkit.eval.multitarget.Frames`, one frame per scan.
+the truth as :class:`~trackkit.eval.track_metrics.Frames`, one frame per scan.
 
 Truth. Every target has the state ``x = [x, y, vx, vy]`` (SI, x east, y north), given at its
 birth time, and moves on the grid of distinct scan times t_0 < t_1 < ... . Over a step
@@ -30,7 +30,7 @@ scan, uniform in the field of view in measurement space (uniform in range and in
 range-bearing radar), spatial density ``lambda / V`` with V the field-of-view volume. Within a
 scan the plots are in random order.
 
-Determinism. Run r draws from ``run_rng(seed, r)`` alone (``sim.simulate``), in this order:
+Determinism. Run r draws from ``run_rng(seed, r)`` alone (``sim.streams``), in this order:
 
 1. process noise, standard normal ``(K, n, 4)`` (K distinct scan times, n targets);
 2. detection draws, uniform ``(S, n)`` (S scans);
@@ -57,12 +57,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
-from trackkit.eval.multitarget import Frames
-from trackkit.models.motion import _turn_terms
+from trackkit.eval.track_metrics import Frames
+from trackkit.io.scans import Scans
+from trackkit.models.motion import turn_coefficients
 from trackkit.models.sensors import Position, RangeBearing
 from trackkit.sim.kinematics import LegPlan
-from trackkit.sim.simulate import run_rng
-from trackkit.tracking.scans import Scans
+from trackkit.sim.streams import run_rng
 
 __all__ = [
     "Radar",
@@ -403,7 +403,7 @@ def propagate_targets(
             act = (legs.kind == 2) & (legs.start <= tx[legs.target]) & (tx[legs.target] < legs.end)
             rate = np.bincount(legs.target, np.where(act, legs.rate, 0.0), minlength=n)
             # the transition is counter-clockwise positive; a nautical (starboard) rate is -w
-            s, c, _, _, cos, sin = _turn_terms(-rate, dt)
+            s, c, _, _, cos, sin = turn_coefficients(-rate, dt)
             nx[..., 0] = px + s * vx - c * vy
             nx[..., 1] = py + c * vx + s * vy
             nx[..., 2] = cos * vx - sin * vy

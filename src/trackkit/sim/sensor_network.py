@@ -44,7 +44,7 @@ window of an agent's bearings of one target is a slice that
 ``network.composite_measurement`` takes as it is (nan = absent).
 
 Determinism. Run r draws from the children of ``SeedSequence(seed, spawn_key=(r,))`` (the
-sequence behind ``sim.simulate.run_rng(seed, r)``), one child per purpose, so each purpose's
+sequence behind ``sim.streams.run_rng(seed, r)``), one child per purpose, so each purpose's
 draws depend on (seed, r) and the sizes alone, never on the other runs or on another purpose:
 
 * child 0: the execution delays, uniform ``(A, E)``;
@@ -66,8 +66,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
-from trackkit.models.motion import ConstantVelocity, _blocks
-from trackkit.models.sensors import Bearing, _check_convention
+from trackkit.models.motion import ConstantVelocity, interleave_axes
+from trackkit.models.sensors import Bearing, check_convention
 
 __all__ = [
     "Bearings",
@@ -179,7 +179,7 @@ def _count(name: str, value: int, least: int) -> int:
 
 def _draw(seed: int, first_run: int, runs: int, child: int, draw) -> Array:
     """``draw(g)`` stacked over runs, g the generator of child ``child`` of run r's
-    SeedSequence (the one behind ``sim.simulate.run_rng(seed, r)``)."""
+    SeedSequence (the one behind ``sim.streams.run_rng(seed, r)``)."""
     out = [draw(np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(r, child))))
            for r in range(first_run, first_run + runs)]
     return np.stack(out)
@@ -261,7 +261,7 @@ def cv_noise_factor(q: float, dt: ArrayLike) -> Array:
     B[..., 0, 0] = np.sqrt(dt**3 / 3.0)
     B[..., 1, 0] = np.sqrt(3.0 * dt) / 2.0
     B[..., 1, 1] = np.sqrt(dt) / 2.0
-    return _blocks(B, np.full(2, math.sqrt(q)))
+    return interleave_axes(B, np.full(2, math.sqrt(q)))
 
 
 def target_truth(x0: ArrayLike, times: ArrayLike, q: float = 0.0,
@@ -349,7 +349,7 @@ def bearings_at(
         ``z`` ``(..., Nt)``: wrap(h + sigma e), nan where |T - S| > MR; ``in_range``
         ``(..., Nt)``.
     """
-    _check_convention(convention)
+    check_convention(convention)
     S = np.asarray(sensor_pos, dtype=float)
     X = np.asarray(targets, dtype=float)
     if S.ndim < 1 or S.shape[-1] != 2:

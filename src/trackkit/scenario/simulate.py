@@ -18,16 +18,11 @@ from trackkit.angles import wrap
 from trackkit.linalg import psd_factor
 from trackkit.scenario.build import Plan
 from trackkit.sim.kinematics import step as platform_step
+from trackkit.sim.streams import run_rng
 
 Array = NDArray[np.float64]
 
-__all__ = ["BlockData", "run_rng", "simulate_block"]
-
-
-def run_rng(seed: int, run: int) -> np.random.Generator:
-    """The generator of run ``run``: child ``run`` of ``SeedSequence(seed)``, the same stream
-    as ``SeedSequence(seed).spawn(run + 1)[run]`` without spawning the ones before it."""
-    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run,)))
+__all__ = ["BlockData", "simulate_block"]
 
 
 @dataclass
