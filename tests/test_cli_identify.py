@@ -67,6 +67,23 @@ def test_the_fixture_log_writes_its_report_and_prints_the_table(tmp_path):
     assert "data:image/png;base64," in page and "<script" not in page
 
 
+def test_identify_log_from_python_gives_what_the_command_writes(tmp_path):
+    """The command is a thin shell over ``experiments.vessel_log.identify_log``: the same
+    coefficients to the bit, the same notes, the same reads."""
+    from trackkit.experiments.vessel_log import LogOptions, identify_log
+
+    ident = identify_log(LogOptions(LOG, INPUTS))
+    out = tmp_path / "out"
+    ran = _run("identify", str(LOG), "--inputs", str(INPUTS), "--out", str(out))
+    assert ran.code == 0, ran.text
+    doc = json.loads((out / "results.json").read_text(encoding="utf-8"))
+    assert [c["value"] for c in doc["coefficients"].values()] == ident.result.theta.tolist()
+    assert [c["std"] for c in doc["coefficients"].values()] == ident.result.theta_std.tolist()
+    assert doc["log"]["records_kept"] == ident.log_read.rows_kept == 1996
+    assert any("the log is 166 s long" in n for n in ident.notes)
+    assert all(n.split(";")[0] in ran.out.replace("\n", " ") for n in ident.notes)
+
+
 def test_bad_log_lines_are_counted_and_named_and_nothing_good_is_dropped(tmp_path):
     lines = LOG.read_text(encoding="ascii").splitlines(keepends=True)
     lines[4] = lines[4][:-3] + "00\n"  # a wrong checksum on line 5

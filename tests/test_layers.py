@@ -130,3 +130,21 @@ def test_the_private_name_check_finds_one(tmp_path):
     found = private_imports(sample, tmp_path)
     assert [f.split(": ", 1)[1] for f in found] == ["from trackkit.report.html import _CSS",
                                                      "trackkit.linalg._triu"]
+
+
+def test_the_readme_layout_names_every_package_and_module():
+    readme = (ROOT / "README.md").read_text()
+    block = readme[readme.index("```\nsrc/trackkit/"):]
+    block = block[:block.index("\n```\n")]
+    missing = []
+    for p in sorted(PACKAGE.rglob("*.py")):
+        rel = p.relative_to(PACKAGE)
+        if p.name in ("__init__.py", "__main__.py") or rel.parts[0].startswith("_"):
+            continue
+        if rel.parts[0] == "io" and p.name.startswith("_"):
+            continue  # io's private modules: the readers' shared parts
+        if len(rel.parts) > 1 and f"{rel.parts[0]}/" not in block:
+            missing.append(f"{rel.parts[0]}/")
+        if p.name not in block:
+            missing.append(str(rel))
+    assert not missing, f"README.md's layout does not name: {sorted(set(missing))}"

@@ -26,6 +26,7 @@ from trackkit.cli.output import (
     user_errors,
 )
 from trackkit.cli.summaries import print_recorded_summary, print_vessel_summary
+from trackkit.experiments.vessel_log import LogOptions
 
 
 class VesselFilter(StrEnum):
@@ -36,12 +37,8 @@ class VesselFilter(StrEnum):
     ls = "ls"
 
 
-#: the NMEA sentences the identifier reads
-NMEA_TYPES = "GGA RMC VTG HDT THS ROT"
 #: the NMEA log suffixes; any other log is the CSV form (.csv)
 NMEA_SUFFIXES = (".nmea", ".log", ".txt")
-#: a log shorter than this cannot show converged coefficients (the paper: 500 s)
-_CONVERGED_AFTER_S = 500.0
 
 
 def _identify_kind(what: str) -> str:
@@ -157,8 +154,9 @@ def identify(
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
             say_note(where)
-            _identify_log(log, inputs, where.path, filt=(filt or VesselFilter.ekf).value,
-                          period=1.0 if period is None else period, on_bad=on_bad.value)
+            _identify_log(LogOptions(log, inputs, (filt or VesselFilter.ekf).value,
+                                     1.0 if period is None else period, on_bad.value),
+                          where.path)
             state.interrupted = "interrupted"
 
 
@@ -172,109 +170,31 @@ def _stage(what: str) -> Iterator[None]:
         yield
 
 
-def _filter_compiled(filt: str) -> bool:
-    """Whether the identifier's compiled step is in numba's cache already (the EKF's fused
-    step is compiled on its first run and cached beside its module)."""
-    if filt != "ekf":
-        return True
-    from trackkit.identify import fused
-
-    return fused.step_is_compiled()
-
-
-def _stop_hint(err: ValueError, columns: str) -> ValueError:
+def _stop_hint(err: ValueError) -> ValueError:
     """A reader's message in the command's words (its options, not the function's)."""
     return ValueError(str(err).replace(
         "[on_bad='stop'; pass on_bad='skip' to skip bad records]",
-        "[--on-bad stop; pass --on-bad skip to skip bad records]").replace(
-        " (pass a column mapping)", f"; expected the columns {columns}"))
+        "[--on-bad stop; pass --on-bad skip to skip bad records]"))
 
 
-def _check_log_usable(log: Path, nav: Any, read: Any, expected: str) -> None:
-    """A log with no usable position is named as the culprit (before its inputs, which
-    cannot be read against the times of a log without any)."""
-    if read.rows_kept and nav.t_pos.size:
-        return
-    why = ", ".join(f"{n} {r}" for r, n in sorted(read.skipped.items(), key=lambda kv: -kv[1]))
-    first = f"; first: {read.bad[0]}" if read.bad else ""
-    kept = (f"{read.rows_kept} kept but none gives a position (GGA or RMC)" if read.rows_kept
-            else f"none usable ({why or 'empty'}){first}")
-    raise ValueError(f"{log}: no usable GPS/INS record: {read.rows_read} lines read, {kept}; "
-                     f"expected {expected}")
-
-
-def _identify_log(log: Path, inputs: Path, out: Path, *, filt: str, period: float,
-                  on_bad: str) -> None:
-    """Read, pre-process and identify a recorded log; write its report; print the
-    coefficients, the standard trials and the IMO table."""
-    from trackkit.experiments.vessel_mc import identify_recorded
-    from trackkit.io.navigation import INPUT_COLUMNS, preprocess, read_inputs_csv
-    from trackkit.io.nmea import NAV_CSV_COLUMNS, read_nav_csv, read_nmea
+def _identify_log(options: LogOptions, out: Path) -> None:
+    """Identify a recorded log (``experiments.vessel_log.identify_log``); write its report;
+    print the coefficients, the standard trials and the IMO table."""
+    from trackkit.experiments.vessel_log import identify_log
     from trackkit.report.vessel_report import write_recorded_report
 
     console = Console()
-    notes: list[str] = []
-    with _stage(f"reading {log} and {inputs}"):
-        try:
-            if log.suffix.lower() == ".csv":
-                nav, read = read_nav_csv(log, on_bad)
-            else:
-                nav, read = read_nmea(log, on_bad)
-        except ValueError as err:
-            raise _stop_hint(err, ", ".join(NAV_CSV_COLUMNS)) from None
-        _check_log_usable(log, nav, read, (
-            f"the columns {', '.join(NAV_CSV_COLUMNS)}" if log.suffix.lower() == ".csv" else
-            f"NMEA 0183 sentences ({NMEA_TYPES}) with valid checksums"))
-        fmt = "iso" if nav.epoch is not None else "seconds"  # a log without a date: both
-        try:
-            ins, iread = read_inputs_csv(inputs, on_bad, epoch=nav.epoch, time_format=fmt)
-        except ValueError as err:
-            raise _stop_hint(err, ", ".join(INPUT_COLUMNS)) from None
-    console.print(Text(read.summary()), soft_wrap=True)
-    console.print(Text(iread.summary()), soft_wrap=True)
-    if nav.unsupported:
-        console.print(Text("  sentence types not used: " + ", ".join(
-            f"{k} {v}" for k, v in sorted(nav.unsupported.items()))), soft_wrap=True)
-    if ins.t.size < 2:
-        raise ValueError(f"--inputs {inputs}: {ins.t.size} usable records "
-                         f"({iread.n_skipped} skipped); expected nozzle angle and rpm over "
-                         "the log's time span")
-    rate_source = "gyro"
-    if nav.t_rate.size < 2 and nav.t_heading.size >= 2:  # no ROT: differentiate the heading
-        rate_source = "heading"
-        notes.append("the log has no rate of turn (ROT); the yaw rate is the differenced INS "
-                     "heading")
     try:
-        m = preprocess(nav, T=period, rate_source=rate_source)
+        ident = identify_log(options, stage=_stage,
+                             say=lambda text: console.print(Text(text), soft_wrap=True))
     except ValueError as err:
-        raise ValueError(f"{log}: {err}") from None
-    if m.gaps:
-        notes.append(f"{len(m.gaps)} gap(s) in the log's streams ("
-                     + ", ".join(f"{g.stream} {g.start:.1f}-{g.end:.1f} s" for g in m.gaps[:5])
-                     + ("..." if len(m.gaps) > 5 else "") + "): no measurement there, the "
-                     "filter predicts across")
-    doing = f"identifying the 16 coefficients with {filt} ({m.t.size} samples)"
-    if not _filter_compiled(filt):
-        doing = (f"compiling the {filt} filter (the first run only: about half a minute; "
-                 f"later runs reuse it), then {doing}")
-    with _stage(doing):
-        rec = identify_recorded(m, ins, filter=filt, inputs_name=f"--inputs {inputs}")
-    span = rec.t[-1] - rec.t[0]
-    if span < _CONVERGED_AFTER_S:
-        notes.append(f"the log is {span:.0f} s long; the paper's coefficients converged only "
-                     f"after {_CONVERGED_AFTER_S:.0f} s: expect wide standard deviations")
-    if not rec.stable:
-        notes.append(f"the identified model is unstable in a straight line at the log's "
-                     f"{rec.speed / 1852.0 * 3600.0:.1f} kn and {rec.rpm:.0f} rpm (an eigenvalue "
-                     "of df/dx with a positive real part): its simulated trials diverge and "
-                     "their metrics are not meaningful")
-    if rec.dropped:
-        notes.append(f"the first {rec.dropped} grid sample(s) lack a measurement and were "
-                     "left out")
+        raise _stop_hint(err) from None
     with _stage(f"writing the report to {out}"):
-        paths = write_recorded_report(rec, out, title=log.name, notes=notes, log_read=read,
-                                      inputs_read=iread)
-    print_recorded_summary(paths, log, notes)
+        paths = write_recorded_report(ident.result, out, title=options.log.name,
+                                      notes=ident.notes, log_read=ident.log_read,
+                                      inputs_read=ident.inputs_read)
+    print_recorded_summary(paths, options.log, ident.notes)
+
 
 def _run_vessel(sc: Any, out: Path, **kwargs: Any) -> None:
     """A vessel scenario's Monte Carlo (``experiments.vessel_mc.run_vessel``), its report written
