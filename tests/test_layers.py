@@ -148,3 +148,16 @@ def test_the_readme_layout_names_every_package_and_module():
         if p.name not in block:
             missing.append(str(rel))
     assert not missing, f"README.md's layout does not name: {sorted(set(missing))}"
+
+
+def test_no_two_modules_share_a_name_for_different_jobs():
+    """A module's name says what it holds. The command line's modules are named for their
+    commands (``cli/run.py`` is ``trackkit run``), and a package's ``base.py`` holds its base
+    types; any other name is used once."""
+    seen: dict[str, list[str]] = {}
+    for p in PACKAGE.rglob("*.py"):
+        rel = p.relative_to(PACKAGE)
+        if p.name in ("__init__.py", "__main__.py", "base.py") or rel.parts[0] == "cli":
+            continue
+        seen.setdefault(p.name, []).append(str(rel))
+    assert not {n: w for n, w in seen.items() if len(w) > 1}

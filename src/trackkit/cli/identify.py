@@ -15,7 +15,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import OnBad, at_least, number
+from trackkit.cli.option_types import OnBad, at_least, number
 from trackkit.cli.output import (
     OutputDir,
     default_dir,

@@ -13,7 +13,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import at_least
+from trackkit.cli.option_types import at_least
 from trackkit.cli.output import (
     OutputDir,
     default_dir,

@@ -15,7 +15,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import SCENARIO_HELP
+from trackkit.cli.option_types import SCENARIO_HELP
 from trackkit.cli.output import user_errors
 
 

@@ -14,7 +14,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.options import SCENARIO_HELP, Scheduler, Workers, at_least
+from trackkit.cli.option_types import SCENARIO_HELP, Scheduler, Workers, at_least
 from trackkit.cli.output import (
     OutputDir,
     default_dir,

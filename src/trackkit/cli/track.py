@@ -10,7 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from trackkit.cli.entry import app
-from trackkit.cli.options import OnBad, at_least, number
+from trackkit.cli.option_types import OnBad, at_least, number
 from trackkit.cli.output import (
     OutputDir,
     output_dir,
