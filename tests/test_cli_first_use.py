@@ -155,7 +155,7 @@ def test_ctrl_c_with_workers_says_interrupted_once_and_leaves_no_process(command
     import sys
     import time
 
-    from tests.eval.test_sweep import short_bo_cv_toml
+    from tests.experiments.test_sweep import short_bo_cv_toml
 
     out = tmp_path / "out"
     env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1"}
@@ -318,7 +318,7 @@ def test_a_network_table_folds_instead_of_cutting(tmp_path):
 def test_the_sweep_summary_shows_the_swept_values_not_a_hash(tmp_path):
     import json
 
-    from tests.eval.test_sweep import short_bo_cv_toml
+    from tests.experiments.test_sweep import short_bo_cv_toml
 
     scenario = short_bo_cv_toml(tmp_path / "short.toml")
     out = tmp_path / "sweep"

@@ -189,7 +189,7 @@ def test_a_crafted_structure_builds_no_other_type(tmp_path):
     store.prepare_point("p1", {"key": "k1"})
     path = store.save_block("p1", "k1", 0, 5, {"sums": np.zeros(2)})
     magic, head, _, arrays = path.read_bytes().split(b"\n", 3)
-    for bad in ('{"$o":"builtins.open","v":{"$d":[]}}', '{"$o":"tests.eval.test_checkpoint.'
+    for bad in ('{"$o":"builtins.open","v":{"$d":[]}}', '{"$o":"tests.experiments.test_checkpoint.'
                 '_Plant","v":{"$d":[["marker","x"]]}}', '{"$a":7}', '{"$x":1}'):
         path.write_bytes(b"\n".join([magic, head, bad.encode(), arrays]))
         with pytest.raises(CheckpointError, match=r"block-000000\.tkb: damaged \(ValueError"):
