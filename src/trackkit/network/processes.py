@@ -114,14 +114,14 @@ from trackkit.network.agents import (
 )
 from trackkit.network.central import CentralSettings
 from trackkit.network.run import (
+    Motion,
     NetworkResult,
-    _central_trace,
-    _Motion,
-    _Recorder,
-    _relay_to_hub,
-    _Spacing,
-    _world,
+    Recorder,
+    Spacing,
+    build_world,
+    central_trace,
     check_loss,
+    relay_to_hub,
 )
 from trackkit.network.steering import Steering
 from trackkit.network.tracks import Message
@@ -440,7 +440,7 @@ class _Link:
 
 
 class _Confirmed:
-    """What ``_Recorder.add`` reads from an agent, rebuilt from a ``result`` message."""
+    """What ``Recorder.add`` reads from an agent, rebuilt from a ``result`` message."""
 
     def __init__(self, t: float, conf: dict[str, list] | None) -> None:
         self.time = t
@@ -452,7 +452,7 @@ class _Confirmed:
                                               mean=np.asarray(conf["mean"], float).reshape(T, 4),
                                               cov=np.asarray(conf["cov"], float).reshape(T, 4, 4))
 
-    def confirmed(self):  # noqa: ANN201 (duck-typed Agent for _Recorder.add)
+    def confirmed(self):  # noqa: ANN201 (duck-typed Agent for Recorder.add)
         return self._c
 
 
@@ -696,9 +696,9 @@ def run_network_processes(
             raise ValueError(f"{name} = {v!r}; expected seconds > 0")
     if not (isinstance(port, int) and 0 <= port < 65536):
         raise ValueError(f"port = {port!r}; expected 0 (OS-chosen) or a TCP port")
-    w = _world(seed, run, targets, agents, duration=duration, period=period, sigma=sigma,
-               mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings, steering=steering,
-               central=central)
+    w = build_world(seed, run, targets, agents, duration=duration, period=period,
+                    sigma=sigma, mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings,
+                    steering=steering, central=central)
     A, E = w.times.shape
     kills: dict[int, tuple[float, float]] = {}
     for k, o in enumerate(outages):
@@ -712,9 +712,9 @@ def run_network_processes(
                              "before the restart time")
         kills[a] = (t_kill, t_back)
 
-    motion = _Motion(w.ag0, steering)
-    rec = [_Recorder() for _ in range(A)]
-    rec_c = _Recorder() if w.hub is not None else None
+    motion = Motion(w.ag0, steering)
+    rec = [Recorder() for _ in range(A)]
+    rec_c = Recorder() if w.hub is not None else None
     Zc = np.full((A, E, w.Nt), np.nan)
     Sc = np.zeros((A, E, 2))
     # in flight: per receiver, (arrival time, send time, payload dict), in sending order
@@ -722,7 +722,7 @@ def run_network_processes(
     last_exec = np.full(A, -math.inf)  # each agent's last execution (for "late")
     alive = np.ones(A, bool)
     sent = delivered = lost = late = restarts = 0
-    spacing = _Spacing(w.CR)
+    spacing = Spacing(w.CR)
     held_before = dict.fromkeys(kills, 0)
     recovered = {a: math.nan for a in kills}
     t0 = _time.perf_counter()
@@ -802,7 +802,7 @@ def run_network_processes(
                     continue
                 flight[b].append((t + delay, t, pd))
             if rec_c is not None:
-                _relay_to_hub(w.hub, rec_c, payload, t, truth)
+                relay_to_hub(w.hub, rec_c, payload, t, truth)
             if on_event is not None:
                 on_event(t)
         # the run ends at the last execution: what has arrived by then is handed over (as
@@ -817,7 +817,7 @@ def run_network_processes(
                 delivered += len(due)
     finally:
         env.close()
-    trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
+    trace_c, fusion = central_trace(w, rec_c, Zc, Sc, q, central_settings)
     seconds = _time.perf_counter() - t0
     out = ProcessNetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered,
                                lost, seconds, fusion, spacing.span, late)
