@@ -4,13 +4,13 @@ augmented state.
 The state is ``x_a = [u, v, r, theta]`` (19): the body states in SI (m/s, m/s, rad/s) and the
 coefficients ``theta = [a1..a9, b1..b4, c1..c3]`` in the prime units of ``norm``, exactly as
 ``trackkit.models.vessel.AugmentedVessel`` takes them. Between samples k - 1 and k the
-prediction takes ``substeps = m`` forward-Euler steps of ``h = T / m`` (``SampledVessel``)::
+prediction takes ``substeps = m`` forward-Euler steps of ``h = dt / m`` (``SampledVessel``)::
 
     x <- x + h f(x, s_j, theta),   s_j = s_{k-1} + (j + 1/2) / m (s_k - s_{k-1}),
-    theta <- theta,   then  x_a <- x_a + w,   w ~ N(0, T diag(q_body, q_theta))
+    theta <- theta,   then  x_a <- x_a + w,   w ~ N(0, dt diag(q_body, q_theta))
 
 or, with the inputs measured at the sub-steps' ends ``t_{k-1} + j h`` (``s`` given every
-``T / m``), ``s_j = (s(t_{k-1} + j h) + s(t_{k-1} + (j + 1) h)) / 2``
+``dt / m``), ``s_j = (s(t_{k-1} + j h) + s(t_{k-1} + (j + 1) h)) / 2``
 
 (random-walk coefficients). m = 1 is the paper's eq. 4, one Euler step with the mean input
 ``s_m = (s_{k-1} + s_k) / 2`` (``AugmentedVessel`` itself). The update uses
@@ -33,12 +33,12 @@ sample of the previous one. The coefficients start at ``theta0`` with standard d
 hull beyond the order of magnitude of prime coefficients (the reference set's are 0.12-1.0).
 ``initial_guess`` gives the alternative of a perturbed reference set.
 
-Defaults at T = 1 s, for measured inputs (``docs/vessel-comparison.md``,
+Defaults at dt = 1 s, for measured inputs (``docs/vessel-comparison.md``,
 ``tests/statistical/test_vessel_coefficient_nees.py``: 105 trials of three programmes other
 than ``identify.programme``'s, random hulls, a truth integrated at 0.005 s):
 
 * ``substeps = 50`` (h = 0.02 s), each taking the mean of the inputs measured at its ends
-  (pass ``s`` at ``T / 50``; ``eval.vessel_mc.inputs_at_substeps`` does for a log). The
+  (pass ``s`` at ``dt / 50``; ``eval.vessel_mc.inputs_at_substeps`` does for a log). The
   nozzle is rate-limited and starts and stops between samples: interpolated between 1 s
   samples its corners are smoothed, which biases c1 by -10 to -18%, c2 by -2 to -6% and c3
   by +0.4 to +2.5% (about one reported sd) whatever the noise. With the measured inputs,
@@ -103,12 +103,12 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-#: q_body for inputs measured at the sub-steps (``s`` every ``T / m``)
+#: q_body for inputs measured at the sub-steps (``s`` every ``dt / m``)
 DEFAULT_Q_BODY = np.array([2e-5, 2e-5, 2e-7])
 #: q_body for inputs known at the samples only: it covers their interpolation's error
 Q_BODY_SAMPLED_INPUTS = np.array([3e-4, 3e-4, 3e-6])
 #: Euler sub-steps per sample of the prediction with the inputs measured at their ends (h =
-#: 0.02 s at T = 1 s), and with the inputs known at the samples only (the module docstring)
+#: 0.02 s at dt = 1 s), and with the inputs known at the samples only (the module docstring)
 DEFAULT_SUBSTEPS, SUBSTEPS_SAMPLED_INPUTS = 50, 10
 _FILTERS = {"ekf": tk.filters.EKF, "ukf": tk.filters.UKF, "ckf": tk.filters.CKF,
             "srckf": tk.filters.SRCKF}
@@ -248,7 +248,7 @@ def _vector(value: ArrayLike, n: int, name: str, positive: bool = False) -> Arra
     return a
 
 
-def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None = None,
+def identify(z: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | None = None,
              starts: ArrayLike | None = None, filter: str | Filter = "ekf",
              theta0: ArrayLike | None = None, theta_sd0: ArrayLike = 1.0,
              sigma_z: ArrayLike = DEFAULT_NOISE.body, q_body: ArrayLike | None = None,
@@ -256,8 +256,8 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
              keep_cov: bool = False) -> Identification:
     """Run the augmented filter over measured body states ``z (..., K, 3)`` (SI; nan where
     missing) and applied inputs ``s (..., K, 2)`` (``[delta, n]``, rad and rpm; or ``(K, 2)``
-    shared by the runs) sampled every ``T`` seconds, or ``s (..., (K - 1) m + 1, 2)`` sampled
-    every ``T / m`` at the ends of the ``m = substeps`` sub-steps (each sub-step then takes
+    shared by the runs) sampled every ``dt`` seconds, or ``s (..., (K - 1) m + 1, 2)`` sampled
+    every ``dt / m`` at the ends of the ``m = substeps`` sub-steps (each sub-step then takes
     the mean of its ends instead of the interpolation between samples: see the module).
 
     ``norm`` is the prime system of the coefficients (default: the reference vessel's,
@@ -266,7 +266,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     ``"ukf"``, ``"ckf"``, ``"srckf"`` (the square-root CKF) or a filter instance; ``theta0
     (..., 16)`` and ``theta_sd0`` (scalar or 16) the coefficients' prior mean and standard
     deviation; ``sigma_z`` (3) the measurement standard deviations, ``R = diag(sigma_z^2)``;
-    ``q_body`` (3) and ``q_theta`` (16 or scalar) the random-walk densities, ``Q = T
+    ``q_body`` (3) and ``q_theta`` (16 or scalar) the random-walk densities, ``Q = dt
     diag(q_body, q_theta)`` per sample (default ``DEFAULT_Q_BODY`` for inputs at the
     sub-steps, ``Q_BODY_SAMPLED_INPUTS`` for inputs at the samples); ``substeps`` the Euler
     steps per sample (1: the paper's eq. 4; default ``DEFAULT_SUBSTEPS`` with inputs at the
@@ -292,9 +292,9 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
                          f"{substeps} sub-steps per sample")
     if not np.all(np.isfinite(s)):
         raise ValueError("s has non-finite entries; expected finite inputs at every sample")
-    T = float(T)
-    if not (math.isfinite(T) and T > 0):
-        raise ValueError(f"T = {T!r}; expected a sample period > 0 s")
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r}; expected a sample period > 0 s")
     s_fine = s if s.shape[-2] != K else None
     s = s[..., ::substeps, :] if s_fine is not None else s
     if starts is None:
@@ -327,7 +327,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     if s_fine is not None:
         s_fine = np.broadcast_to(s_fine, batch + (Kf, 2))
     R = np.diag(sigma_z**2)
-    Qd = T * np.concatenate([q_body, q_theta])
+    Qd = dt * np.concatenate([q_body, q_theta])
 
     out_theta = np.empty(batch + (K, N_THETA))
     out_theta_sd = np.empty(batch + (K, N_THETA))
@@ -349,7 +349,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     cov = np.zeros(batch + (19, 19))
     cov[..., 3:, 3:] = np.diag(sd0**2)
     if f is None:
-        return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
+        return _identify_ekf(z, s, dt, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
                              s_fine)
     sensor = tk.models.Position(dim=3, sigma=sigma_z)
     b = None  # the filter's belief (kept, so that its checks stay cheap)
@@ -363,7 +363,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
             cov[..., :3, :3] = R
             b = None
         else:
-            b = f.predict(Gaussian(mean, cov) if b is None else b, model(k), T)
+            b = f.predict(Gaussian(mean, cov) if b is None else b, model(k), dt)
             b, innov = f.update(b, z[..., k, :], sensor)
             mean, cov = b.mean, b.cov
             nis[..., k] = innov.nis
@@ -380,7 +380,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
                           body_std=out_body_sd, nis=nis, cov_history=covs, filter=name)
 
 
-def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: int,
+def _identify_ekf(z: Array, s: Array, dt: float, norm: Normalisation, substeps: int,
                   starts: Array, mean: Array, cov: Array, R: Array, Qd: Array,
                   keep_cov: bool, s_fine: Array | None = None) -> Identification:
     """``identify``'s EKF: the equations of ``trackkit.filters.EKF`` on ``SampledVessel``
@@ -403,7 +403,7 @@ def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: i
     body, body_sd = np.empty((K, 3, N)), np.empty((K, 3, N))
     nis = np.full((K, N), np.nan)
     covs = np.empty((K, N, 19, 19)) if keep_cov else None
-    plan = fused.plan(norm, substeps, T)
+    plan = fused.plan(norm, substeps, dt)
     for k in range(K):
         if starts[k]:
             x[:3] = zs[k]

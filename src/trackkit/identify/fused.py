@@ -14,7 +14,7 @@ The equations are ``trackkit.filters.EKF``'s on ``SampledVessel``, with ``F = [[
 I]]`` and ``H = [I3 0]`` written out (the generic filter is the textbook form this is pinned
 to, ``tests/identify/test_fused.py``)::
 
-    body', A, B  m Euler steps of h = T / m from the model (eq. 2, ``prime_rates``,
+    body', A, B  m Euler steps of h = dt / m from the model (eq. 2, ``prime_rates``,
                  ``prime_jacobian``, ``prime_terms``): A = A_(m-1) .. A_0,
                  B = sum_j A_(m-1) .. A_(j+1) B_j,  A_j = I + h D J' / scale,  B_j = h D Phi
     G    = [A B] P                                     (3 x 19, the top rows of F P)
@@ -297,7 +297,7 @@ _NO_SUB = np.zeros((1, 2, 1))  # the kernel's sf when the inputs are interpolate
 
 class Plan(NamedTuple):
     """What the kernel needs of the model, computed once per identification: ``substeps``
-    ``m``, ``h = T / m``, ``scale = [U0, L / U0, n0, D1, D2, D3]``, ``DS = D_i / scale_j`` and
+    ``m``, ``h = dt / m``, ``scale = [U0, L / U0, n0, D1, D2, D3]``, ``DS = D_i / scale_j`` and
     the ``(row, coefficient)`` entries of B that can be non-zero."""
 
     m: int
@@ -307,14 +307,14 @@ class Plan(NamedTuple):
     pairs: Array
 
 
-def plan(norm: Normalisation, substeps: int, T: float) -> Plan:
+def plan(norm: Normalisation, substeps: int, dt: float) -> Plan:
     """The kernel's constants for prime system ``norm``, ``substeps`` Euler steps per sample
-    period ``T``."""
+    period ``dt``."""
     m = int(substeps)
     # one step keeps each body equation to its own coefficients; more mix them through A
     pairs = (np.stack([EQUATION, np.arange(EQUATION.size)], -1) if m == 1 else
              np.argwhere(np.ones((3, EQUATION.size), bool)))
-    return Plan(m, T / m, np.array([norm.speed, norm.length / norm.speed, norm.rpm,
+    return Plan(m, dt / m, np.array([norm.speed, norm.length / norm.speed, norm.rpm,
                                     *norm.rate_scale]),
                 norm.rate_scale[:, None] / norm.state_scale[None, :], pairs.astype(np.int64))
 
