@@ -62,7 +62,7 @@ overconfident (mean 42; ``tests/statistical/test_vessel_identification.py``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -276,6 +276,46 @@ def identify(z: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | Non
     norm = reference_vessel().norm if norm is None else norm
     if not isinstance(norm, Normalisation):
         raise ValueError(f"norm = {norm!r}; expected a trackkit.models.vessel.Normalisation")
+    z, s, s_fine, substeps = _samples(z, s, substeps)
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r}; expected a sample period > 0 s")
+    starts = _trial_starts(starts, z)
+    theta0 = np.zeros(N_THETA) if theta0 is None else np.asarray(theta0, dtype=float)
+    if theta0.ndim < 1 or theta0.shape[-1] != N_THETA or not np.all(np.isfinite(theta0)):
+        raise ValueError(f"theta0 has shape {theta0.shape}; expected finite (..., 16)")
+    sd0 = _vector(theta_sd0, N_THETA, "theta_sd0", positive=True)
+    sigma_z = _vector(sigma_z, 3, "sigma_z", positive=True)
+    if q_body is None:
+        q_body = Q_BODY_SAMPLED_INPUTS if s_fine is None else DEFAULT_Q_BODY
+    q_body = _vector(q_body, 3, "q_body")
+    q_theta = _vector(q_theta, N_THETA, "q_theta")
+    batch, z, s, s_fine = _broadcast(z, s, s_fine, theta0)
+    R = np.diag(sigma_z**2)
+    Qd = dt * np.concatenate([q_body, q_theta])
+    mean = np.concatenate([z[..., 0, :], np.broadcast_to(theta0, batch + (N_THETA,))], -1)
+    cov = np.zeros(batch + (19, 19))
+    cov[..., 3:, 3:] = np.diag(sd0**2)
+    if f is None:
+        return _identify_ekf(z, s, dt, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
+                             s_fine)
+
+    def model(k: int) -> AugmentedVessel | SampledVessel:
+        if substeps == 1:  # the paper's eq. 4, exactly
+            return AugmentedVessel(0.5 * (s[..., k - 1, :] + s[..., k, :]), norm, q_body,
+                                   q_theta)
+        sub = None if s_fine is None else np.moveaxis(
+            s_fine[..., (k - 1) * substeps:k * substeps + 1, :], -2, 0)
+        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps,
+                             sub)
+
+    return _identify_filter(f, z, dt, model, starts, mean, cov, R, sigma_z, keep_cov)
+
+
+def _samples(z: ArrayLike, s: ArrayLike, substeps: int | None
+             ) -> tuple[Array, Array, Array | None, int]:
+    """``identify``'s ``z`` and ``s`` checked: ``(z, s at the samples, s at the sub-steps'
+    ends or None, substeps)``."""
     z, s = np.asarray(z, dtype=float), np.asarray(s, dtype=float)
     if z.ndim < 2 or z.shape[-1] != 3:
         raise ValueError(f"z has shape {z.shape}; expected (..., K, 3) samples of [u, v, r]")
@@ -292,11 +332,14 @@ def identify(z: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | Non
                          f"{substeps} sub-steps per sample")
     if not np.all(np.isfinite(s)):
         raise ValueError("s has non-finite entries; expected finite inputs at every sample")
-    dt = float(dt)
-    if not (math.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt = {dt!r}; expected a sample period > 0 s")
     s_fine = s if s.shape[-2] != K else None
     s = s[..., ::substeps, :] if s_fine is not None else s
+    return z, s, s_fine, substeps
+
+
+def _trial_starts(starts: ArrayLike | None, z: Array) -> Array:
+    """``starts (K,)`` checked, with sample 0 a start; ``z`` must be finite at each."""
+    K = z.shape[-2]
     if starts is None:
         starts = np.zeros(K, bool)
     starts = np.asarray(starts)
@@ -308,49 +351,39 @@ def identify(z: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | Non
     if not np.all(np.isfinite(z[..., starts, :])):
         raise ValueError("z has missing or non-finite samples at a trial start; expected "
                          "finite [u, v, r] there (they initialise the body states)")
-    theta0 = np.zeros(N_THETA) if theta0 is None else np.asarray(theta0, dtype=float)
-    if theta0.ndim < 1 or theta0.shape[-1] != N_THETA or not np.all(np.isfinite(theta0)):
-        raise ValueError(f"theta0 has shape {theta0.shape}; expected finite (..., 16)")
-    sd0 = _vector(theta_sd0, N_THETA, "theta_sd0", positive=True)
-    sigma_z = _vector(sigma_z, 3, "sigma_z", positive=True)
-    if q_body is None:
-        q_body = Q_BODY_SAMPLED_INPUTS if s_fine is None else DEFAULT_Q_BODY
-    q_body = _vector(q_body, 3, "q_body")
-    q_theta = _vector(q_theta, N_THETA, "q_theta")
+    return starts
+
+
+def _broadcast(z: Array, s: Array, s_fine: Array | None, theta0: Array
+               ) -> tuple[tuple[int, ...], Array, Array, Array | None]:
+    """The runs' shape ``batch`` and ``z``, ``s``, ``s_fine`` broadcast to it."""
     try:
         batch = np.broadcast_shapes(z.shape[:-2], s.shape[:-2], theta0.shape[:-1])
     except ValueError:
         raise ValueError(f"run axes do not broadcast: z {z.shape[:-2]}, s {s.shape[:-2]}, "
                          f"theta0 {theta0.shape[:-1]}") from None
+    K = z.shape[-2]
     z = np.broadcast_to(z, batch + (K, 3))
     s = np.broadcast_to(s, batch + (K, 2))
     if s_fine is not None:
-        s_fine = np.broadcast_to(s_fine, batch + (Kf, 2))
-    R = np.diag(sigma_z**2)
-    Qd = dt * np.concatenate([q_body, q_theta])
+        s_fine = np.broadcast_to(s_fine, batch + (s_fine.shape[-2], 2))
+    return batch, z, s, s_fine
 
+
+def _identify_filter(f: Filter, z: Array, dt: float,
+                     model: Callable[[int], AugmentedVessel | SampledVessel], starts: Array,
+                     mean: Array, cov: Array, R: Array, sigma_z: Array, keep_cov: bool
+                     ) -> Identification:
+    """``identify`` with a filter instance: ``f.predict`` with ``model(k)`` from sample
+    ``k - 1`` to ``k``, ``f.update`` with ``z_k``; initialisation and joins as in
+    ``identify``."""
+    batch, K = z.shape[:-2], z.shape[-2]
     out_theta = np.empty(batch + (K, N_THETA))
     out_theta_sd = np.empty(batch + (K, N_THETA))
     out_body = np.empty(batch + (K, 3))
     out_body_sd = np.empty(batch + (K, 3))
     nis = np.full(batch + (K,), np.nan)
     covs = np.empty(batch + (K, 19, 19)) if keep_cov else None
-
-    def model(k: int):
-        if substeps == 1:  # the paper's eq. 4, exactly
-            return AugmentedVessel(0.5 * (s[..., k - 1, :] + s[..., k, :]), norm, q_body,
-                                   q_theta)
-        sub = None if s_fine is None else np.moveaxis(
-            s_fine[..., (k - 1) * substeps:k * substeps + 1, :], -2, 0)
-        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps,
-                             sub)
-
-    mean = np.concatenate([z[..., 0, :], np.broadcast_to(theta0, batch + (N_THETA,))], -1)
-    cov = np.zeros(batch + (19, 19))
-    cov[..., 3:, 3:] = np.diag(sd0**2)
-    if f is None:
-        return _identify_ekf(z, s, dt, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
-                             s_fine)
     sensor = tk.models.Position(dim=3, sigma=sigma_z)
     b = None  # the filter's belief (kept, so that its checks stay cheap)
     for k in range(K):
