@@ -125,8 +125,8 @@ def main() -> None:
           f"trial starts); trackkit batched over {a.runs} runs\n")
 
     # first: trackkit's first run (in the batch) is FilterPy's
-    _, ours = timed(lambda: identify(z, s, rec.T, **kw))
-    _, fp_mean, fp_std = filterpy_run(z[0], s[0], starts, rec.T, sigma, K)
+    _, ours = timed(lambda: identify(z, s, rec.dt, **kw))
+    _, fp_mean, fp_std = filterpy_run(z[0], s[0], starts, rec.dt, sigma, K)
     mean0 = np.concatenate([ours.body[0], ours.theta_history[0]], -1)
     std0 = np.concatenate([ours.body_std[0], ours.theta_std[0]], -1)
     dm = np.abs(mean0 - fp_mean) / fp_std
@@ -138,22 +138,22 @@ def main() -> None:
 
     rows = {
         "EKF, `identify(filter=\"ekf\")` (by blocks, compiled)": lambda: identify(
-            z, s, rec.T, **kw),
-        "EKF, generic `tk.filters.EKF()`": lambda: identify(z, s, rec.T, filter=tk.filters.EKF(),
+            z, s, rec.dt, **kw),
+        "EKF, generic `tk.filters.EKF()`": lambda: identify(z, s, rec.dt, filter=tk.filters.EKF(),
                                                              **kw),
-        "UKF, `tk.filters.UKF()`": lambda: identify(z, s, rec.T, filter="ukf", **kw),
-        "CKF, `tk.filters.CKF()`": lambda: identify(z, s, rec.T, filter="ckf", **kw),
+        "UKF, `tk.filters.UKF()`": lambda: identify(z, s, rec.dt, filter="ukf", **kw),
+        "CKF, `tk.filters.CKF()`": lambda: identify(z, s, rec.dt, filter="ckf", **kw),
         "EKF by blocks, compiled, 10 sub-steps per sample": lambda: identify(
-            z, s, rec.T, **(kw | {"substeps": 10})),
+            z, s, rec.dt, **(kw | {"substeps": 10})),
         f"EKF by blocks, compiled, the default: {DEFAULT_SUBSTEPS} sub-steps, inputs at "
-        "their ends": lambda: identify(z, s_sub, rec.T, starts=starts, sigma_z=sigma),
+        "their ends": lambda: identify(z, s_sub, rec.dt, starts=starts, sigma_z=sigma),
         "batch least squares (QR, three equations)": lambda: least_squares(
-            z, s, rec.T, starts=starts),
+            z, s, rec.dt, starts=starts),
     }
     t_fp = float("inf")
     best = dict.fromkeys(rows, float("inf"))
     for _ in range(a.repeat):  # in turn: a change of machine load hits all alike
-        t_fp = min(t_fp, filterpy_run(z[0], s[0], starts, rec.T, sigma, K)[0])
+        t_fp = min(t_fp, filterpy_run(z[0], s[0], starts, rec.dt, sigma, K)[0])
         for name, fn in rows.items():
             best[name] = min(best[name], timed(fn)[0])
     steps = K - 1  # transitions per run (the starts are re-initialisations, cheap for both)

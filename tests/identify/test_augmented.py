@@ -93,20 +93,20 @@ def test_the_default_discretisation_follows_the_inputs_given(rec):
     sub-steps, each with its measured inputs, and the smaller Q."""
     K = 40
     z, s, starts = rec.z[:2, :K], rec.s[:2, :K], rec.starts[:K]
-    a = identify(z, s, rec.T, starts=starts)
-    b = identify(z, s, rec.T, starts=starts, substeps=SUBSTEPS_SAMPLED_INPUTS,
+    a = identify(z, s, rec.dt, starts=starts)
+    b = identify(z, s, rec.dt, starts=starts, substeps=SUBSTEPS_SAMPLED_INPUTS,
                  q_body=Q_BODY_SAMPLED_INPUTS)
     np.testing.assert_array_equal(a.theta_history, b.theta_history)
     t = np.linspace(0.0, K - 1.0, (K - 1) * DEFAULT_SUBSTEPS + 1)
     s_sub = np.stack([np.stack([np.interp(t, np.arange(K), s[r, :, j]) for j in range(2)], -1)
                       for r in range(2)])
-    c = identify(z, s_sub, rec.T, starts=starts)
-    d = identify(z, s, rec.T, starts=starts, substeps=DEFAULT_SUBSTEPS, q_body=DEFAULT_Q_BODY)
+    c = identify(z, s_sub, rec.dt, starts=starts)
+    d = identify(z, s, rec.dt, starts=starts, substeps=DEFAULT_SUBSTEPS, q_body=DEFAULT_Q_BODY)
     # the interpolated inputs at the sub-steps are the interpolation between the samples
     np.testing.assert_allclose(c.theta_history, d.theta_history, rtol=1e-9, atol=1e-12)
     with pytest.raises(ValueError, match=r"s has shape \(2, 41, 2\); expected \(\.\.\., 40, 2\) "
                        r"inputs \[delta, n\] at the samples of z, or \(\.\.\., 1951, 2\)"):
-        identify(z, s_sub[:, :41], rec.T, starts=starts)
+        identify(z, s_sub[:, :41], rec.dt, starts=starts)
 
 
 def test_substepped_jacobian_matches_finite_differences():
@@ -146,9 +146,9 @@ def test_ekf_batched_equals_runs_one_at_a_time_bit_for_bit(rec, m, filter):
     theta0 = initial_guess(REF.theta, 4, seed=3)
     f = "ekf" if filter == "ekf" else tk.filters.EKF()
     kw = dict(starts=rec.starts[:K], filter=f, substeps=m, keep_cov=True)
-    batch = identify(rec.z[:, :K], rec.s[:, :K], rec.T, theta0=theta0, **kw)
+    batch = identify(rec.z[:, :K], rec.s[:, :K], rec.dt, theta0=theta0, **kw)
     for i in range(4):
-        one = identify(rec.z[i:i + 1, :K], rec.s[i:i + 1, :K], rec.T, theta0=theta0[i:i + 1],
+        one = identify(rec.z[i:i + 1, :K], rec.s[i:i + 1, :K], rec.dt, theta0=theta0[i:i + 1],
                        **kw)
         for name in ("theta", "cov", "theta_history", "theta_std", "body", "body_std", "nis",
                      "cov_history"):
@@ -162,9 +162,9 @@ def test_sigma_point_batched_equals_runs_one_at_a_time(rec, name):
     # runs' columns), whose rounding depends on how many columns there are. The agreement is
     # checked relative to each value and, for a coefficient passing near zero, to its sd.
     kw = dict(starts=rec.starts[:K], filter=name, substeps=10)
-    batch = identify(rec.z[:, :K], rec.s[:, :K], rec.T, **kw)
+    batch = identify(rec.z[:, :K], rec.s[:, :K], rec.dt, **kw)
     for i in range(4):
-        one = identify(rec.z[i:i + 1, :K], rec.s[i:i + 1, :K], rec.T, **kw)
+        one = identify(rec.z[i:i + 1, :K], rec.s[i:i + 1, :K], rec.dt, **kw)
         a, b, sd = one.theta_history[0], batch.theta_history[i], batch.theta_std[i]
         assert np.all(np.abs(a - b) <= 1e-9 * np.abs(b) + 1e-10 * sd)
         np.testing.assert_allclose(one.theta_std[0], sd, rtol=1e-9)
@@ -180,8 +180,8 @@ def test_structured_ekf_equals_the_generic_filter(rec, m):
     z[1, 100] = np.nan
     z[2, 200:203] = np.nan
     kw = dict(starts=rec.starts[:300], substeps=m, keep_cov=True)
-    a = identify(z, rec.s[:, :300], rec.T, filter="ekf", **kw)
-    b = identify(z, rec.s[:, :300], rec.T, filter=tk.filters.EKF(), **kw)
+    a = identify(z, rec.s[:, :300], rec.dt, filter="ekf", **kw)
+    b = identify(z, rec.s[:, :300], rec.dt, filter=tk.filters.EKF(), **kw)
     sd = np.sqrt(np.diagonal(b.cov_history, axis1=-2, axis2=-1))
     mean_a = np.concatenate([a.body, a.theta_history], -1)
     mean_b = np.concatenate([b.body, b.theta_history], -1)
@@ -195,15 +195,15 @@ def test_structured_ekf_equals_the_generic_filter(rec, m):
 
 
 def test_one_run_without_batch_axes(rec):
-    one = identify(rec.z[2, :K], rec.s[2, :K], rec.T, starts=rec.starts[:K])
-    batch = identify(rec.z[:, :K], rec.s[:, :K], rec.T, starts=rec.starts[:K])
+    one = identify(rec.z[2, :K], rec.s[2, :K], rec.dt, starts=rec.starts[:K])
+    batch = identify(rec.z[:, :K], rec.s[:, :K], rec.dt, starts=rec.starts[:K])
     assert one.theta.shape == (16,) and one.theta_history.shape == (K, 16)
     np.testing.assert_allclose(one.theta_history, batch.theta_history[2], rtol=1e-12,
                                atol=1e-12)
 
 
 def test_result_fields_agree_with_the_final_covariance(rec):
-    r = identify(rec.z[:, :K], rec.s[:, :K], rec.T, starts=rec.starts[:K], keep_cov=True)
+    r = identify(rec.z[:, :K], rec.s[:, :K], rec.dt, starts=rec.starts[:K], keep_cov=True)
     assert r.theta.shape == (4, 16) and r.cov.shape == (4, 19, 19)
     assert r.theta_history.shape == r.theta_std.shape == (4, K, 16)
     assert r.body.shape == r.body_std.shape == (4, K, 3) and r.nis.shape == (4, K)
@@ -218,7 +218,7 @@ def test_result_fields_agree_with_the_final_covariance(rec):
 
 def test_a_join_reinitialises_the_body_and_keeps_theta(rec):
     j = rec.segments[1].start  # first sample of the 20/20 zig-zag
-    r = identify(rec.z[:, :K], rec.s[:, :K], rec.T, starts=rec.starts[:K], keep_cov=True)
+    r = identify(rec.z[:, :K], rec.s[:, :K], rec.dt, starts=rec.starts[:K], keep_cov=True)
     P = r.cov_history[:, j]
     np.testing.assert_array_equal(r.body[:, j], rec.z[:, j])
     np.testing.assert_array_equal(P[:, :3, :3], np.broadcast_to(np.diag(
@@ -229,14 +229,14 @@ def test_a_join_reinitialises_the_body_and_keeps_theta(rec):
     assert np.all(np.isnan(r.nis[:, [0, j]]))
     assert np.all(np.isfinite(r.nis[:, j + 1]))
     # without the join the filter would fit the jump: the results differ
-    r2 = identify(rec.z[:, :K], rec.s[:, :K], rec.T)
+    r2 = identify(rec.z[:, :K], rec.s[:, :K], rec.dt)
     assert np.abs(r2.theta - r.theta).max() > 1e-3
 
 
 def test_missing_samples_keep_the_prediction(rec):
     z = rec.z[:, :K].copy()
     z[:, 40] = np.nan
-    r = identify(z, rec.s[:, :K], rec.T, starts=rec.starts[:K], keep_cov=True)
+    r = identify(z, rec.s[:, :K], rec.dt, starts=rec.starts[:K], keep_cov=True)
     assert np.all(np.isnan(r.nis[:, 40])) and np.all(np.isfinite(r.theta))
     # the coefficients are not updated at the missing sample (the prediction leaves them)
     np.testing.assert_array_equal(r.theta_history[:, 40], r.theta_history[:, 39])
@@ -246,13 +246,13 @@ def test_missing_samples_keep_the_prediction(rec):
 def test_noise_free_discrete_data_give_the_coefficients():
     # the identifier's own model (substeps=1 truth), exact states, a small R: all 16 come out
     rec = programme(1, seed=3, substeps=1)
-    r = identify(rec.x, rec.s, rec.T, starts=rec.starts, substeps=1,
+    r = identify(rec.x, rec.s, rec.dt, starts=rec.starts, substeps=1,
                  sigma_z=[1e-4, 1e-4, 5e-6], q_body=0.0)
     assert relative_error(r.theta, REF.theta).max() < 1e-5
 
 
 def test_the_default_initial_guess_is_zero_with_unit_sd(rec):
-    r = identify(rec.z[:, :2], rec.s[:, :2], rec.T, keep_cov=True)
+    r = identify(rec.z[:, :2], rec.s[:, :2], rec.dt, keep_cov=True)
     np.testing.assert_array_equal(r.cov_history[:, 0, 3:, 3:], np.broadcast_to(np.eye(16),
                                                                                 (4, 16, 16)))
     np.testing.assert_array_equal(r.theta_history[:, 0], 0.0)
@@ -318,7 +318,7 @@ def test_bad_data_name_the_field(rec):
         identify(rec.z[:, :5, :2], rec.s[:, :5], 1.0)
     with pytest.raises(ValueError, match="s has shape"):
         identify(rec.z[:, :5], rec.s[:, :4], 1.0)
-    with pytest.raises(ValueError, match="T = "):
+    with pytest.raises(ValueError, match="dt = "):
         identify(rec.z[:, :5], rec.s[:, :5], 0.0)
     z = rec.z[:, :5].copy()
     z[1, 0, 2] = np.nan

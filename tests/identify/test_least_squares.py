@@ -28,7 +28,7 @@ def exact():
 
 
 def test_noise_free_discrete_data_give_all_16_coefficients_exactly(exact):
-    fit = least_squares(exact.x, exact.s, exact.T, starts=exact.starts)
+    fit = least_squares(exact.x, exact.s, exact.dt, starts=exact.starts)
     assert relative_error(fit.theta, REF.theta).max() < 1e-9
     assert np.all(fit.residual_std < 1e-10)
     assert fit.rows[0] == exact.t.size - len(exact.segments)
@@ -38,28 +38,28 @@ def test_noise_free_discrete_data_give_all_16_coefficients_exactly(exact):
 
 def test_joins_and_missing_samples_are_left_out(exact):
     # without the joins the jumps between trials enter the fit
-    fit = least_squares(exact.x, exact.s, exact.T)
+    fit = least_squares(exact.x, exact.s, exact.dt)
     assert relative_error(fit.theta, REF.theta).max() > 1e-3
     # a missing sample removes the two pairs it belongs to, and nothing else changes
     x = exact.x.copy()
     x[0, 100] = np.nan
-    fit = least_squares(x, exact.s, exact.T, starts=exact.starts)
+    fit = least_squares(x, exact.s, exact.dt, starts=exact.starts)
     assert fit.rows[0] == exact.t.size - len(exact.segments) - 2
     assert relative_error(fit.theta, REF.theta).max() < 1e-9
 
 
 def test_batched_equals_runs_one_at_a_time():
     rec = programme(4, seed=5)
-    batch = least_squares(rec.z, rec.s, rec.T, starts=rec.starts)
+    batch = least_squares(rec.z, rec.s, rec.dt, starts=rec.starts)
     for i in range(4):
-        one = least_squares(rec.z[i], rec.s[i], rec.T, starts=rec.starts)
+        one = least_squares(rec.z[i], rec.s[i], rec.dt, starts=rec.starts)
         np.testing.assert_array_equal(one.theta, batch.theta[i])
         np.testing.assert_array_equal(one.cov, batch.cov[i])
         np.testing.assert_array_equal(one.residual_std, batch.residual_std[i])
 
 
 def test_the_equations_are_separate_problems(exact):
-    fit = least_squares(exact.x, exact.s, exact.T, starts=exact.starts)
+    fit = least_squares(exact.x, exact.s, exact.dt, starts=exact.starts)
     block = np.zeros((16, 16), bool)
     for cols in EQUATIONS:
         block[np.ix_(cols, cols)] = True
@@ -75,10 +75,10 @@ def test_covariance_is_right_for_a_white_equation_error():
     # estimates sqrt(q / T) per equation.
     q = np.array([1e-4, 1e-4, 1e-6])
     rec = programme(200, seed=21, substeps=1, noise=NO_NOISE, q=q)
-    fit = least_squares(rec.x, rec.s, rec.T, starts=rec.starts)
+    fit = least_squares(rec.x, rec.s, rec.dt, starts=rec.starts)
     nees = coefficient_nees(fit.theta, fit.cov, REF.theta)
     assert abs(nees.mean() - 16.0) < 4 * math.sqrt(2 * 16 / 200)
-    np.testing.assert_allclose(np.median(fit.residual_std, 0), np.sqrt(q / rec.T), rtol=0.02)
+    np.testing.assert_allclose(np.median(fit.residual_std, 0), np.sqrt(q / rec.dt), rtol=0.02)
     # and the spread over runs matches the stated standard deviations (sway and yaw; the
     # sample sd of 200 runs has a relative standard error of 5%: 0.2 is 4 of them)
     sd_stated = np.sqrt(np.diagonal(fit.cov, axis1=-2, axis2=-1)).mean(0)
@@ -89,12 +89,12 @@ def test_covariance_is_right_for_a_white_equation_error():
     ({"x": np.zeros((5, 2))}, "x has shape"),
     ({"x": np.zeros((1, 3))}, "x has shape"),
     ({"s": np.zeros((4, 2))}, "s has shape"),
-    ({"T": -1.0}, "T = "),
+    ({"dt": -1.0}, "dt = "),
     ({"starts": np.zeros(3, bool)}, "starts"),
     ({"norm": 1.0}, "norm"),
 ])
 def test_bad_input_names_the_field(kwargs, match):
-    args = {"x": np.ones((5, 3)), "s": np.ones((5, 2)), "T": 1.0} | kwargs
+    args = {"x": np.ones((5, 3)), "s": np.ones((5, 2)), "dt": 1.0} | kwargs
     with pytest.raises(ValueError, match=match):
         least_squares(**args)
 

@@ -67,7 +67,7 @@ def test_the_same_truth_as_seatrials(rec):
 def test_substeps_one_is_the_identifiers_discrete_model():
     rec = programme(1, seed=0, substeps=1)
     x, s = rec.x[0], rec.s[0]
-    pred = step(x[:-1], mean_input(s[:-1], s[1:]), REF.theta, rec.T, REF.norm)
+    pred = step(x[:-1], mean_input(s[:-1], s[1:]), REF.theta, rec.dt, REF.norm)
     inside = ~rec.starts[1:]
     np.testing.assert_allclose(pred[inside], x[1:][inside], rtol=1e-13, atol=1e-15)
     # and the near-continuous default is not (an Euler step of 1 s misses by cm/s)
@@ -116,8 +116,8 @@ def test_a_custom_programme():
     trials = (TrialSpec("turn", "turn", {"delta": 0.3, "rpm": 1800.0, "duration": 30.0}),
               TrialSpec("acc", "acceleration", {"rpm_start": 1800.0, "rpm_end": 2000.0,
                                                 "duration": 20.0}))
-    rec = programme(3, seed=1, trials=trials, T=0.5)
-    assert rec.t.size == 61 + 41 and rec.T == 0.5
+    rec = programme(3, seed=1, trials=trials, dt=0.5)
+    assert rec.t.size == 61 + 41 and rec.dt == 0.5
     assert rec.segment("acc") == slice(61, 102)
     with pytest.raises(KeyError, match="nope"):
         rec.segment("nope")

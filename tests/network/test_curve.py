@@ -20,6 +20,7 @@ from tests.network.test_processes import _agent_children, _setup
 from tests.test_network_scenarios import TINY
 from trackkit.network.processes import (
     CurveKeys,
+    Deployment,
     _Environment,
     decode,
     encode,
@@ -131,7 +132,8 @@ def test_curve_refuses_rogues_during_a_run_and_keeps_the_bits(tmp_path):
             seen.extend(peers.outcomes())
 
     try:
-        got = run_network_processes(*args, curve=True, keys=tmp_path, on_event=rogues, **kw)
+        got = run_network_processes(*args, deployment=Deployment(curve=True, keys=tmp_path),
+                                    on_event=rogues, **kw)
     finally:
         peers.close()
     assert all(o in _FAILED for o in seen) and len(seen) == 3, seen
@@ -149,18 +151,18 @@ def test_curve_is_on_off_loopback_and_bad_keys_are_named(tmp_path):
     assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.4")
     args, kw = _setup(30.0)
     with pytest.raises(ValueError, match=r"not a directory"):
-        run_network_processes(*args, keys=tmp_path / "none", **kw)
+        run_network_processes(*args, deployment=Deployment(keys=tmp_path / "none"), **kw)
     with pytest.raises(ValueError, match=r"server\.key_secret: cannot be read"):
-        run_network_processes(*args, keys=tmp_path, **kw)
+        run_network_processes(*args, deployment=Deployment(keys=tmp_path), **kw)
     zmq.auth.create_certificates(tmp_path, "server")
     (tmp_path / "client.key_secret").write_text("not a certificate\n")
     with pytest.raises(ValueError, match=r"client\.key_secret: cannot be read"):
-        run_network_processes(*args, keys=tmp_path, **kw)
+        run_network_processes(*args, deployment=Deployment(keys=tmp_path), **kw)
     (tmp_path / "client.key_secret").write_bytes((tmp_path / "server.key").read_bytes())
     with pytest.raises(ValueError, match=r"client\.key_secret: holds no secret key"):
-        run_network_processes(*args, keys=tmp_path, **kw)
+        run_network_processes(*args, deployment=Deployment(keys=tmp_path), **kw)
     with pytest.raises(ValueError, match="curve = False"):
-        run_network_processes(*args, keys=tmp_path, curve=False, **kw)
+        run_network_processes(*args, deployment=Deployment(keys=tmp_path, curve=False), **kw)
     assert _agent_children() == []
 
 

@@ -20,6 +20,7 @@ from trackkit.network.agents import PAYLOAD_VERSION, Payload, empty_bearings
 from trackkit.network.inprocess import run_network
 from trackkit.network.processes import (
     AgentError,
+    Deployment,
     _Environment,
     decode_payload,
     encode,
@@ -132,9 +133,10 @@ def test_agents_started_by_a_launcher_dial_the_advertised_address():
 
     args, kw = _setup(90.0)
     ref = run_network(*args, **kw)
-    got = run_network_processes(*args, host="0.0.0.0", advertise=_own_address(),
-                                launch={a: ["env", "TRACKKIT_LAUNCHED=1"] for a in range(3)},
-                                remote_python=sys.executable, **kw)
+    got = run_network_processes(*args, deployment=Deployment(
+        host="0.0.0.0", advertise=_own_address(),
+        launch={a: ["env", "TRACKKIT_LAUNCHED=1"] for a in range(3)},
+        remote_python=sys.executable), **kw)
     for x, y in zip(ref.agents, got.agents, strict=True):
         np.testing.assert_array_equal(x.mean, y.mean)
         np.testing.assert_array_equal(x.offsets, y.offsets)
@@ -142,9 +144,10 @@ def test_agents_started_by_a_launcher_dial_the_advertised_address():
     assert (got.curve, got.refused) == (True, 0)  # off loopback: CURVE, keys made for the run
     assert _agent_children() == []
     with pytest.raises(ValueError, match="advertise"):
-        run_network_processes(*args, host="0.0.0.0", launch={0: ["env"]}, **kw)
+        run_network_processes(*args, deployment=Deployment(host="0.0.0.0", launch={0: ["env"]}),
+                              **kw)
     with pytest.raises(ValueError, match="launch"):
-        run_network_processes(*args, launch={5: ["env"]}, **kw)
+        run_network_processes(*args, deployment=Deployment(launch={5: ["env"]}), **kw)
 
 
 def test_no_process_socket_or_port_left_after_a_run(pair):

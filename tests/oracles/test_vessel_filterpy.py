@@ -131,10 +131,10 @@ def test_augmented_ekf_matches_filterpy(record, m, filter):
     assert starts[1:].sum() >= 2  # the comparison crosses trial joins
     sd0 = np.full(16, 0.5)
     f = "ekf" if filter == "ekf" else tk.filters.EKF()
-    ours = identify(z, s, rec.T, starts=starts, filter=f, theta0=theta0, theta_sd0=sd0,
+    ours = identify(z, s, rec.dt, starts=starts, filter=f, theta0=theta0, theta_sd0=sd0,
                     sigma_z=SIGMA, q_body=Q_BODY, q_theta=Q_THETA, substeps=m, keep_cov=True)
     mean = np.concatenate([ours.body, ours.theta_history], -1)
-    ref_mean, ref_cov = _filterpy_run(z, s, starts, theta0, sd0, rec.T, m)
+    ref_mean, ref_cov = _filterpy_run(z, s, starts, theta0, sd0, rec.dt, m)
     assert_gaussian_close(mean, ours.cov_history, ref_mean, ref_cov,
                           f"augmented EKF ({filter}), {m} sub-step(s)")
     # the data moved the estimate: the comparison is not of two priors

@@ -67,7 +67,7 @@ def case(request):
     rec = programme(RUNS, SEED, substeps=1 if exact else 10)
     kw = {"substeps": 1, "q_body": Q_EXACT} if exact else {}
     m = 1 if exact else 10
-    ekf = identify(rec.z, rec.s, rec.T, starts=rec.starts, filter="ekf", **kw)
+    ekf = identify(rec.z, rec.s, rec.dt, starts=rec.starts, filter="ekf", **kw)
     return SimpleNamespace(name=request.param, rec=rec, ekf=ekf, kw=kw, m=m,
                            theta=rec.truth.theta)
 
@@ -92,7 +92,7 @@ def test_a_the_papers_euler_step_biases_yaw_on_near_continuous_data(realistic):
     # time constant is about 1.7 s, and the identified c1, c2, c3 are the Euler-equivalent
     # ones, 14-15% off (measured mean errors +14.2%, +14.5%, -14.3%, i.e. 53, 229 and 566
     # standard errors of the 100-run mean), against 1.7-3.3% with ten sub-steps.
-    r = identify(realistic.z, realistic.s, realistic.T, starts=realistic.starts, substeps=1)
+    r = identify(realistic.z, realistic.s, realistic.dt, starts=realistic.starts, substeps=1)
     th = realistic.truth.theta
     bias = (r.theta.mean(0) - th) / np.abs(th)
     se = r.theta.std(0) / np.abs(th) / math.sqrt(RUNS)
@@ -159,7 +159,7 @@ def test_d_coefficient_nees_inside_the_95_percent_band_in_90_percent_of_runs(cas
     "q_body = 1e-4, 1e-4, 1e-7) also gives 91% (NEES mean 10.8) but lets c1 wander (7.2% "
     "median error instead of 3.3%)"))
 def test_d_nees_with_q_matched_to_the_model_error_rms(realistic):
-    r = identify(realistic.z, realistic.s, realistic.T, starts=realistic.starts,
+    r = identify(realistic.z, realistic.s, realistic.dt, starts=realistic.starts,
                  q_body=[3e-5, 3e-5, 1e-6])
     assert _nees_inside(r, realistic.truth.theta) >= 0.90
 
@@ -175,7 +175,7 @@ def test_e_the_three_filters_agree_and_are_consistent(case):
     rec = case.rec
     med = {"ekf": np.median(relative_error(case.ekf.theta, case.theta), 0)}
     for name in ("ukf", "ckf"):
-        r = identify(rec.z, rec.s, rec.T, starts=rec.starts, filter=name, **case.kw)
+        r = identify(rec.z, rec.s, rec.dt, starts=rec.starts, filter=name, **case.kw)
         med[name] = np.median(relative_error(r.theta, case.theta), 0)
         assert _nees_inside(r, case.theta) >= 0.90, name
         np.testing.assert_allclose(med[name][SWAY_YAW], med["ekf"][SWAY_YAW], atol=0.005)
@@ -187,8 +187,8 @@ def test_e_least_squares_is_worse_than_the_filter_on_near_continuous_data(realis
     # 8.1 12.9 13.6%, EKF 0.9 2.0 1.4 0.7 3.3 1.7 1.7%; LS NEES inside the band in 0% of runs
     # (mean 1128).
     th = realistic.truth.theta
-    ls = least_squares(realistic.z, realistic.s, realistic.T, starts=realistic.starts)
-    ekf = identify(realistic.z, realistic.s, realistic.T, starts=realistic.starts)
+    ls = least_squares(realistic.z, realistic.s, realistic.dt, starts=realistic.starts)
+    ekf = identify(realistic.z, realistic.s, realistic.dt, starts=realistic.starts)
     e_ls = np.median(relative_error(ls.theta, th), 0)
     e_ekf = np.median(relative_error(ekf.theta, th), 0)
     assert np.all(e_ls[SWAY_YAW] > e_ekf[SWAY_YAW])
@@ -201,8 +201,8 @@ def test_e_least_squares_errors_in_variables_bias():
     # the 100-run mean) against the EKF's -0.1%, -0.35%, +0.1%
     rec = programme(RUNS, SEED, substeps=1)
     th = rec.truth.theta
-    ls = least_squares(rec.z, rec.s, rec.T, starts=rec.starts)
-    ekf = identify(rec.z, rec.s, rec.T, starts=rec.starts, substeps=1, q_body=Q_EXACT)
+    ls = least_squares(rec.z, rec.s, rec.dt, starts=rec.starts)
+    ekf = identify(rec.z, rec.s, rec.dt, starts=rec.starts, substeps=1, q_body=Q_EXACT)
     idx = [9, 10, 11]
     bias_ls = (ls.theta.mean(0) - th)[idx] / np.abs(th[idx])
     se_ls = ls.theta.std(0)[idx] / np.abs(th[idx]) / math.sqrt(RUNS)
@@ -223,7 +223,7 @@ def test_f_predicted_10_10_zigzag_within_a_ship_length(case):
                            substeps=case.rec.substeps, duration=60.0)
     s = np.stack([val.delta, val.n], -1)
     x0 = np.array([val.u[0], val.v[0], val.r[0]])
-    p = predict(case.ekf.theta, s, case.rec.T, x0, norm=norm, substeps=case.m)
+    p = predict(case.ekf.theta, s, case.rec.dt, x0, norm=norm, substeps=case.m)
     worst = position_error(p.pose, val.east, val.north).max(-1)
     assert np.median(worst) < 19.6
 
@@ -270,7 +270,7 @@ def test_g_filtered_track_beats_raw_gps(case):
     err, gps = [], []
     for seg in rec.segments:
         sl = slice(seg.start, seg.stop)
-        track = dead_reckon(body[:, sl], rec.heading[:, sl], rec.T, rec.pose[:, seg.start])
+        track = dead_reckon(body[:, sl], rec.heading[:, sl], rec.dt, rec.pose[:, seg.start])
         err.append(position_error(track, rec.pose[:, sl, 0], rec.pose[:, sl, 1]))
         gps.append(position_error(rec.gps[:, sl], rec.pose[:, sl, 0], rec.pose[:, sl, 1]))
     e, g = rmse(np.concatenate(err, -1)), rmse(np.concatenate(gps, -1))

@@ -99,6 +99,7 @@ def network(
     The same scenario and seed give byte-identical results.json on one machine."""
     with user_errors() as state:
         from trackkit.network.inprocess import check_loss
+        from trackkit.network.processes import Deployment
 
         sc = _load_network(scenario)
         if compare_straight and (straight or not sc.settings.steering):
@@ -132,9 +133,9 @@ def network(
             _run_network(sc, where.path, runs=runs, seed=seed,
                          steering=False if straight else None, agents=str(agents.value),
                          compare_straight=compare_straight, loss=loss, delay=delay,
-                         outages=outages, host=host, advertise=advertise,
-                         launch=launchers or None, remote_python=remote_python,
-                         curve=curve, keys=keys)
+                         outages=outages, deployment=Deployment(
+                             host=host, advertise=advertise, launch=launchers or None,
+                             remote_python=remote_python, curve=curve, keys=keys))
             state.interrupted = "interrupted"
 
 

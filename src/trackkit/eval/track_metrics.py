@@ -599,50 +599,18 @@ def track_counts(
     * ``sq_error`` sums |x_track - x_truth|^2 over assigned pairs (RMSE = sqrt(sq_error /
       assigned_steps)), and ``assigned_steps / truth_steps`` is SIAP's completeness.
     """
-    c, p = _check_params(c, p)
-    if not 0 < min_assigned <= 1:
-        raise ValueError(f"min_assigned = {min_assigned!r}; expected a fraction in (0, 1]")
-    if not within >= 0:
-        raise ValueError(f"within = {within!r}; expected a delay >= 0")
-    X = _check_frames("truth", truth, need_ids=True)
-    Y = _check_frames("tracks", tracks, need_ids=True)
-    _check_pair(X, Y, "truth", "tracks")
+    X, Y, c, p = _check_counts(truth, tracks, c, p, min_assigned, within)
     S = X.n_steps
-    if run_offsets is None:
-        ro = np.array([0, S], np.int64)
-    else:
-        ro = np.asarray(run_offsets)
-        if (
-            ro.ndim != 1
-            or ro.size < 2
-            or not np.issubdtype(ro.dtype, np.integer)
-            or ro[0] != 0
-            or ro[-1] != S
-            or np.any(np.diff(ro) < 0)
-        ):
-            raise ValueError(
-                f"run_offsets = {ro!r}; expected integers (R + 1,) non-decreasing from 0 to "
-                f"the number of steps {S}"
-            )
-        ro = ro.astype(np.int64)
+    ro = _run_offsets(run_offsets, S)
     R = ro.size - 1
-    if times is None:
-        t = (np.arange(S) - np.repeat(ro[:-1], np.diff(ro))).astype(float)
-    else:
-        t = np.asarray(times, dtype=float)
-        if t.shape != (S,):
-            raise ValueError(f"times has shape {t.shape}; expected ({S},), one per step")
+    t = _step_times(times, ro, S)
     run_of_step = np.repeat(np.arange(R), np.diff(ro))
-
     xs = np.repeat(np.arange(S), X.sizes)  # step of each truth row
     ys = np.repeat(np.arange(S), Y.sizes)
-    for name, f, st in (("truth", X, xs), ("tracks", Y, ys)):
-        k, _ = _keys(st, f.ids)
-        if k.size and k.max() + 1 != k.size:
-            raise ValueError(f"{name}.ids repeat an ID within a step; expected unique IDs")
+    _check_unique_ids("truth", X, xs)
+    _check_unique_ids("tracks", Y, ys)
     tk_, truth_run = _keys(run_of_step[xs], X.ids)  # truth key of each truth row
     jk_, track_run = _keys(run_of_step[ys], Y.ids)
-    nT, nJ = truth_run.size, track_run.size
 
     I, J, _ = _assign(X, Y, c, p)
     pstep, pt, pj = xs[I], tk_[I], jk_[J]
@@ -652,36 +620,10 @@ def track_counts(
         out = np.bincount(idx, weights=w, minlength=R)
         return out.astype(np.int64 if w is None else float)  # (bincount of nothing is int)
 
-    # truths: birth (first row, rows are in step order) and first assigned step
-    birth = np.full(nT, S, np.int64)
-    np.minimum.at(birth, tk_, xs)
-    first = np.full(nT, S, np.int64)
-    np.minimum.at(first, pt, pstep)
-    conf = first < S
-    delay = t[first[conf]] - t[birth[conf]]
-
-    # tracks: life, last step, assigned steps, purity on the dominant truth
-    life = np.bincount(jk_, minlength=nJ)
-    last = np.full(nJ, -1, np.int64)
-    np.maximum.at(last, jk_, ys)
-    on = np.bincount(pj, minlength=nJ)
-    false_ = on < min_assigned * life
-    pair_key, _ = _keys(pj, pt)  # (track, truth) combinations
-    combo_n = np.bincount(pair_key)
-    combo_track = np.zeros(combo_n.size, np.int64)
-    combo_track[pair_key] = pj
-    dom = np.zeros(nJ, np.int64)
-    np.maximum.at(dom, combo_track, combo_n)
-    purity = dom / np.maximum(life, 1)
+    conf, delay = _confirmation(tk_, xs, pt, pstep, truth_run.size, S, t)
+    life, last, false_, purity = _track_lives(jk_, ys, pt, pj, track_run.size, min_assigned)
     good = ~false_
-
-    # truth switches and breaks along each truth's assigned steps; ID switches along tracks
-    o, ch = _changes(pt, pj, pstep)
-    new = o[1:][ch]
-    prev = o[:-1][ch]
-    brk = last[pj[prev]] < pstep[new]
-    o2, ch2 = _changes(pj, pt, pstep)
-
+    new, brk, id_new = _switches(pt, pj, pstep, last)
     diff = X.x[I] - Y.x[J]
     return TrackCounts(
         truths=per_run(truth_run),
@@ -696,9 +638,103 @@ def track_counts(
         purity=per_run(track_run[good], purity[good]),
         breaks=per_run(prun[new][brk]),
         truth_switches=per_run(prun[new]),
-        id_switches=per_run(prun[o2[1:][ch2]]),
+        id_switches=per_run(prun[id_new]),
         sq_error=per_run(prun, (diff * diff).sum(axis=1)),
     )
+
+
+def _check_counts(truth: Frames, tracks: Frames, c: float, p: float, min_assigned: float,
+                  within: float) -> tuple[Frames, Frames, float, float]:
+    """``track_counts``' arguments checked: the frames, ``c`` and ``p``."""
+    c, p = _check_params(c, p)
+    if not 0 < min_assigned <= 1:
+        raise ValueError(f"min_assigned = {min_assigned!r}; expected a fraction in (0, 1]")
+    if not within >= 0:
+        raise ValueError(f"within = {within!r}; expected a delay >= 0")
+    X = _check_frames("truth", truth, need_ids=True)
+    Y = _check_frames("tracks", tracks, need_ids=True)
+    _check_pair(X, Y, "truth", "tracks")
+    return X, Y, c, p
+
+
+def _check_unique_ids(name: str, f: Frames, steps: IntArray) -> None:
+    k, _ = _keys(steps, f.ids)
+    if k.size and k.max() + 1 != k.size:
+        raise ValueError(f"{name}.ids repeat an ID within a step; expected unique IDs")
+
+
+def _switches(pt: IntArray, pj: IntArray, pstep: IntArray,
+              last: IntArray) -> tuple[IntArray, NDArray, IntArray]:
+    """Along each truth's assigned pairs (truth keys ``pt``, track keys ``pj`` at steps
+    ``pstep``): the pairs where its track changes (truth switches) and, of those, the breaks
+    (the previous track's ``last`` step is before the change); along each track's: the
+    pairs where its truth changes (ID switches)."""
+    o, ch = _changes(pt, pj, pstep)
+    new = o[1:][ch]
+    prev = o[:-1][ch]
+    brk = last[pj[prev]] < pstep[new]
+    o2, ch2 = _changes(pj, pt, pstep)
+    return new, brk, o2[1:][ch2]
+
+
+def _run_offsets(run_offsets: ArrayLike | None, S: int) -> IntArray:
+    """``track_counts``' ``run_offsets`` checked (default: one run of the ``S`` steps)."""
+    if run_offsets is None:
+        return np.array([0, S], np.int64)
+    ro = np.asarray(run_offsets)
+    if (
+        ro.ndim != 1
+        or ro.size < 2
+        or not np.issubdtype(ro.dtype, np.integer)
+        or ro[0] != 0
+        or ro[-1] != S
+        or np.any(np.diff(ro) < 0)
+    ):
+        raise ValueError(
+            f"run_offsets = {ro!r}; expected integers (R + 1,) non-decreasing from 0 to "
+            f"the number of steps {S}"
+        )
+    return ro.astype(np.int64)
+
+
+def _step_times(times: ArrayLike | None, ro: IntArray, S: int) -> Array:
+    """``track_counts``' ``times`` checked (default: each step's index within its run)."""
+    if times is None:
+        return (np.arange(S) - np.repeat(ro[:-1], np.diff(ro))).astype(float)
+    t = np.asarray(times, dtype=float)
+    if t.shape != (S,):
+        raise ValueError(f"times has shape {t.shape}; expected ({S},), one per step")
+    return t
+
+
+def _confirmation(tk_: IntArray, xs: IntArray, pt: IntArray, pstep: IntArray, nT: int,
+                  S: int, t: Array) -> tuple[NDArray, Array]:
+    """Per truth key: confirmed (assigned at some step) and, for those, the delay from its
+    birth (its first row; rows are in step order) to its first assigned step."""
+    birth = np.full(nT, S, np.int64)
+    np.minimum.at(birth, tk_, xs)
+    first = np.full(nT, S, np.int64)
+    np.minimum.at(first, pt, pstep)
+    conf = first < S
+    return conf, t[first[conf]] - t[birth[conf]]
+
+
+def _track_lives(jk_: IntArray, ys: IntArray, pt: IntArray, pj: IntArray, nJ: int,
+                 min_assigned: float) -> tuple[IntArray, IntArray, NDArray, Array]:
+    """Per track key: life (steps present), last step, false (assigned on fewer than
+    ``min_assigned`` of its life) and purity (steps on its dominant truth over its life)."""
+    life = np.bincount(jk_, minlength=nJ)
+    last = np.full(nJ, -1, np.int64)
+    np.maximum.at(last, jk_, ys)
+    on = np.bincount(pj, minlength=nJ)
+    false_ = on < min_assigned * life
+    pair_key, _ = _keys(pj, pt)  # (track, truth) combinations
+    combo_n = np.bincount(pair_key)
+    combo_track = np.zeros(combo_n.size, np.int64)
+    combo_track[pair_key] = pj
+    dom = np.zeros(nJ, np.int64)
+    np.maximum.at(dom, combo_track, combo_n)
+    return life, last, false_, dom / np.maximum(life, 1)
 
 
 def track_summary(counts: TrackCounts) -> dict[str, float]:

@@ -50,8 +50,7 @@ from __future__ import annotations
 import time as _time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,6 +59,10 @@ from trackkit.eval.network_score import score_trace
 from trackkit.eval.track_metrics import Frames, assign
 from trackkit.network.bound import network_pcrlb
 from trackkit.network.inprocess import NetworkResult, Trace, run_network
+
+if TYPE_CHECKING:
+    from trackkit.network.agents import AgentSettings
+    from trackkit.network.processes import Deployment
 
 __all__ = ["NetworkMonteCarlo", "RunScores", "run_network_mc", "score_run"]
 
@@ -345,12 +348,7 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                    loss: float | None = None,
                    delay: float = 0.0,
                    outages: Sequence[tuple[int, float, float | None]] = (),
-                   host: str = "127.0.0.1",
-                   advertise: str | None = None,
-                   launch: dict[int, Sequence[str]] | None = None,
-                   remote_python: str = "python3",
-                   curve: bool | None = None,
-                   keys: str | Path | None = None,
+                   deployment: Deployment | None = None,
                    ) -> NetworkMonteCarlo:
     """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
     ``runs``, ``seed``, ``steering`` and ``loss`` override the file's; ``progress(done,
@@ -359,33 +357,10 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     (``network.processes.run_network_processes``: every agent its own OS process, talking
     over ZeroMQ; without loss, delay and outages the same results bit for bit, only slower),
     which also takes ``delay`` (the channel's delivery delay, simulated s), ``outages``
-    (``(agent, kill_at, restart_at or None)``, 0-based agent), ``host`` (the address the
-    environment binds), ``advertise``, ``launch`` and ``remote_python`` (agents on other
-    machines: ``run_network_processes``), ``curve`` and ``keys`` (CURVE: on by default off
-    loopback; ``run_network_processes``)."""
-    from dataclasses import replace
-
-    from trackkit.network.agents import AgentSettings
-
-    extra: dict = {}
-    if agents == "inprocess":
-        runner = run_network
-        if (delay != 0.0 or outages or host != "127.0.0.1" or advertise or launch or curve
-                or keys is not None):
-            raise ValueError(f"delay = {delay!r}, outages = {list(outages)!r}, host = "
-                             f"{host!r}, advertise = {advertise!r}, launch = {launch!r}: a "
-                             "channel delay, killing agents, addresses and launchers need "
-                             "agents='processes'")
-    elif agents == "processes":
-        from trackkit.network.processes import run_network_processes
-
-        runner = run_network_processes
-        extra = {"delay": delay, "outages": tuple(outages), "host": host,
-                 "advertise": advertise, "launch": launch, "remote_python": remote_python,
-                 "curve": curve, "keys": keys}
-    else:
-        raise ValueError(f"agents = {agents!r}; expected 'inprocess' or 'processes'")
-
+    (``(agent, kill_at, restart_at or None)``, 0-based agent) and ``deployment`` (a
+    ``network.processes.Deployment``: the address the environment binds, agents on other
+    machines, CURVE: on by default off loopback)."""
+    runner, extra = _runner(agents, delay, outages, deployment)
     runs = scenario.run.runs if runs is None else int(runs)
     seed = scenario.run.seed if seed is None else int(seed)
     steer = scenario.settings.steering if steering is None else bool(steering)
@@ -394,13 +369,11 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     if seed < 0:
         raise ValueError(f"seed = {seed}; expected an integer >= 0")
     net, rep = scenario.network, scenario.report
-    settings = AgentSettings(combination=scenario.settings.combination)
-    if scenario.settings.q is not None:
-        settings = replace(settings, q=scenario.settings.q)
     states = scenario.agent_states()
     sigma, mr, cr = scenario.sigma_rad(), scenario.meas_range(), scenario.comm_range()
     prior = np.diag([rep.prior_pos_std_m**2] * 2 + [rep.prior_vel_std_mps**2] * 2)
     p_loss = net.loss if loss is None else float(loss)
+    settings = _agent_settings(scenario)
     per_run: list[RunScores] = []
     wall: list[float] = []
     recovered: list[list[float]] = []
@@ -423,7 +396,54 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
             example, example_targets = res, targets
         if progress is not None:
             progress(r + 1, runs)
+    return _stacked(scenario, per_run, seed=seed, steering=steer,
+                    recovered=np.array(recovered, float).reshape(runs, len(outages)),
+                    wall=np.array(wall), loss=p_loss, delay=float(delay),
+                    outages=tuple(outages), curve=secured,
+                    refused=np.array(refused, np.int64), example=example,
+                    example_targets=example_targets)
 
+
+def _runner(agents: str, delay: float, outages: Sequence[tuple[int, float, float | None]],
+            deployment: Deployment | None) -> tuple[Callable[..., NetworkResult], dict]:
+    """``run_network``, or ``run_network_processes`` with its extra keywords; the options
+    that need agents in their own processes are refused in process."""
+    d = deployment
+    if agents == "inprocess":
+        remote = d is not None and (d.host != "127.0.0.1" or d.advertise or d.launch
+                                    or d.curve or d.keys is not None)
+        if delay != 0.0 or outages or remote:
+            host, advertise, launch = ((d.host, d.advertise, d.launch) if d is not None
+                                       else ("127.0.0.1", None, None))
+            raise ValueError(f"delay = {delay!r}, outages = {list(outages)!r}, host = "
+                             f"{host!r}, advertise = {advertise!r}, launch = {launch!r}: a "
+                             "channel delay, killing agents, addresses and launchers need "
+                             "agents='processes'")
+        return run_network, {}
+    if agents == "processes":
+        from trackkit.network.processes import Deployment, run_network_processes
+
+        return run_network_processes, {"delay": delay, "outages": tuple(outages),
+                                       "deployment": Deployment() if d is None else d}
+    raise ValueError(f"agents = {agents!r}; expected 'inprocess' or 'processes'")
+
+
+def _agent_settings(scenario) -> AgentSettings:
+    """The agents' settings of a network scenario."""
+    from dataclasses import replace
+
+    from trackkit.network.agents import AgentSettings
+
+    settings = AgentSettings(combination=scenario.settings.combination)
+    if scenario.settings.q is not None:
+        settings = replace(settings, q=scenario.settings.q)
+    return settings
+
+
+def _stacked(scenario, per_run: list[RunScores], **more) -> NetworkMonteCarlo:
+    """The per-run scores stacked over the runs, with the scenario's constants and
+    ``more`` (the run's other fields)."""
+    net, rep = scenario.network, scenario.report
     E = per_run[0].count.shape[1]
     have_c = per_run[0].central_err is not None
 
@@ -431,7 +451,7 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
         return np.stack([get(s) for s in per_run])
 
     return NetworkMonteCarlo(
-        name=scenario.name, runs=runs, seed=seed, steering=steer, duration=net.duration_s,
+        name=scenario.name, runs=len(per_run), duration=net.duration_s,
         period=net.period_s, jitter=net.max_delay_s, first_fraction=rep.first_fraction,
         last_fraction=rep.last_fraction, c=rep.c_m,
         time=net.period_s * np.arange(E) + 0.5 * net.max_delay_s,
@@ -451,10 +471,5 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
         delivered=np.array([s.delivered for s in per_run], np.int64),
         lost=np.array([s.lost for s in per_run], np.int64),
         late=np.array([s.late for s in per_run], np.int64),
-        recovered=np.array(recovered, float).reshape(runs, len(outages)),
-        seconds=np.array([s.seconds for s in per_run]), wall=np.array(wall),
-        loss=p_loss, delay=float(delay), outages=tuple(outages), curve=secured,
-        refused=np.array(refused, np.int64),
-        example=example, example_targets=example_targets,
+        seconds=np.array([s.seconds for s in per_run]), **more,
     )
-

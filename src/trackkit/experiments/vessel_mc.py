@@ -405,7 +405,7 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
     # the identification data
     t0 = time.perf_counter()
     if idn.data == "programme":
-        rec = programme(R, seed, truth=truth, T=T, substeps=t_sub)
+        rec = programme(R, seed, truth=truth, dt=T, substeps=t_sub)
         m = _sensed(rec.t, rec.pose, rec.x, run_ids, seed, _PROGRAMME_KEY, scenario.sensors, T)
         K = m.t.size
         z, s, x_true = _body(m), rec.s[:, :K], rec.x[:, :K]

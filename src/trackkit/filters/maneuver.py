@@ -885,6 +885,25 @@ def run_variable_order(
     s = detector.memory if s is None else _count(s, "s", "run_variable_order", lo=0)
     p = _count(end_window, "end_window", "run_variable_order")
     end_pfa = _probability(end_pfa, "end_pfa", "run_variable_order")
+    accel_var = _accel_variance(accel_std)
+    steps = _steps(dt, K)
+    N = math.prod(batch)
+    cov0 = np.asarray(prior.cov, dtype=float)
+    if cov0.shape[:-2] not in (batch, ()) or cov0.shape[-2:] != (n, n):
+        raise ValueError(f"run_variable_order: prior cov has shape {cov0.shape}; expected "
+                         f"{batch + (n, n)} or ({n}, {n})")
+    b_cv = Gaussian(mean0.reshape((N, n)) if mean0.ndim > 1 else mean0,
+                    cov0.reshape((N, n, n)) if cov0.ndim > 2 else cov0)
+    run = _VariableOrder(z.reshape(K, N, m), steps, b_cv, sensor, d, q_cv, q_ca, s, p,
+                         accel_var, float(stats.chi2.isf(end_pfa, p * d)))
+    ds = detector.init((N,))
+    for k in range(K):
+        ds = run.step(k, detector, ds)
+    return run.result(batch)
+
+
+def _accel_variance(accel_std: float) -> float:
+    """``accel_std^2``, checked."""
     try:
         a_std = float(accel_std)
     except (TypeError, ValueError):
@@ -893,95 +912,133 @@ def run_variable_order(
     if not (0 < a_std and accel_var < math.inf):
         raise ValueError(f"run_variable_order: accel_std = {accel_std!r}; expected a finite "
                          "value > 0 (m/s^2)")
-    steps = _steps(dt, K)
-    N = math.prod(batch)
-    zf = z.reshape(K, N, m)
-    kf = KF()
-    cv, ca = ConstantVelocity(dim=d, q=q_cv), ConstantAcceleration(dim=d, q=q_ca)
-    thr_end = float(stats.chi2.isf(end_pfa, p * d))
+    return accel_var
 
-    # the CV filter runs on every row (so rows that never switch are the plain CV filter)
-    cov0 = np.asarray(prior.cov, dtype=float)
-    if cov0.shape[:-2] not in (batch, ()) or cov0.shape[-2:] != (n, n):
-        raise ValueError(f"run_variable_order: prior cov has shape {cov0.shape}; expected "
-                         f"{batch + (n, n)} or ({n}, {n})")
-    b_cv = Gaussian(mean0.reshape((N, n)) if mean0.ndim > 1 else mean0,
-                    cov0.reshape((N, n, n)) if cov0.ndim > 2 else cov0)
-    prior_mean = np.broadcast_to(b_cv.mean, (N, n))
-    prior_cov = np.broadcast_to(b_cv.cov, (N, n, n))
-    mode = np.zeros(N, bool)
-    ca_mean, ca_cov = np.zeros((N, 3 * d)), np.zeros((N, 3 * d, 3 * d))
-    delta_a = np.full((N, p), np.nan)  # the last p acceleration tests, oldest first
-    ds = detector.init((N,))
-    hist_mean, hist_cov = np.empty((K, N, 3 * d)), np.empty((K, N, 3 * d, 3 * d))
-    hist_mode = np.zeros((K, N), bool)
-    stat_hist, on_hist = np.empty((K, N)), np.zeros((K, N), bool)
-    up_hist, down_hist = np.zeros((K, N), bool), np.zeros((K, N), bool)
 
-    def accel_test(mu: Array, P: Array) -> Array:
+class _VariableOrder:
+    """:func:`run_variable_order` in progress over ``N`` rows: the CV filter on every row
+    (so rows that never switch are the plain CV filter), the CA filter on the rows in CA
+    mode, the last ``p`` acceleration tests and the history."""
+
+    def __init__(self, zf: Array, steps: list, b_cv: Gaussian, sensor: Any, d: int,
+                 q_cv: ArrayLike, q_ca: ArrayLike, s: int, p: int, accel_var: float,
+                 thr_end: float) -> None:
+        K, N = zf.shape[:2]
+        n = 2 * d
+        self.zf, self.steps, self.sensor, self.d, self.s = zf, steps, sensor, d, s
+        self.accel_var, self.thr_end = accel_var, thr_end
+        self.kf = KF()
+        self.cv, self.ca = ConstantVelocity(dim=d, q=q_cv), ConstantAcceleration(dim=d, q=q_ca)
+        self.b_cv = b_cv
+        self.prior_mean = np.broadcast_to(b_cv.mean, (N, n))
+        self.prior_cov = np.broadcast_to(b_cv.cov, (N, n, n))
+        self.mode = np.zeros(N, bool)
+        self.ca_mean, self.ca_cov = np.zeros((N, 3 * d)), np.zeros((N, 3 * d, 3 * d))
+        self.delta_a = np.full((N, p), np.nan)  # the last p acceleration tests, oldest first
+        self.hist_mean = np.empty((K, N, 3 * d))
+        self.hist_cov = np.empty((K, N, 3 * d, 3 * d))
+        self.hist_mode = np.zeros((K, N), bool)
+        self.stat_hist, self.on_hist = np.empty((K, N)), np.zeros((K, N), bool)
+        self.up_hist, self.down_hist = np.zeros((K, N), bool), np.zeros((K, N), bool)
+
+    def accel_test(self, mu: Array, P: Array) -> Array:
+        """``delta_a = a^T P_aa^-1 a``."""
+        d = self.d
         return quadratic_form(P[..., 2 * d:, 2 * d:], mu[..., 2 * d:],
                               "CA acceleration covariance")
 
-    for k in range(K):
-        b_cv = kf.predict(b_cv, cv, steps[k])
-        b_cv, inn = kf.update(b_cv, zf[k], sensor)
+    def step(self, k: int, detector: Any, ds: Any) -> Any:
+        """Step k: both filters, the detector on the innovations of the model in use, the
+        switches up and down; returns the detector's state."""
+        ds = detector.step(ds, self._filter(k))
+        up = np.flatnonzero(ds.on & ~self.mode)
+        if up.size:
+            self._switch_up(k, up)
+        # false while the window has a nan
+        down = self.mode & (self.delta_a.sum(-1) < self.thr_end)
+        if down.any():
+            self._switch_down(k, down)
+            ds = detector.reset(ds, down)
+        self._record(k, ds)
+        return ds
+
+    def _filter(self, k: int) -> Innovation:
+        """The CV filter on every row and the CA filter on the CA rows over step k: the
+        innovations of the model each row uses."""
+        kf, sensor, zf = self.kf, self.sensor, self.zf
+        N, m = zf.shape[1:]
+        self.b_cv = kf.predict(self.b_cv, self.cv, self.steps[k])
+        self.b_cv, inn = kf.update(self.b_cv, zf[k], sensor)
         r = np.broadcast_to(inn.residual, (N, m))
         S = np.broadcast_to(inn.cov, (N, m, m))
-        rows = np.flatnonzero(mode)
+        rows = np.flatnonzero(self.mode)
         if rows.size:
-            g = kf.predict(Gaussian._make((ca_mean[rows], register(ca_cov[rows]))), ca,
-                           steps[k])
+            g = kf.predict(Gaussian._make((self.ca_mean[rows], register(self.ca_cov[rows]))),
+                           self.ca, self.steps[k])
             g, inn_ca = kf.update(g, zf[k, rows], sensor)
-            ca_mean[rows], ca_cov[rows] = g.mean, g.cov
+            self.ca_mean[rows], self.ca_cov[rows] = g.mean, g.cov
             r, S = r.copy(), S.copy()
             r[rows], S[rows] = inn_ca.residual, inn_ca.cov
-            delta_a[rows] = np.concatenate(
-                [delta_a[rows, 1:], accel_test(g.mean, g.cov)[:, None]], -1)
-        ds = detector.step(ds, Innovation(r, S))
-        up = np.flatnonzero(ds.on & ~mode)
-        if up.size:
-            j0 = max(k - s, 0)
-            if j0 == 0:
-                m0, P0 = _embed(prior_mean[up], prior_cov[up], d, accel_var)
-            else:
-                m0, P0 = hist_mean[j0 - 1, up].copy(), hist_cov[j0 - 1, up].copy()
-                was_cv = ~hist_mode[j0 - 1, up]
-                if was_cv.any():  # the CV estimate gets the acceleration prior
-                    ia = np.arange(2 * d, 3 * d)
-                    P0[np.ix_(np.flatnonzero(was_cv), ia, ia)] = accel_var * np.eye(d)
-            g = Gaussian._make((m0, register(P0)))
-            tests = []
-            for j in range(j0, k + 1):  # the stored measurements z(k - s) .. z(k)
-                g = kf.predict(g, ca, steps[j])
-                g, _ = kf.update(g, zf[j, up], sensor)
-                tests.append(accel_test(g.mean, g.cov))
-            ca_mean[up], ca_cov[up] = g.mean, g.cov
-            last = np.stack(tests[-p:], -1)
-            delta_a[up] = np.concatenate([np.full((up.size, p - last.shape[-1]), np.nan),
-                                          last], -1)
-            mode[up] = True
-            up_hist[k, up] = True
-        down = mode & (delta_a.sum(-1) < thr_end)  # false while the window has a nan
-        if down.any():
-            rows = np.flatnonzero(down)
-            cv_mean = np.array(np.broadcast_to(b_cv.mean, (N, n)))
-            cv_cov = np.array(np.broadcast_to(b_cv.cov, (N, n, n)))
-            cv_mean[rows] = ca_mean[rows, :n]
-            cv_cov[rows] = ca_cov[rows, :n, :n]
-            b_cv = Gaussian._make((cv_mean, register(cv_cov)))
-            mode[rows] = False
-            delta_a[rows] = np.nan
-            ds = detector.reset(ds, down)
-            down_hist[k] = down
-        m6, P6 = _embed(np.broadcast_to(b_cv.mean, (N, n)), np.broadcast_to(b_cv.cov, (N, n, n)),
-                        d, None)
-        hist_mean[k] = np.where(mode[:, None], ca_mean, m6)
-        hist_cov[k] = np.where(mode[:, None, None], ca_cov, P6)
-        hist_mode[k] = mode
-        stat_hist[k], on_hist[k] = ds.statistic, ds.on
-    shape = (K, *batch)
-    est = Gaussian._make((hist_mean.reshape(shape + (3 * d,)),
-                          hist_cov.reshape(shape + (3 * d, 3 * d))))
-    return VariableOrderRun(est, hist_mode.reshape(shape), stat_hist.reshape(shape),
-                            on_hist.reshape(shape), up_hist.reshape(shape),
-                            down_hist.reshape(shape))
+            self.delta_a[rows] = np.concatenate(
+                [self.delta_a[rows, 1:], self.accel_test(g.mean, g.cov)[:, None]], -1)
+        return Innovation(r, S)
+
+    def _switch_up(self, k: int, up: Array) -> None:
+        """Rows ``up`` to CA, re-initialised at ``k - s`` and re-filtered over the stored
+        measurements ``z(k - s) .. z(k)`` as one batch."""
+        d, p = self.d, self.delta_a.shape[1]
+        j0 = max(k - self.s, 0)
+        if j0 == 0:
+            m0, P0 = _embed(self.prior_mean[up], self.prior_cov[up], d, self.accel_var)
+        else:
+            m0, P0 = self.hist_mean[j0 - 1, up].copy(), self.hist_cov[j0 - 1, up].copy()
+            was_cv = ~self.hist_mode[j0 - 1, up]
+            if was_cv.any():  # the CV estimate gets the acceleration prior
+                ia = np.arange(2 * d, 3 * d)
+                P0[np.ix_(np.flatnonzero(was_cv), ia, ia)] = self.accel_var * np.eye(d)
+        g = Gaussian._make((m0, register(P0)))
+        tests = []
+        for j in range(j0, k + 1):
+            g = self.kf.predict(g, self.ca, self.steps[j])
+            g, _ = self.kf.update(g, self.zf[j, up], self.sensor)
+            tests.append(self.accel_test(g.mean, g.cov))
+        self.ca_mean[up], self.ca_cov[up] = g.mean, g.cov
+        last = np.stack(tests[-p:], -1)
+        self.delta_a[up] = np.concatenate([np.full((up.size, p - last.shape[-1]), np.nan),
+                                           last], -1)
+        self.mode[up] = True
+        self.up_hist[k, up] = True
+
+    def _switch_down(self, k: int, down: Array) -> None:
+        """Rows ``down`` back to CV, restarted from the CA estimate's position and
+        velocity."""
+        N, n = self.mode.size, 2 * self.d
+        rows = np.flatnonzero(down)
+        cv_mean = np.array(np.broadcast_to(self.b_cv.mean, (N, n)))
+        cv_cov = np.array(np.broadcast_to(self.b_cv.cov, (N, n, n)))
+        cv_mean[rows] = self.ca_mean[rows, :n]
+        cv_cov[rows] = self.ca_cov[rows, :n, :n]
+        self.b_cv = Gaussian._make((cv_mean, register(cv_cov)))
+        self.mode[rows] = False
+        self.delta_a[rows] = np.nan
+        self.down_hist[k] = down
+
+    def _record(self, k: int, ds: Any) -> None:
+        """Step k's estimate (CV rows embedded in the CA state), mode and detector."""
+        N, n = self.mode.size, 2 * self.d
+        m6, P6 = _embed(np.broadcast_to(self.b_cv.mean, (N, n)),
+                        np.broadcast_to(self.b_cv.cov, (N, n, n)), self.d, None)
+        self.hist_mean[k] = np.where(self.mode[:, None], self.ca_mean, m6)
+        self.hist_cov[k] = np.where(self.mode[:, None, None], self.ca_cov, P6)
+        self.hist_mode[k] = self.mode
+        self.stat_hist[k], self.on_hist[k] = ds.statistic, ds.on
+
+    def result(self, batch: tuple[int, ...]) -> VariableOrderRun:
+        """The history, rows back to ``batch``."""
+        K, d = self.hist_mode.shape[0], self.d
+        shape = (K, *batch)
+        est = Gaussian._make((self.hist_mean.reshape(shape + (3 * d,)),
+                              self.hist_cov.reshape(shape + (3 * d, 3 * d))))
+        return VariableOrderRun(est, self.hist_mode.reshape(shape),
+                                self.stat_hist.reshape(shape), self.on_hist.reshape(shape),
+                                self.up_hist.reshape(shape), self.down_hist.reshape(shape))

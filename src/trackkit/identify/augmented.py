@@ -4,13 +4,13 @@ augmented state.
 The state is ``x_a = [u, v, r, theta]`` (19): the body states in SI (m/s, m/s, rad/s) and the
 coefficients ``theta = [a1..a9, b1..b4, c1..c3]`` in the prime units of ``norm``, exactly as
 ``trackkit.models.manoeuvring.AugmentedVessel`` takes them. Between samples k - 1 and k the
-prediction takes ``substeps = m`` forward-Euler steps of ``h = T / m`` (``SampledVessel``)::
+prediction takes ``substeps = m`` forward-Euler steps of ``h = dt / m`` (``SampledVessel``)::
 
     x <- x + h f(x, s_j, theta),   s_j = s_{k-1} + (j + 1/2) / m (s_k - s_{k-1}),
-    theta <- theta,   then  x_a <- x_a + w,   w ~ N(0, T diag(q_body, q_theta))
+    theta <- theta,   then  x_a <- x_a + w,   w ~ N(0, dt diag(q_body, q_theta))
 
 or, with the inputs measured at the sub-steps' ends ``t_{k-1} + j h`` (``s`` given every
-``T / m``), ``s_j = (s(t_{k-1} + j h) + s(t_{k-1} + (j + 1) h)) / 2``
+``dt / m``), ``s_j = (s(t_{k-1} + j h) + s(t_{k-1} + (j + 1) h)) / 2``
 
 (random-walk coefficients). m = 1 is the paper's eq. 4, one Euler step with the mean input
 ``s_m = (s_{k-1} + s_k) / 2`` (``AugmentedVessel`` itself). The update uses
@@ -33,12 +33,12 @@ sample of the previous one. The coefficients start at ``theta0`` with standard d
 hull beyond the order of magnitude of prime coefficients (the reference set's are 0.12-1.0).
 ``initial_guess`` gives the alternative of a perturbed reference set.
 
-Defaults at T = 1 s, for measured inputs (``docs/vessel-comparison.md``,
+Defaults at dt = 1 s, for measured inputs (``docs/vessel-comparison.md``,
 ``tests/statistical/test_vessel_coefficient_nees.py``: 105 trials of three programmes other
 than ``identify.programme``'s, random hulls, a truth integrated at 0.005 s):
 
 * ``substeps = 50`` (h = 0.02 s), each taking the mean of the inputs measured at its ends
-  (pass ``s`` at ``T / 50``; ``experiments.vessel_mc.inputs_at_substeps`` does for a log). The
+  (pass ``s`` at ``dt / 50``; ``experiments.vessel_mc.inputs_at_substeps`` does for a log). The
   nozzle is rate-limited and starts and stops between samples: interpolated between 1 s
   samples its corners are smoothed, which biases c1 by -10 to -18%, c2 by -2 to -6% and c3
   by +0.4 to +2.5% (about one reported sd) whatever the noise. With the measured inputs,
@@ -62,7 +62,7 @@ overconfident (mean 42; ``tests/statistical/test_vessel_identification.py``).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -104,12 +104,12 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-#: q_body for inputs measured at the sub-steps (``s`` every ``T / m``)
+#: q_body for inputs measured at the sub-steps (``s`` every ``dt / m``)
 DEFAULT_Q_BODY = np.array([2e-5, 2e-5, 2e-7])
 #: q_body for inputs known at the samples only: it covers their interpolation's error
 Q_BODY_SAMPLED_INPUTS = np.array([3e-4, 3e-4, 3e-6])
 #: Euler sub-steps per sample of the prediction with the inputs measured at their ends (h =
-#: 0.02 s at T = 1 s), and with the inputs known at the samples only (the module docstring)
+#: 0.02 s at dt = 1 s), and with the inputs known at the samples only (the module docstring)
 DEFAULT_SUBSTEPS, SUBSTEPS_SAMPLED_INPUTS = 50, 10
 _FILTERS = {"ekf": EKF, "ukf": UKF, "ckf": CKF, "srckf": SRCKF}
 #: the identifiers by name: the filters on the augmented state and batch least squares
@@ -248,7 +248,7 @@ def _vector(value: ArrayLike, n: int, name: str, positive: bool = False) -> Arra
     return a
 
 
-def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None = None,
+def identify(z: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | None = None,
              starts: ArrayLike | None = None, filter: str | Filter = "ekf",
              theta0: ArrayLike | None = None, theta_sd0: ArrayLike = 1.0,
              sigma_z: ArrayLike = DEFAULT_NOISE.body, q_body: ArrayLike | None = None,
@@ -256,8 +256,8 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
              keep_cov: bool = False) -> Identification:
     """Run the augmented filter over measured body states ``z (..., K, 3)`` (SI; nan where
     missing) and applied inputs ``s (..., K, 2)`` (``[delta, n]``, rad and rpm; or ``(K, 2)``
-    shared by the runs) sampled every ``T`` seconds, or ``s (..., (K - 1) m + 1, 2)`` sampled
-    every ``T / m`` at the ends of the ``m = substeps`` sub-steps (each sub-step then takes
+    shared by the runs) sampled every ``dt`` seconds, or ``s (..., (K - 1) m + 1, 2)`` sampled
+    every ``dt / m`` at the ends of the ``m = substeps`` sub-steps (each sub-step then takes
     the mean of its ends instead of the interpolation between samples: see the module).
 
     ``norm`` is the prime system of the coefficients (default: the reference vessel's,
@@ -266,7 +266,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     ``"ukf"``, ``"ckf"``, ``"srckf"`` (the square-root CKF) or a filter instance; ``theta0
     (..., 16)`` and ``theta_sd0`` (scalar or 16) the coefficients' prior mean and standard
     deviation; ``sigma_z`` (3) the measurement standard deviations, ``R = diag(sigma_z^2)``;
-    ``q_body`` (3) and ``q_theta`` (16 or scalar) the random-walk densities, ``Q = T
+    ``q_body`` (3) and ``q_theta`` (16 or scalar) the random-walk densities, ``Q = dt
     diag(q_body, q_theta)`` per sample (default ``DEFAULT_Q_BODY`` for inputs at the
     sub-steps, ``Q_BODY_SAMPLED_INPUTS`` for inputs at the samples); ``substeps`` the Euler
     steps per sample (1: the paper's eq. 4; default ``DEFAULT_SUBSTEPS`` with inputs at the
@@ -276,6 +276,46 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     norm = reference_vessel().norm if norm is None else norm
     if not isinstance(norm, Normalisation):
         raise ValueError(f"norm = {norm!r}; expected a trackkit.models.manoeuvring.Normalisation")
+    z, s, s_fine, substeps = _samples(z, s, substeps)
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r}; expected a sample period > 0 s")
+    starts = _trial_starts(starts, z)
+    theta0 = np.zeros(N_THETA) if theta0 is None else np.asarray(theta0, dtype=float)
+    if theta0.ndim < 1 or theta0.shape[-1] != N_THETA or not np.all(np.isfinite(theta0)):
+        raise ValueError(f"theta0 has shape {theta0.shape}; expected finite (..., 16)")
+    sd0 = _vector(theta_sd0, N_THETA, "theta_sd0", positive=True)
+    sigma_z = _vector(sigma_z, 3, "sigma_z", positive=True)
+    if q_body is None:
+        q_body = Q_BODY_SAMPLED_INPUTS if s_fine is None else DEFAULT_Q_BODY
+    q_body = _vector(q_body, 3, "q_body")
+    q_theta = _vector(q_theta, N_THETA, "q_theta")
+    batch, z, s, s_fine = _broadcast(z, s, s_fine, theta0)
+    R = np.diag(sigma_z**2)
+    Qd = dt * np.concatenate([q_body, q_theta])
+    mean = np.concatenate([z[..., 0, :], np.broadcast_to(theta0, batch + (N_THETA,))], -1)
+    cov = np.zeros(batch + (19, 19))
+    cov[..., 3:, 3:] = np.diag(sd0**2)
+    if f is None:
+        return _identify_ekf(z, s, dt, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
+                             s_fine)
+
+    def model(k: int) -> AugmentedVessel | SampledVessel:
+        if substeps == 1:  # the paper's eq. 4, exactly
+            return AugmentedVessel(0.5 * (s[..., k - 1, :] + s[..., k, :]), norm, q_body,
+                                   q_theta)
+        sub = None if s_fine is None else np.moveaxis(
+            s_fine[..., (k - 1) * substeps:k * substeps + 1, :], -2, 0)
+        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps,
+                             sub)
+
+    return _identify_filter(f, z, dt, model, starts, mean, cov, R, sigma_z, keep_cov)
+
+
+def _samples(z: ArrayLike, s: ArrayLike, substeps: int | None
+             ) -> tuple[Array, Array, Array | None, int]:
+    """``identify``'s ``z`` and ``s`` checked: ``(z, s at the samples, s at the sub-steps'
+    ends or None, substeps)``."""
     z, s = np.asarray(z, dtype=float), np.asarray(s, dtype=float)
     if z.ndim < 2 or z.shape[-1] != 3:
         raise ValueError(f"z has shape {z.shape}; expected (..., K, 3) samples of [u, v, r]")
@@ -292,11 +332,14 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
                          f"{substeps} sub-steps per sample")
     if not np.all(np.isfinite(s)):
         raise ValueError("s has non-finite entries; expected finite inputs at every sample")
-    T = float(T)
-    if not (math.isfinite(T) and T > 0):
-        raise ValueError(f"T = {T!r}; expected a sample period > 0 s")
     s_fine = s if s.shape[-2] != K else None
     s = s[..., ::substeps, :] if s_fine is not None else s
+    return z, s, s_fine, substeps
+
+
+def _trial_starts(starts: ArrayLike | None, z: Array) -> Array:
+    """``starts (K,)`` checked, with sample 0 a start; ``z`` must be finite at each."""
+    K = z.shape[-2]
     if starts is None:
         starts = np.zeros(K, bool)
     starts = np.asarray(starts)
@@ -308,49 +351,39 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
     if not np.all(np.isfinite(z[..., starts, :])):
         raise ValueError("z has missing or non-finite samples at a trial start; expected "
                          "finite [u, v, r] there (they initialise the body states)")
-    theta0 = np.zeros(N_THETA) if theta0 is None else np.asarray(theta0, dtype=float)
-    if theta0.ndim < 1 or theta0.shape[-1] != N_THETA or not np.all(np.isfinite(theta0)):
-        raise ValueError(f"theta0 has shape {theta0.shape}; expected finite (..., 16)")
-    sd0 = _vector(theta_sd0, N_THETA, "theta_sd0", positive=True)
-    sigma_z = _vector(sigma_z, 3, "sigma_z", positive=True)
-    if q_body is None:
-        q_body = Q_BODY_SAMPLED_INPUTS if s_fine is None else DEFAULT_Q_BODY
-    q_body = _vector(q_body, 3, "q_body")
-    q_theta = _vector(q_theta, N_THETA, "q_theta")
+    return starts
+
+
+def _broadcast(z: Array, s: Array, s_fine: Array | None, theta0: Array
+               ) -> tuple[tuple[int, ...], Array, Array, Array | None]:
+    """The runs' shape ``batch`` and ``z``, ``s``, ``s_fine`` broadcast to it."""
     try:
         batch = np.broadcast_shapes(z.shape[:-2], s.shape[:-2], theta0.shape[:-1])
     except ValueError:
         raise ValueError(f"run axes do not broadcast: z {z.shape[:-2]}, s {s.shape[:-2]}, "
                          f"theta0 {theta0.shape[:-1]}") from None
+    K = z.shape[-2]
     z = np.broadcast_to(z, batch + (K, 3))
     s = np.broadcast_to(s, batch + (K, 2))
     if s_fine is not None:
-        s_fine = np.broadcast_to(s_fine, batch + (Kf, 2))
-    R = np.diag(sigma_z**2)
-    Qd = T * np.concatenate([q_body, q_theta])
+        s_fine = np.broadcast_to(s_fine, batch + (s_fine.shape[-2], 2))
+    return batch, z, s, s_fine
 
+
+def _identify_filter(f: Filter, z: Array, dt: float,
+                     model: Callable[[int], AugmentedVessel | SampledVessel], starts: Array,
+                     mean: Array, cov: Array, R: Array, sigma_z: Array, keep_cov: bool
+                     ) -> Identification:
+    """``identify`` with a filter instance: ``f.predict`` with ``model(k)`` from sample
+    ``k - 1`` to ``k``, ``f.update`` with ``z_k``; initialisation and joins as in
+    ``identify``."""
+    batch, K = z.shape[:-2], z.shape[-2]
     out_theta = np.empty(batch + (K, N_THETA))
     out_theta_sd = np.empty(batch + (K, N_THETA))
     out_body = np.empty(batch + (K, 3))
     out_body_sd = np.empty(batch + (K, 3))
     nis = np.full(batch + (K,), np.nan)
     covs = np.empty(batch + (K, 19, 19)) if keep_cov else None
-
-    def model(k: int):
-        if substeps == 1:  # the paper's eq. 4, exactly
-            return AugmentedVessel(0.5 * (s[..., k - 1, :] + s[..., k, :]), norm, q_body,
-                                   q_theta)
-        sub = None if s_fine is None else np.moveaxis(
-            s_fine[..., (k - 1) * substeps:k * substeps + 1, :], -2, 0)
-        return SampledVessel(s[..., k - 1, :], s[..., k, :], norm, q_body, q_theta, substeps,
-                             sub)
-
-    mean = np.concatenate([z[..., 0, :], np.broadcast_to(theta0, batch + (N_THETA,))], -1)
-    cov = np.zeros(batch + (19, 19))
-    cov[..., 3:, 3:] = np.diag(sd0**2)
-    if f is None:
-        return _identify_ekf(z, s, T, norm, substeps, starts, mean, cov, R, Qd, keep_cov,
-                             s_fine)
     sensor = Position(dim=3, sigma=sigma_z)
     b = None  # the filter's belief (kept, so that its checks stay cheap)
     for k in range(K):
@@ -363,7 +396,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
             cov[..., :3, :3] = R
             b = None
         else:
-            b = f.predict(Gaussian(mean, cov) if b is None else b, model(k), T)
+            b = f.predict(Gaussian(mean, cov) if b is None else b, model(k), dt)
             b, innov = f.update(b, z[..., k, :], sensor)
             mean, cov = b.mean, b.cov
             nis[..., k] = innov.nis
@@ -380,7 +413,7 @@ def identify(z: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None
                           body_std=out_body_sd, nis=nis, cov_history=covs, filter=name)
 
 
-def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: int,
+def _identify_ekf(z: Array, s: Array, dt: float, norm: Normalisation, substeps: int,
                   starts: Array, mean: Array, cov: Array, R: Array, Qd: Array,
                   keep_cov: bool, s_fine: Array | None = None) -> Identification:
     """``identify``'s EKF: the equations of ``trackkit.filters.EKF`` on ``SampledVessel``
@@ -403,7 +436,7 @@ def _identify_ekf(z: Array, s: Array, T: float, norm: Normalisation, substeps: i
     body, body_sd = np.empty((K, 3, N)), np.empty((K, 3, N))
     nis = np.full((K, N), np.nan)
     covs = np.empty((K, N, 19, 19)) if keep_cov else None
-    plan = fused.plan(norm, substeps, T)
+    plan = fused.plan(norm, substeps, dt)
     for k in range(K):
         if starts[k]:
             x[:3] = zs[k]

@@ -4,7 +4,7 @@ baseline.
 The model is linear in theta, so the forward-Euler step with the mean input (paper eq. 4)
 gives one linear regression per sample pair::
 
-    y_k = (x_{k+1} - x_k) / T = Phi(x_k, s_m(k)) theta + eps_k,   s_m(k) = (s_k + s_{k+1}) / 2
+    y_k = (x_{k+1} - x_k) / dt = Phi(x_k, s_m(k)) theta + eps_k,   s_m(k) = (s_k + s_{k+1}) / 2
 
 with ``Phi`` the 3 x 16 regressor matrix of ``trackkit.models.manoeuvring.regressors`` (SI rates
 per unit prime coefficient). The surge, sway and yaw rows share no coefficients (a1..a9,
@@ -19,9 +19,9 @@ variance ``sigma_i^2 = |y_i - X_i theta_i|^2 / (N - p_i)``.
 Pairs across a trial join (``starts[k + 1]``) and pairs with a missing sample are left out.
 
 Errors in variables. With measured states ``z = x + e`` as regressors the estimate is biased:
-the regressors carry the noise ``e_k``, and ``y_k`` carries ``-e_k / T``, which is correlated
-with them (for a damping term ``b x`` the bias is about ``-sigma^2 / (T var x)`` in b). The
-residual variance then also holds ``2 sigma^2 / T^2`` of differenced measurement noise, so the
+the regressors carry the noise ``e_k``, and ``y_k`` carries ``-e_k / dt``, which is correlated
+with them (for a damping term ``b x`` the bias is about ``-sigma^2 / (dt var x)`` in b). The
+residual variance then also holds ``2 sigma^2 / dt^2`` of differenced measurement noise, so the
 stated covariance is that of a white equation error, not of the measurement noise. With
 noise-free states of the identifier's own discrete model (``substeps=1`` truth) the solution
 is exact.
@@ -65,11 +65,11 @@ class LeastSquaresFit(NamedTuple):
     condition: Array
 
 
-def least_squares(x: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation | None = None,
+def least_squares(x: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | None = None,
                   starts: ArrayLike | None = None) -> LeastSquaresFit:
     """Fit theta (prime units of ``norm``, default the reference vessel's) to body states
     ``x (..., K, 3)`` (SI, measured or true; nan where missing) and inputs
-    ``s (..., K, 2)`` (rad, rpm) sampled every ``T`` seconds; ``starts (K,)`` marks trial
+    ``s (..., K, 2)`` (rad, rpm) sampled every ``dt`` seconds; ``starts (K,)`` marks trial
     joins."""
     norm = reference_vessel().norm if norm is None else norm
     if not isinstance(norm, Normalisation):
@@ -80,9 +80,9 @@ def least_squares(x: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation |
     K = x.shape[-2]
     if s.ndim < 2 or s.shape[-2:] != (K, 2) or not np.all(np.isfinite(s)):
         raise ValueError(f"s has shape {s.shape}; expected finite (..., {K}, 2) inputs")
-    T = float(T)
-    if not (math.isfinite(T) and T > 0):
-        raise ValueError(f"T = {T!r}; expected a sample period > 0 s")
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r}; expected a sample period > 0 s")
     starts = np.zeros(K, bool) if starts is None else np.asarray(starts)
     if starts.shape != (K,) or starts.dtype != bool:
         raise ValueError(f"starts has shape {starts.shape} and dtype {starts.dtype}; expected "
@@ -95,7 +95,7 @@ def least_squares(x: ArrayLike, s: ArrayLike, T: float, *, norm: Normalisation |
     ok = ~starts[1:] & np.isfinite(x0).all(-1) & np.isfinite(x1).all(-1)  # (..., K - 1)
     x0 = np.where(ok[..., None], x0, 0.0)  # left-out rows become zero rows: no influence
     Phi = regressors(x0, 0.5 * (s[..., :-1, :] + s[..., 1:, :]), norm)  # (..., K-1, 3, 16)
-    y = np.where(ok[..., None], (x1 - x0) / T, 0.0)
+    y = np.where(ok[..., None], (x1 - x0) / dt, 0.0)
     Phi = np.where(ok[..., None, None], Phi, 0.0)
     rows = ok.sum(-1)
 

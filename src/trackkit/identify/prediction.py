@@ -39,11 +39,11 @@ class Prediction(NamedTuple):
     pose: Array
 
 
-def predict(theta: ArrayLike, s: ArrayLike, T: float, x0: ArrayLike, *,
+def predict(theta: ArrayLike, s: ArrayLike, dt: float, x0: ArrayLike, *,
             norm: Normalisation, pose0: ArrayLike = (0.0, 0.0, 0.0),
             substeps: int = SUBSTEPS_SAMPLED_INPUTS) -> Prediction:
     """Predict body states and poses for inputs ``s (..., K, 2)`` (rad, rpm) sampled every
-    ``T`` seconds from ``x0 (..., 3)`` (SI) and ``pose0 (..., 3)``, with coefficients
+    ``dt`` seconds from ``x0 (..., 3)`` (SI) and ``pose0 (..., 3)``, with coefficients
     ``theta (..., 16)`` in the prime units of ``norm``. Batch axes lead and broadcast."""
     theta = np.asarray(theta, dtype=float)
     s, x0 = np.asarray(s, dtype=float), np.asarray(x0, dtype=float)
@@ -53,25 +53,25 @@ def predict(theta: ArrayLike, s: ArrayLike, T: float, x0: ArrayLike, *,
         raise ValueError(f"s has shape {s.shape}; expected finite (..., K, 2) with K >= 2")
     if x0.ndim < 1 or x0.shape[-1] != 3 or not np.all(np.isfinite(x0)):
         raise ValueError(f"x0 has shape {x0.shape}; expected finite (..., 3)")
-    T = float(T)
-    if not (math.isfinite(T) and T > 0):
-        raise ValueError(f"T = {T!r}; expected a sample period > 0 s")
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r}; expected a sample period > 0 s")
     K = s.shape[-2]
     batch = np.broadcast_shapes(theta.shape[:-1], s.shape[:-2], x0.shape[:-1])
     xa = np.concatenate([np.broadcast_to(x0, batch + (3,)),
                          np.broadcast_to(theta, batch + (N_THETA,))], -1)
     out = [xa[..., :3]]
     for k in range(K - 1):
-        xa = SampledVessel(s[..., k, :], s[..., k + 1, :], norm, substeps=substeps).f(xa, T)
+        xa = SampledVessel(s[..., k, :], s[..., k + 1, :], norm, substeps=substeps).f(xa, dt)
         out.append(xa[..., :3])
     body = np.stack(out, -2)
-    return Prediction(body, integrate_pose(body, T, pose0))
+    return Prediction(body, integrate_pose(body, dt, pose0))
 
 
-def dead_reckon(body: ArrayLike, heading: ArrayLike, T: float,
+def dead_reckon(body: ArrayLike, heading: ArrayLike, dt: float,
                 pose0: ArrayLike) -> Array:
     """Track ``(..., K, 3)`` = ``[east, north, psi]`` from body states ``body (..., K, 3)``
-    (only u and v are used) and measured heading ``(..., K)`` (rad) every ``T`` seconds,
+    (only u and v are used) and measured heading ``(..., K)`` (rad) every ``dt`` seconds,
     starting at the known ``pose0 (..., 3)`` (its east and north; psi is the measured
     heading throughout)."""
     body, heading = np.asarray(body, dtype=float), np.asarray(heading, dtype=float)
@@ -82,19 +82,19 @@ def dead_reckon(body: ArrayLike, heading: ArrayLike, T: float,
         raise ValueError(f"heading has shape {heading.shape}; expected (..., {K})")
     pose0 = np.asarray(pose0, dtype=float)
     batch = np.broadcast_shapes(body.shape[:-2], heading.shape[:-1], pose0.shape[:-1])
-    T = float(T)
-    if not (math.isfinite(T) and T > 0):
-        raise ValueError(f"T = {T!r}; expected a sample period > 0 s")
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r}; expected a sample period > 0 s")
     east = np.broadcast_to(pose0[..., 0], batch)
     north = np.broadcast_to(pose0[..., 1], batch)
     out = [np.stack([east, north, np.broadcast_to(heading[..., 0], batch)], -1)]
     for k in range(K - 1):
         turn = wrap(heading[..., k + 1] - heading[..., k])
         mean_body = 0.5 * (body[..., k, :] + body[..., k + 1, :])
-        x = np.stack(np.broadcast_arrays(mean_body[..., 0], mean_body[..., 1], turn / T), -1)
+        x = np.stack(np.broadcast_arrays(mean_body[..., 0], mean_body[..., 1], turn / dt), -1)
         pose = np.stack(np.broadcast_arrays(out[-1][..., 0], out[-1][..., 1],
                                             heading[..., k]), -1)
-        nxt = advance_pose(pose, x, T)
+        nxt = advance_pose(pose, x, dt)
         out.append(np.stack([nxt[..., 0], nxt[..., 1],
                              np.broadcast_to(heading[..., k + 1], batch)], -1))
     return np.stack(out, -2)

@@ -2,8 +2,8 @@
 Seif (2025).
 
 A sea-trial identification programme is a sequence of separate trials, each started on a
-straight course at the steady speed of its engine setting, recorded at ``T`` and joined into
-one record. ``DEFAULT_PROGRAMME`` (our choice; the paper gives none) is, at T = 1 s::
+straight course at the steady speed of its engine setting, recorded at ``dt`` and joined into
+one record. ``DEFAULT_PROGRAMME`` (our choice; the paper gives none) is, at dt = 1 s::
 
     acceleration    rpm 1000 -> 2000 at t = 10 s, zero nozzle                60 s
     zigzag_20       20/20 zig-zag to starboard first, 2000 rpm, 9 commands  120 s
@@ -13,7 +13,7 @@ one record. ``DEFAULT_PROGRAMME`` (our choice; the paper gives none) is, at T = 
     zigzag_10       10/10 zig-zag to starboard first, 2000 rpm, 9 commands  110 s
     turn_starboard  20 deg turning circle to starboard, 2000 rpm             90 s
 
-657 samples (each trial has ``duration / T + 1``). The zig-zags and turns excite sway and
+657 samples (each trial has ``duration / dt + 1``). The zig-zags and turns excite sway and
 yaw; the rpm changes are what separates the surge terms ``a1 u^2, a8 u n, a9 n^2`` (at a
 constant engine speed their regressors are nearly proportional), and the second zig-zag at
 1500 rpm puts the turning data at a second speed. A zig-zag of fixed duration holds its last
@@ -28,7 +28,7 @@ each trial's origin.
 Truth: ``substeps`` forward-Euler sub-steps per sample. ``substeps=1`` is exactly the
 identifiers' discrete model (paper eq. 4, Euler with the mean input ``s_m``), the unbiased
 case; the default 10 is close to the continuous model (the realistic case: an Euler
-identifier at T = 1 s then carries a discretisation bias, since the yaw time constant is
+identifier at dt = 1 s then carries a discretisation bias, since the yaw time constant is
 only about 1.7 s at 18 kn).
 
 Measurements, per sample (our choice of realistic levels, all white and independent):
@@ -127,7 +127,7 @@ _KINDS = {"zigzag": seatrials.zigzag, "turn": seatrials.turning_circle,
 
 
 class Record(NamedTuple):
-    """Identification data of ``R`` runs and ``K`` samples at period ``T`` (SI throughout).
+    """Identification data of ``R`` runs and ``K`` samples at period ``dt`` (SI throughout).
 
     ``t (K,)`` s from the programme start; ``s (R, K, 2)`` the applied inputs ``[delta, n]``
     (rad, rpm); ``x (R, K, 3)`` the true and ``z (R, K, 3)`` the measured ``[u, v, r]``;
@@ -138,7 +138,7 @@ class Record(NamedTuple):
     measurement standard deviations; ``substeps`` the truth's Euler sub-steps per sample."""
 
     t: Array
-    T: float
+    dt: float
     s: Array
     x: Array
     z: Array
@@ -190,7 +190,7 @@ def _noise(noise: NoiseLevels) -> NoiseLevels:
 
 def programme(runs: int | Sequence[int], seed: int, *,
               trials: Sequence[TrialSpec] = DEFAULT_PROGRAMME,
-              truth: CoefficientSet | None = None, T: float = 1.0, substeps: int = 10,
+              truth: CoefficientSet | None = None, dt: float = 1.0, substeps: int = 10,
               noise: NoiseLevels = DEFAULT_NOISE, q: ArrayLike | None = None) -> Record:
     """Simulate the trial programme ``trials`` of the vessel ``truth`` (default
     ``reference_vessel()``) for ``runs`` (a count, or run indices for a block) and join it
@@ -216,7 +216,7 @@ def programme(runs: int | Sequence[int], seed: int, *,
         else:
             kw = {"q": q, "rng": [run_seed(seed, r, 1, i) for r in run_ids],
                   "psi0": np.zeros(R)}  # psi0 gives the batch its run axis
-        tr = _KINDS[spec.kind](truth.theta, truth.norm, T=T, substeps=substeps,
+        tr = _KINDS[spec.kind](truth.theta, truth.norm, T=dt, substeps=substeps,
                                **spec.params, **kw)
         K = tr.t.size
         parts.append(tr)
@@ -238,7 +238,7 @@ def programme(runs: int | Sequence[int], seed: int, *,
         rng = run_seed(seed, r, 0)
         e[j], g[j], h[j] = (rng.standard_normal((K, 3)), rng.standard_normal((K, 2)),
                             rng.standard_normal(K))
-    return Record(t=T * np.arange(K), T=float(T), s=s, x=x, z=x + noise.body * e, pose=pose,
+    return Record(t=dt * np.arange(K), dt=float(dt), s=s, x=x, z=x + noise.body * e, pose=pose,
                   gps=pose[..., :2] + noise.gps * g, heading=pose[..., 2] + noise.heading * h,
                   starts=starts, segments=tuple(segments), truth=truth, noise=noise,
                   substeps=int(substeps))

@@ -118,7 +118,7 @@ class NetworkResult(NamedTuple):
     late: int = 0
 
 
-class _Spacing:
+class Spacing:
     """The least and greatest agent-pair distance over the execution instants, as a
     fraction of the pair's communication range (``NetworkResult.spacing``)."""
 
@@ -140,7 +140,7 @@ class _Spacing:
         return (self.low, self.high) if self.finite.any() else (math.nan, math.nan)
 
 
-class _Recorder:
+class Recorder:
     def __init__(self) -> None:
         self.time: list[float] = []
         self.sizes: list[int] = []
@@ -217,20 +217,20 @@ def run_network(
         central_settings: the centralised filter's ``CentralSettings``.
     """
     check_loss(loss)
-    w = _world(seed, run, targets, agents, duration=duration, period=period, sigma=sigma,
-               mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings, steering=steering,
-               central=central)
+    w = build_world(seed, run, targets, agents, duration=duration, period=period,
+                    sigma=sigma, mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings,
+                    steering=steering, central=central)
     A, E = w.times.shape
     nodes = [Agent(a, w.settings[a], np.random.default_rng(np.random.SeedSequence(
         seed, spawn_key=(run, 3, a)))) for a in range(A)]
-    motion = _Motion(w.ag0, steering)
-    rec = [_Recorder() for _ in range(A)]
-    rec_c = _Recorder() if w.hub is not None else None
+    motion = Motion(w.ag0, steering)
+    rec = [Recorder() for _ in range(A)]
+    rec_c = Recorder() if w.hub is not None else None
     # the bearings as taken, labelled by target, for the centralised filter
     Zc = np.full((A, E, w.Nt), np.nan)
     Sc = np.zeros((A, E, 2))
     sent = delivered = lost = 0
-    spacing = _Spacing(w.CR)
+    spacing = Spacing(w.CR)
     t0 = _time.perf_counter()
     for a, e in w.order:
         t = float(w.times[a, e])
@@ -258,8 +258,8 @@ def run_network(
             nodes[b].receive(msg)
             delivered += 1
         if rec_c is not None:
-            _relay_to_hub(w.hub, rec_c, msg.payload, t, truth)
-    trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
+            relay_to_hub(w.hub, rec_c, msg.payload, t, truth)
+    trace_c, fusion = central_trace(w, rec_c, Zc, Sc, q, central_settings)
     seconds = _time.perf_counter() - t0
     return NetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered, lost,
                          seconds, fusion, spacing.span)
@@ -269,8 +269,8 @@ def run_network(
 # What the in-process run and the process run (trackkit.network.processes) share
 
 
-class _World(NamedTuple):
-    """A network run's fixed parts, built from its arguments by :func:`_world`: the
+class World(NamedTuple):
+    """A network run's fixed parts, built from its arguments by :func:`build_world`: the
     simulation, the execution times ``(A, E)`` and bearing noise ``(A, E, Nt)``, each
     agent's bearing std, ranges and settings, the "agent" reference's hub (or None), the
     message-loss stream, and the executions ``(a, e)`` in time order."""
@@ -293,11 +293,11 @@ class _World(NamedTuple):
         return self.sim.target_at_bearing.shape[-2]
 
 
-def _world(seed: int, run: int, targets: ArrayLike, agents: ArrayLike, *, duration: float,
-           period: float, sigma: ArrayLike, mr: ArrayLike, cr: ArrayLike,
-           max_delay: float | None, q: float, settings: AgentSettings | None,
-           steering: bool, central: bool | str) -> _World:
-    """Check the shared arguments of a network run and build its :class:`_World`."""
+def build_world(seed: int, run: int, targets: ArrayLike, agents: ArrayLike, *,
+                duration: float, period: float, sigma: ArrayLike, mr: ArrayLike, cr: ArrayLike,
+                max_delay: float | None, q: float, settings: AgentSettings | None,
+                steering: bool, central: bool | str) -> World:
+    """Check the shared arguments of a network run and build its :class:`World`."""
     if central is True:
         central = "filter"
     if central not in (False, "filter", "agent"):
@@ -331,11 +331,11 @@ def _world(seed: int, run: int, targets: ArrayLike, agents: ArrayLike, *, durati
     lose = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(run, 4)))
     # time order, ties: lower agent index first
     order = np.lexsort((np.repeat(np.arange(A), E), times.ravel()))
-    return _World(central, ag0, sim, times, noise, sig, MR, CR, per_agent, hub, lose,
+    return World(central, ag0, sim, times, noise, sig, MR, CR, per_agent, hub, lose,
                   [divmod(int(f), E) for f in order])
 
 
-class _Motion:
+class Motion:
     """The agents' kinematics between executions: with steering, each agent is moved from its
     previous execution on its last commanded course (``steering.move``); without, the
     straight line ``p0 + t v`` exactly (so the bearings equal ``simulate_network``'s)."""
@@ -368,8 +368,8 @@ class _Motion:
                     TURN_RATE)[0]
 
 
-def _relay_to_hub(hub: Agent, rec: _Recorder, payload: Payload, t: float,
-                  truth: Array) -> None:
+def relay_to_hub(hub: Agent, rec: Recorder, payload: Payload, t: float,
+                 truth: Array) -> None:
     """The "agent" reference: the sender's bearings (not its tracks) to the hub, which then
     executes."""
     bare = replace(payload, ids=payload.ids[:0], mean=payload.mean[:0],
@@ -379,9 +379,9 @@ def _relay_to_hub(hub: Agent, rec: _Recorder, payload: Payload, t: float,
     rec.add(hub, truth, np.full(2, np.nan), rep)
 
 
-def _central_trace(w: _World, rec_c: _Recorder | None, Zc: Array, Sc: Array, q: float,
-                   central_settings: CentralSettings | None
-                   ) -> tuple[Trace | None, CentralFusion | None]:
+def central_trace(w: World, rec_c: Recorder | None, Zc: Array, Sc: Array, q: float,
+                  central_settings: CentralSettings | None
+                  ) -> tuple[Trace | None, CentralFusion | None]:
     """The centralised reference's trace (and the filter's output), after the run."""
     if w.central == "filter":
         fusion = central_fusion(Zc[None], w.times[None], Sc[None], w.sig, q=q,

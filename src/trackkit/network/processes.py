@@ -95,7 +95,7 @@ import sys
 import tempfile
 import threading
 import time as _time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -115,20 +115,22 @@ from trackkit.network.agents import (
 )
 from trackkit.network.central import CentralSettings
 from trackkit.network.inprocess import (
+    Motion,
     NetworkResult,
-    _central_trace,
-    _Motion,
-    _Recorder,
-    _relay_to_hub,
-    _Spacing,
-    _world,
+    Recorder,
+    Spacing,
+    World,
+    build_world,
+    central_trace,
     check_loss,
+    relay_to_hub,
 )
 from trackkit.network.steering import Steering
 from trackkit.network.tracks import Message
 from trackkit.sim.sensor_network import bearings_at, disk_graph
 
-__all__ = ["PROTOCOL_VERSION", "AgentError", "CurveKeys", "ProcessNetworkResult", "decode",
+__all__ = ["PROTOCOL_VERSION", "AgentError", "CurveKeys", "Deployment", "ProcessNetworkResult",
+           "decode",
            "decode_payload", "encode", "is_loopback", "run_network_processes",
            "settings_from_dict", "settings_to_dict"]
 
@@ -441,7 +443,7 @@ class _Link:
 
 
 class _Confirmed:
-    """What ``_Recorder.add`` reads from an agent, rebuilt from a ``result`` message."""
+    """What ``Recorder.add`` reads from an agent, rebuilt from a ``result`` message."""
 
     def __init__(self, t: float, conf: dict[str, list] | None) -> None:
         self.time = t
@@ -453,7 +455,7 @@ class _Confirmed:
                                               mean=np.asarray(conf["mean"], float).reshape(T, 4),
                                               cov=np.asarray(conf["cov"], float).reshape(T, 4, 4))
 
-    def confirmed(self):  # noqa: ANN201 (duck-typed Agent for _Recorder.add)
+    def confirmed(self):  # noqa: ANN201 (duck-typed Agent for Recorder.add)
         return self._c
 
 
@@ -626,6 +628,38 @@ def _hand_keys(proc: subprocess.Popen, line: bytes) -> None:
             pass
 
 
+@dataclass(frozen=True)
+class Deployment:
+    """Where and how ``run_network_processes`` runs the agents' processes.
+
+    ``host``, ``port``: the environment's ROUTER address (port 0: chosen by the OS; host
+    "0.0.0.0" listens on every interface, for agents on other machines). ``advertise``: the
+    address the agents dial (default ``host``): this machine's name or address as the
+    agents' machines see it, when ``host`` is "0.0.0.0". ``launch``: per agent (0-based), a
+    command prefix that starts its process elsewhere, e.g. ``{2: ["ssh", "boat2"]}``: the
+    agent runs ``remote_python -m trackkit.network.processes agent ...`` there
+    (``remote_python``: an interpreter with trackkit installed, "python3" on the remote PATH
+    by default) and dials ``advertise``; killing it (``outages``) kills the local launcher,
+    and the remote agent, hearing nothing for ``idle_timeout_s``, exits by itself.
+    ``timeout_s``: the longest wait for one agent's answer (wall-clock s);
+    ``start_timeout_s`` for the processes to start; ``idle_timeout_s``: an agent that hears
+    nothing that long exits by itself. ``curve``: authenticate and encrypt the agents with
+    CURVE (module docstring); None: on whenever ``host`` is not a loopback address (the
+    results are the same bits). ``keys``: a directory of CURVE certificates (module
+    docstring) instead of keys made for the run; implies ``curve``."""
+
+    host: str = "127.0.0.1"
+    port: int = 0
+    advertise: str | None = None
+    launch: Mapping[int, Sequence[str]] | None = None
+    remote_python: str = "python3"
+    timeout_s: float = 60.0
+    start_timeout_s: float = 120.0
+    idle_timeout_s: float = 300.0
+    curve: bool | None = None
+    keys: str | Path | None = None
+
+
 def run_network_processes(
     seed: int,
     run: int,
@@ -646,17 +680,8 @@ def run_network_processes(
     central_settings: CentralSettings | None = None,
     delay: float = 0.0,
     outages: Sequence[tuple[int, float, float | None]] = (),
-    host: str = "127.0.0.1",
-    port: int = 0,
-    advertise: str | None = None,
-    launch: dict[int, Sequence[str]] | None = None,
-    remote_python: str = "python3",
-    timeout_s: float = 60.0,
-    start_timeout_s: float = 120.0,
-    idle_timeout_s: float = 300.0,
+    deployment: Deployment = Deployment(),
     on_event: Callable[[float], None] | None = None,
-    curve: bool | None = None,
-    keys: str | Path | None = None,
 ) -> ProcessNetworkResult:
     """Run ``run`` of a network with every agent in its own process (module docstring).
 
@@ -667,40 +692,59 @@ def run_network_processes(
         delay: the channel's delivery delay (simulated s, >= 0).
         outages: ``(agent, kill_at, restart_at)`` (0-based agent index, simulated s;
             ``restart_at`` None: never restarted, else > ``kill_at``).
-        host, port: the environment's ROUTER address (port 0: chosen by the OS; host
-            "0.0.0.0" listens on every interface, for agents on other machines).
-        advertise: the address the agents dial (default ``host``): this machine's name or
-            address as the agents' machines see it, when ``host`` is "0.0.0.0".
-        launch: per agent (0-based), a command prefix that starts its process elsewhere,
-            e.g. ``{2: ["ssh", "boat2"]}``: the agent runs ``remote_python -m
-            trackkit.network.processes agent ...`` there (``remote_python``: an interpreter
-            with trackkit installed, "python3" on the remote PATH by default) and dials
-            ``advertise``. Killing it
-            (``outages``) kills the local launcher; the remote agent, hearing nothing for
-            ``idle_timeout_s``, exits by itself.
-        timeout_s: the longest wait for one agent's answer (wall-clock s);
-            ``start_timeout_s`` for the processes to start; ``idle_timeout_s``: an agent
-            that hears nothing that long exits by itself.
+        deployment: where and how the processes run (addresses, launchers, timeouts,
+            CURVE): ``Deployment``.
         on_event: called with the simulated time after every execution (progress; an
             exception it raises ends the run, cleanly).
-        curve: authenticate and encrypt the agents with CURVE (module docstring); None: on
-            whenever ``host`` is not a loopback address. The results are the same bits.
-        keys: a directory of CURVE certificates (module docstring) instead of keys made
-            for the run; implies ``curve``.
     """
     check_loss(loss)
     if not (math.isfinite(delay) and delay >= 0):
         raise ValueError(f"delay = {delay!r}; expected simulated seconds >= 0")
-    for name, v in (("timeout_s", timeout_s), ("start_timeout_s", start_timeout_s),
-                    ("idle_timeout_s", idle_timeout_s)):
+    _check_timeouts_and_port(deployment)
+    w = build_world(seed, run, targets, agents, duration=duration, period=period,
+                    sigma=sigma, mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings,
+                    steering=steering, central=central)
+    A = w.times.shape[0]
+    kills = _outage_times(outages, A)
+    t0 = _time.perf_counter()
+    launch = _launch_commands(deployment, A)
+    d = deployment
+    env = _Environment(d.host, d.port, d.timeout_s, d.start_timeout_s, d.idle_timeout_s,
+                       d.advertise, launch, d.remote_python,
+                       _curve_keys(d.curve, d.keys, d.host, A))
+    ex = _Exchange(w, env, seed, run, kills, steering, loss, delay, period)
+    try:
+        env.start(range(A), w.settings, seed, [(run, 3, a) for a in range(A)])
+        for a, e in w.order:
+            ex.execute(a, e)
+            if on_event is not None:
+                on_event(float(w.times[a, e]))
+        ex.finish()
+    finally:
+        env.close()
+    trace_c, fusion = central_trace(w, ex.rec_c, ex.Zc, ex.Sc, q, central_settings)
+    seconds = _time.perf_counter() - t0
+    out = ProcessNetworkResult([r.trace() for r in ex.rec], trace_c, w.sim, ex.sent,
+                               ex.delivered, ex.lost, seconds, fusion, ex.spacing.span,
+                               ex.late)
+    out.endpoint, out.restarts = env.endpoint, ex.restarts
+    out.curve, out.refused = env.keys is not None, env.refused
+    out.recovered = [ex.recovered[a] for a in sorted(kills)]
+    return out
+
+
+def _check_timeouts_and_port(d: Deployment) -> None:
+    for name, v in (("timeout_s", d.timeout_s), ("start_timeout_s", d.start_timeout_s),
+                    ("idle_timeout_s", d.idle_timeout_s)):
         if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
             raise ValueError(f"{name} = {v!r}; expected seconds > 0")
-    if not (isinstance(port, int) and 0 <= port < 65536):
-        raise ValueError(f"port = {port!r}; expected 0 (OS-chosen) or a TCP port")
-    w = _world(seed, run, targets, agents, duration=duration, period=period, sigma=sigma,
-               mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings, steering=steering,
-               central=central)
-    A, E = w.times.shape
+    if not (isinstance(d.port, int) and 0 <= d.port < 65536):
+        raise ValueError(f"port = {d.port!r}; expected 0 (OS-chosen) or a TCP port")
+
+
+def _outage_times(outages: Sequence[tuple[int, float, float | None]],
+                  A: int) -> dict[int, tuple[float, float]]:
+    """``outages`` checked, as ``{agent: (kill_at, restart_at or inf)}``."""
     kills: dict[int, tuple[float, float]] = {}
     for k, o in enumerate(outages):
         a, t_kill, t_back = int(o[0]), float(o[1]), math.inf if o[2] is None else float(o[2])
@@ -712,120 +756,148 @@ def run_network_processes(
             raise ValueError(f"outages[{k}] = {tuple(o)!r}; expected a finite kill time "
                              "before the restart time")
         kills[a] = (t_kill, t_back)
+    return kills
 
-    motion = _Motion(w.ag0, steering)
-    rec = [_Recorder() for _ in range(A)]
-    rec_c = _Recorder() if w.hub is not None else None
-    Zc = np.full((A, E, w.Nt), np.nan)
-    Sc = np.zeros((A, E, 2))
-    # in flight: per receiver, (arrival time, send time, payload dict), in sending order
-    flight: list[list[tuple[float, float, dict[str, Any]]]] = [[] for _ in range(A)]
-    last_exec = np.full(A, -math.inf)  # each agent's last execution (for "late")
-    alive = np.ones(A, bool)
-    sent = delivered = lost = late = restarts = 0
-    spacing = _Spacing(w.CR)
-    held_before = dict.fromkeys(kills, 0)
-    recovered = {a: math.nan for a in kills}
-    t0 = _time.perf_counter()
-    launch = {int(a): [str(c) for c in cmd] for a, cmd in (launch or {}).items()}
+
+def _launch_commands(d: Deployment, A: int) -> dict[int, list[str]]:
+    """``d.launch`` checked, as lists of strings; agents launched elsewhere need an address
+    to dial other than the wildcard."""
+    launch = {int(a): [str(c) for c in cmd] for a, cmd in (d.launch or {}).items()}
     for a, cmd in launch.items():
         if not 0 <= a < A or not cmd:
             raise ValueError(f"launch[{a}] = {cmd!r}; expected an agent index in 0..{A - 1} "
                              "and a non-empty command prefix such as ['ssh', 'host']")
-    if host in _WILDCARD and advertise is None and launch:
-        raise ValueError(f"host = {host!r} with agents launched elsewhere; expected "
+    if d.host in _WILDCARD and d.advertise is None and launch:
+        raise ValueError(f"host = {d.host!r} with agents launched elsewhere; expected "
                          "advertise = this machine's address as the agents see it")
-    env = _Environment(host, port, timeout_s, start_timeout_s, idle_timeout_s, advertise,
-                       launch, remote_python, _curve_keys(curve, keys, host, A))
-    try:
-        env.start(range(A), w.settings, seed, [(run, 3, a) for a in range(A)])
-        for a, e in w.order:
-            t = float(w.times[a, e])
-            if a in kills:
-                t_kill, t_back = kills[a]
-                if alive[a] and t_kill <= t < t_back:
-                    env.kill(a)
-                    alive[a] = False
-                    lost += len(flight[a])  # what it had not yet read dies with it
-                    flight[a].clear()
-                    held_before[a] = rec[a].sizes[-1] if rec[a].sizes else 0
-                elif not alive[a] and t >= t_back:
-                    restarts += 1
-                    env.start([a], [w.settings[a]], seed, [(run, 3, a, restarts)])
-                    alive[a] = True
-            here, vel = motion.at(a, t)
-            truth = w.sim.target_at_bearing[0, a, e]
-            if not alive[a]:
-                rec[a].add(_Confirmed(t, None), truth, here,  # type: ignore[arg-type]
-                           StepReport(0, 0, 0, 0, 0, 0, 0))
-                if on_event is not None:
-                    on_event(t)
-                continue
-            z, _ = bearings_at(here, truth, w.noise[a, e], w.sig[a], w.MR[a])
-            Zc[a, e], Sc[a, e] = z, here
-            own = own_bearings(z, t, here, float(w.sig[a]), a)
-            inbox = [m for m in flight[a] if m[0] <= t]
-            flight[a] = [m for m in flight[a] if m[0] > t]
-            for _, t_sent, _ in inbox:
-                delivered += 1
-                # it would have arrived at the receiver's first execution after t_sent
-                late += int(last_exec[a] >= t_sent and delay > 0)
-            dt_next = float(w.times[a, e + 1] - t) if e + 1 < E else period
-            res = env.request(a, encode(
-                "step", a, t, inbox=[m[2] for m in inbox], bearings=_bearings_dict(own),
-                position=here.tolist(), velocity=vel.tolist(), course=float(motion.course[a]),
-                speed=float(motion.speed[a]), dt_next=dt_next))
-            last_exec[a] = t
-            if float(res["time"]) != t:
-                raise AgentError(f"agent {a} answered for time = {res['time']!r}; expected "
-                                 f"{t!r}")
-            conf = _Confirmed(t, res["confirmed"])
-            rec[a].add(conf, truth, here,  # type: ignore[arg-type]
-                       StepReport(*(int(v) for v in res["report"])))
-            if a in kills and math.isnan(recovered[a]) and t >= kills[a][1] and (
-                    conf.confirmed().size >= max(held_before[a], 1)):
-                recovered[a] = t - kills[a][1]
-            if steering and res["course"] is not None:
-                motion.cmd[a] = float(res["course"])
-            pd = res["payload"]
-            payload = decode_payload(pd)  # checks the schema on receipt
+    return launch
 
-            where = motion.where(t)
-            spacing.add(where)
-            links = disk_graph(where, w.CR)[a]
-            for b in np.flatnonzero(links).tolist():
-                sent += 1
-                if loss > 0 and w.lose.random() < loss:
-                    lost += 1
-                    continue
-                if not alive[b]:
-                    lost += 1
-                    continue
-                flight[b].append((t + delay, t, pd))
-            if rec_c is not None:
-                _relay_to_hub(w.hub, rec_c, payload, t, truth)
-            if on_event is not None:
-                on_event(t)
-        # the run ends at the last execution: what has arrived by then is handed over (as
-        # run_network's receive at once); what is still in flight is never delivered
-        t_end = float(w.times.max())
-        for b in range(A):
-            due = [m for m in flight[b] if m[0] <= t_end]
-            lost += len(flight[b]) - len(due)
-            if due and alive[b]:
-                env.request(b, encode("deliver", b, t_end, inbox=[m[2] for m in due]),
-                            "delivered")
-                delivered += len(due)
-    finally:
-        env.close()
-    trace_c, fusion = _central_trace(w, rec_c, Zc, Sc, q, central_settings)
-    seconds = _time.perf_counter() - t0
-    out = ProcessNetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered,
-                               lost, seconds, fusion, spacing.span, late)
-    out.endpoint, out.restarts = env.endpoint, restarts
-    out.curve, out.refused = env.keys is not None, env.refused
-    out.recovered = [recovered[a] for a in sorted(kills)]
-    return out
+
+class _Exchange:
+    """A process run in progress: the agents' executions in the world's order, the messages
+    in flight between them (lost, delayed, or dropped with a killed agent), the outages and
+    the records (``run_network_processes``)."""
+
+    def __init__(self, w: World, env: _Environment, seed: int, run: int,
+                 kills: dict[int, tuple[float, float]], steering: bool, loss: float,
+                 delay: float, period: float) -> None:
+        A, E = w.times.shape
+        self.w, self.env, self.seed, self.run, self.kills = w, env, seed, run, kills
+        self.steering, self.loss, self.delay, self.period = steering, loss, delay, period
+        self.motion = Motion(w.ag0, steering)
+        self.rec = [Recorder() for _ in range(A)]
+        self.rec_c = Recorder() if w.hub is not None else None
+        self.Zc = np.full((A, E, w.Nt), np.nan)
+        self.Sc = np.zeros((A, E, 2))
+        # in flight: per receiver, (arrival time, send time, payload dict), in sending order
+        self.flight: list[list[tuple[float, float, dict[str, Any]]]] = [[] for _ in range(A)]
+        self.last_exec = np.full(A, -math.inf)  # each agent's last execution (for "late")
+        self.alive = np.ones(A, bool)
+        self.sent = self.delivered = self.lost = self.late = self.restarts = 0
+        self.spacing = Spacing(w.CR)
+        self.held_before = dict.fromkeys(kills, 0)
+        self.recovered = {a: math.nan for a in kills}
+
+    def execute(self, a: int, e: int) -> None:
+        """Agent a's execution e: its outage (if due), its bearings and inbox, its answer,
+        the payload broadcast to its neighbours and relayed to the hub."""
+        w, t = self.w, float(self.w.times[a, e])
+        if a in self.kills:
+            self._outage(a, t)
+        here, vel = self.motion.at(a, t)
+        truth = w.sim.target_at_bearing[0, a, e]
+        if not self.alive[a]:
+            self.rec[a].add(_Confirmed(t, None), truth, here,  # type: ignore[arg-type]
+                            StepReport(0, 0, 0, 0, 0, 0, 0))
+            return
+        z, _ = bearings_at(here, truth, w.noise[a, e], w.sig[a], w.MR[a])
+        self.Zc[a, e], self.Sc[a, e] = z, here
+        own = own_bearings(z, t, here, float(w.sig[a]), a)
+        inbox = self._receive(a, t)
+        E = w.times.shape[1]
+        dt_next = float(w.times[a, e + 1] - t) if e + 1 < E else self.period
+        res = self.env.request(a, encode(
+            "step", a, t, inbox=[m[2] for m in inbox], bearings=_bearings_dict(own),
+            position=here.tolist(), velocity=vel.tolist(),
+            course=float(self.motion.course[a]), speed=float(self.motion.speed[a]),
+            dt_next=dt_next))
+        self.last_exec[a] = t
+        if float(res["time"]) != t:
+            raise AgentError(f"agent {a} answered for time = {res['time']!r}; expected "
+                             f"{t!r}")
+        self._record(a, t, res, truth, here)
+        if self.steering and res["course"] is not None:
+            self.motion.cmd[a] = float(res["course"])
+        pd = res["payload"]
+        payload = decode_payload(pd)  # checks the schema on receipt
+        self._broadcast(a, t, pd)
+        if self.rec_c is not None:
+            relay_to_hub(w.hub, self.rec_c, payload, t, truth)
+
+    def _outage(self, a: int, t: float) -> None:
+        """Kill agent a at its kill time (what it had not yet read dies with it); restart it
+        at its restart time."""
+        t_kill, t_back = self.kills[a]
+        if self.alive[a] and t_kill <= t < t_back:
+            self.env.kill(a)
+            self.alive[a] = False
+            self.lost += len(self.flight[a])
+            self.flight[a].clear()
+            self.held_before[a] = self.rec[a].sizes[-1] if self.rec[a].sizes else 0
+        elif not self.alive[a] and t >= t_back:
+            self.restarts += 1
+            self.env.start([a], [self.w.settings[a]], self.seed,
+                           [(self.run, 3, a, self.restarts)])
+            self.alive[a] = True
+
+    def _receive(self, a: int, t: float) -> list[tuple[float, float, dict[str, Any]]]:
+        """The messages that have reached agent a by t, taken out of flight."""
+        inbox = [m for m in self.flight[a] if m[0] <= t]
+        self.flight[a] = [m for m in self.flight[a] if m[0] > t]
+        for _, t_sent, _ in inbox:
+            self.delivered += 1
+            # it would have arrived at the receiver's first execution after t_sent
+            self.late += int(self.last_exec[a] >= t_sent and self.delay > 0)
+        return inbox
+
+    def _record(self, a: int, t: float, res: dict[str, Any], truth: Array,
+                here: Array) -> None:
+        """Agent a's answer into its record; the time it took a restarted agent to hold
+        again as many tracks as before its outage."""
+        conf = _Confirmed(t, res["confirmed"])
+        self.rec[a].add(conf, truth, here,  # type: ignore[arg-type]
+                        StepReport(*(int(v) for v in res["report"])))
+        if a in self.kills and math.isnan(self.recovered[a]) and t >= self.kills[a][1] and (
+                conf.confirmed().size >= max(self.held_before[a], 1)):
+            self.recovered[a] = t - self.kills[a][1]
+
+    def _broadcast(self, a: int, t: float, pd: dict[str, Any]) -> None:
+        """Agent a's payload to every neighbour in communication range: lost with
+        probability ``loss`` or to a dead agent, else in flight for ``delay``."""
+        where = self.motion.where(t)
+        self.spacing.add(where)
+        links = disk_graph(where, self.w.CR)[a]
+        for b in np.flatnonzero(links).tolist():
+            self.sent += 1
+            if self.loss > 0 and self.w.lose.random() < self.loss:
+                self.lost += 1
+                continue
+            if not self.alive[b]:
+                self.lost += 1
+                continue
+            self.flight[b].append((t + self.delay, t, pd))
+
+    def finish(self) -> None:
+        """The run ends at the last execution: what has arrived by then is handed over (as
+        run_network's receive at once); what is still in flight is never delivered."""
+        t_end = float(self.w.times.max())
+        for b, flight in enumerate(self.flight):
+            due = [m for m in flight if m[0] <= t_end]
+            self.lost += len(flight) - len(due)
+            if due and self.alive[b]:
+                self.env.request(b, encode("deliver", b, t_end, inbox=[m[2] for m in due]),
+                                 "delivered")
+                self.delivered += len(due)
 
 
 def _curve_keys(curve: bool | None, keys: str | Path | None, host: str,
