@@ -93,15 +93,15 @@ def _assert_symmetric(P, what=""):
 # ============================================================================================
 
 # batch sizes just below and at each threshold, and well above
-BATCHES = sorted({199, 200, 299, 300, 1000, linalg._CHOL_MIN_BATCH - 1, linalg._CHOL_MIN_BATCH,
-                  linalg._CHOL_MIN_BATCH_FULL - 1, linalg._CHOL_MIN_BATCH_FULL})
+BATCHES = sorted({199, 200, 299, 300, 1000, linalg.CHOL_MIN_BATCH - 1, linalg.CHOL_MIN_BATCH,
+                  linalg.CHOL_MIN_BATCH_FULL - 1, linalg.CHOL_MIN_BATCH_FULL})
 
 
 def test_thresholds_are_what_the_batches_straddle():
     # the batch sizes below were chosen around these values: keep them honest
-    assert linalg._CHOL_MIN_BATCH == 200
-    assert linalg._CHOL_MIN_BATCH_FULL == 300
-    assert linalg._CHOL_MAX_N == 6
+    assert linalg.CHOL_MIN_BATCH == 200
+    assert linalg.CHOL_MIN_BATCH_FULL == 300
+    assert linalg.CHOL_MAX_N == 6
 
 
 class _Spy:
@@ -121,10 +121,10 @@ def test_cholesky_fast_path_equals_lapack_row_by_row(n, B, monkeypatch):
     rng = np.random.default_rng(1000 * n + B)
     # magnitudes over six decades across rows: each row is held to its own scale
     P = _spd(rng, (B,), n, scale=10.0 ** rng.uniform(-3, 3, B))
-    spy = _Spy(linalg._cholesky_t)
-    monkeypatch.setattr(linalg, "_cholesky_t", spy)
+    spy = _Spy(linalg.cholesky_t)
+    monkeypatch.setattr(linalg, "cholesky_t", spy)
     L = linalg.cholesky(P, "P")
-    assert spy.calls == (1 if B >= linalg._CHOL_MIN_BATCH_FULL else 0)
+    assert spy.calls == (1 if B >= linalg.CHOL_MIN_BATCH_FULL else 0)
     assert L.shape == P.shape and L.flags.c_contiguous
     # every |L_ij| <= sqrt(P_ii): that is the scale of the factor's rounding
     scale = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1).max(-1))
@@ -139,15 +139,15 @@ def test_cholesky_fast_path_equals_lapack_row_by_row(n, B, monkeypatch):
 @pytest.mark.parametrize("n", range(1, 7))
 @pytest.mark.parametrize("B", BATCHES)
 def test_cholesky_t_columns_equal_lapack(n, B):
-    # the sigma-point filters use _cholesky_t directly (from _CHOL_MIN_BATCH): batch axis
+    # the sigma-point filters use cholesky_t directly (from CHOL_MIN_BATCH): batch axis
     # last, C[j, i] = L[:, i, j]
     rng = np.random.default_rng(7 + 100 * n + B)
     P = _spd(rng, (B,), n, scale=10.0 ** rng.uniform(-3, 3, B))
-    C = linalg._cholesky_t(P)
+    C = linalg.cholesky_t(P)
     assert C is not None and C.shape == (n, n, B)
     Lref = np.linalg.cholesky(P)
     scale = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1).max(-1))[:, None, None]
-    _close(C.transpose(2, 1, 0), Lref, scale, what="_cholesky_t")
+    _close(C.transpose(2, 1, 0), Lref, scale, what="cholesky_t")
 
 
 @pytest.mark.parametrize("n", [2, 4, 6])
@@ -203,7 +203,7 @@ def test_cholesky_non_positive_definite_row_same_error_in_small_and_big_stacks(B
 
 @pytest.mark.parametrize("B", [10, 300])
 def test_cholesky_nan_row_behaves_the_same_in_small_and_big_stacks(B):
-    # _cholesky_t rejects a nan pivot and hands the stack to LAPACK: same result both ways
+    # cholesky_t rejects a nan pivot and hands the stack to LAPACK: same result both ways
     P = np.broadcast_to(np.eye(3), (B, 3, 3)).copy()
     P[5] = np.nan
     np.testing.assert_array_equal(linalg.cholesky(P, "P"), np.linalg.cholesky(P))
@@ -214,7 +214,7 @@ def test_cholesky_nan_row_behaves_the_same_in_small_and_big_stacks(B):
 # ============================================================================================
 
 SIGMA_FILTERS = {"UKF": UKF, "UKF-a1": lambda: UKF(alpha=1.0, kappa=0.0), "CKF": CKF}
-B_SIGMA = 301  # above _CHOL_MIN_BATCH (200): the vectorised Cholesky; one row: LAPACK
+B_SIGMA = 301  # above CHOL_MIN_BATCH (200): the vectorised Cholesky; one row: LAPACK
 
 
 def _sigma_problem(B, seed):
@@ -225,14 +225,14 @@ def _sigma_problem(B, seed):
 
 
 def _spy_factor(monkeypatch):
-    spy = _Spy(sigma_mod._cholesky_t)
-    monkeypatch.setattr(sigma_mod, "_cholesky_t", spy)
+    spy = _Spy(sigma_mod.cholesky_t)
+    monkeypatch.setattr(sigma_mod, "cholesky_t", spy)
     return spy
 
 
 @pytest.mark.parametrize("fname", SIGMA_FILTERS)
 @pytest.mark.parametrize("dt_kind", ["scalar", "per-row array"])
-@pytest.mark.parametrize("B", [linalg._CHOL_MIN_BATCH - 1, linalg._CHOL_MIN_BATCH, B_SIGMA])
+@pytest.mark.parametrize("B", [linalg.CHOL_MIN_BATCH - 1, linalg.CHOL_MIN_BATCH, B_SIGMA])
 def test_sigma_predict_batch_equals_rows_alone(fname, dt_kind, B, monkeypatch):
     filt = SIGMA_FILTERS[fname]()
     cv = ConstantVelocity(dim=2, q=[0.3, 2.0])
@@ -240,8 +240,8 @@ def test_sigma_predict_batch_equals_rows_alone(fname, dt_kind, B, monkeypatch):
     dt = 0.8 if dt_kind == "scalar" else rng.uniform(0.1, 3.0, B)
     spy = _spy_factor(monkeypatch)
     pred, C = filt.predict_with_cross(tk.Gaussian(x, P), cv, dt)
-    # the vectorised factor from _CHOL_MIN_BATCH rows (LAPACK below)
-    assert spy.calls == (1 if B >= linalg._CHOL_MIN_BATCH else 0)
+    # the vectorised factor from CHOL_MIN_BATCH rows (LAPACK below)
+    assert spy.calls == (1 if B >= linalg.CHOL_MIN_BATCH else 0)
     pred2 = filt.predict(tk.Gaussian(x, P), cv, dt)
     np.testing.assert_array_equal(pred2.mean, pred.mean)
     np.testing.assert_array_equal(pred2.cov, pred.cov)
@@ -778,15 +778,15 @@ def test_residual_wrap_equals_angles_wrap(sensor):
 
 
 def test_cheap_wrap_helper_equals_wrap():
-    from trackkit.models.sensors import _wrap_small
+    from trackkit.models.sensors import wrap_small
 
     rng = np.random.default_rng(61)
     for a in [WRAP_VALUES, WRAP_VALUES[np.abs(WRAP_VALUES) < 3.0],
               rng.uniform(-2.999, 2.999, 1000), rng.uniform(-20, 20, 1000),
               np.array([0.1, np.nan, -0.2]), np.zeros(0)]:
-        np.testing.assert_array_equal(_wrap_small(a), wrap(a))
+        np.testing.assert_array_equal(wrap_small(a), wrap(a))
     for v in WRAP_VALUES:
-        np.testing.assert_array_equal(_wrap_small(np.array([v])), wrap(np.array([v])))
+        np.testing.assert_array_equal(wrap_small(np.array([v])), wrap(np.array([v])))
 
 
 # ============================================================================================

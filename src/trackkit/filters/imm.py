@@ -80,15 +80,15 @@ from trackkit.filters.base import (
     produced,
     register,
 )
-from trackkit.filters.kalman import KF, _linearize
-from trackkit.filters.kalman_fast import _predict_matrices
+from trackkit.filters.kalman import KF, linearize
+from trackkit.filters.kalman_fast import predict_matrices
 from trackkit.linalg import (
-    _mirror,
-    _triu,
     check_covariance,
     gaussian_loglik,
+    mirror,
     solve_psd,
     symmetrize,
+    triu,
 )
 
 __all__ = [
@@ -616,7 +616,7 @@ class IMM(Filter):
         r, n = self._carry.shape
         N = int(np.prod(batch))
         X = b.mean.reshape(N, r, n)
-        zhat, H = _linearize(sensor, X)
+        zhat, H = linearize(sensor, X)
         R = sensor.noise
         m = z.shape[-1]
         if not (type(R) is np.ndarray and H.shape == (m, n) and R.shape == (m, m)
@@ -675,12 +675,12 @@ class IMM(Filter):
 # --------------------------------------------------------------------------------------------
 #
 # Covariances are handled as their upper triangles (T = n (n + 1) / 2 entries, row-major as
-# ``_triu(n).flat``) until they are stored. Mixing is the formula of :func:`mix` on the
+# ``triu(n).flat``) until they are stored. Mixing is the formula of :func:`mix` on the
 # triangles, with the spread of the means as pairwise differences (one outer product per pair
 # of models, shared by every j; :func:`_weighted_upper`). The prediction
 # ``P- = F P0 F^T + Q`` is one GEMM per model on the triangles,
 # ``vec_u(P-) = vec_u(P0) K_uu^T + vec_u(Q)``, with ``K_uu`` the rows of ``F kron F`` for the
-# upper triangle (``kalman_fast._predict_matrices``) with the columns of each mirrored pair of
+# upper triangle (``kalman_fast.predict_matrices``) with the columns of each mirrored pair of
 # entries added. The update of every model and row at once: ``A = P H^T``,
 # ``S = H P H^T + R``, U the inverse of S (explicit for m <= 2), ``x+ = x + A U nu`` and the
 # Joseph form evaluated as ``P+ = P - A G A^T`` with ``G = U + U^T - U S U^T`` (the
@@ -725,10 +725,10 @@ def _upper_predict_matrices(F: Array, Q: Array) -> tuple[Array, Array]:
     hit = _UPPER_PREDICT.get(key)
     if hit is None:
         n = F.shape[0]
-        K_u, _, Q_u = _predict_matrices(F, Q)  # (T, n^2): vec_u(F P F^T) = K_u vec(P)
+        K_u, _, Q_u = predict_matrices(F, Q)  # (T, n^2): vec_u(F P F^T) = K_u vec(P)
         T = K_u.shape[0]
         fold = np.zeros((n * n, T))
-        fold[np.arange(n * n), _triu(n).twin] = 1.0  # vec(P) = fold vec_u(P)
+        fold[np.arange(n * n), triu(n).twin] = 1.0  # vec(P) = fold vec_u(P)
         hit = (np.ascontiguousarray((K_u @ fold).T), np.array(Q_u))
         for a in hit:
             a.flags.writeable = False
@@ -750,7 +750,7 @@ def _fast_predict(mu: Array, X: Array, P: Array, p: Array, motions, dt) -> IMMBe
                 and Q.shape == (n, n) and F.dtype == Q.dtype == np.float64):
             return None
         mats.append((F, _upper_predict_matrices(F, Q)))
-    tri = _triu(n)
+    tri = triu(n)
     c, W = mixing_probabilities(mu, p)
     Pu = P.reshape(N, r, n * n)[:, :, tri.flat]
     spreads = _pair_spreads(X, tri)
@@ -762,7 +762,7 @@ def _fast_predict(mu: Array, X: Array, P: Array, p: Array, motions, dt) -> IMMBe
         P0u = _weighted_upper(w, Pu, spreads)
         Ppu[:, j] = _dot_rows(P0u, K_uuT) + Q_u
         Xp[:, j] = _dot_rows(x0, F.T)
-    return IMMBelief(c, Xp, register(_mirror(Ppu, n)))
+    return IMMBelief(c, Xp, register(mirror(Ppu, n)))
 
 
 def _fast_update_models(X: Array, P: Array, z: Array, zhat: Array, sensor, H: Array,
@@ -772,7 +772,7 @@ def _fast_update_models(X: Array, P: Array, z: Array, zhat: Array, sensor, H: Ar
     log Lambda (N, r))``."""
     N, r, n = X.shape
     m, Nr = H.shape[0], N * r
-    tri = _triu(n)
+    tri = triu(n)
     nu = sensor.residual(z[:, None, :], zhat)
     v = nu.reshape(Nr, m)
     x = X.reshape(Nr, n)
@@ -837,7 +837,7 @@ def _fast_update_models(X: Array, P: Array, z: Array, zhat: Array, sensor, H: Ar
             S = np.stack([a, b, b, d], -1).reshape(Nr, 2, 2)
             logdet, quad = np.log(det), Uv0 * v[:, 0] + Uv1 * v[:, 1]
     loglik = -0.5 * (quad + logdet + m * _LOG_2PI)
-    return (xn.reshape(N, r, n), _mirror(Pu, n).reshape(N, r, n, n), nu,
+    return (xn.reshape(N, r, n), mirror(Pu, n).reshape(N, r, n, n), nu,
             S.reshape(N, r, m, m), loglik.reshape(N, r))
 
 
@@ -872,7 +872,7 @@ def _fast_combine(mu: Array, X: Array, P: Array) -> tuple[Array, Array]:
     ``P = sum_j mu_j (P_j + d_j d_j^T)`` (the spread as pairwise differences, see
     :func:`_weighted_upper`), mirrored (exactly symmetric)."""
     N, r, n = X.shape
-    tri = _triu(n)
+    tri = triu(n)
     x = np.einsum("nj,nja->na", mu, X)
     Pu = P.reshape(N, r, n * n)[:, :, tri.flat]
-    return x, _mirror(_weighted_upper(mu, Pu, _pair_spreads(X, tri)), n)
+    return x, mirror(_weighted_upper(mu, Pu, _pair_spreads(X, tri)), n)

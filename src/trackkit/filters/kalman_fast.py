@@ -34,7 +34,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from trackkit.linalg import _mirror, _triu, mm, mmT, solve_psd, symmetrize
+from trackkit.linalg import mirror, mm, mmT, solve_psd, symmetrize, triu
 
 Array = NDArray[np.float64]
 _F64 = np.dtype(np.float64)
@@ -47,7 +47,7 @@ _KRON_MAX_N = 6
 # an id cannot be reused while its entry exists) and take only read-only arrays (a model's
 # or sensor's cached matrices); the others are keyed by value. All stay small (a few models
 # and step sizes) and are simply cleared when they grow.
-# (F bytes, Q bytes) -> (K_u, K_u^T, Q_u), see _predict_matrices
+# (F bytes, Q bytes) -> (K_u, K_u^T, Q_u), see predict_matrices
 _PREDICT_CACHE: dict[tuple[bytes, bytes], tuple[Array, Array, Array]] = {}
 # (id(F), id(Q)) -> (F, Q, K_u, Q_u, twin): the unbatched prediction without checks
 _SAME: dict[tuple[int, int], tuple] = {}
@@ -63,7 +63,7 @@ _ZEROS: dict[int, Array] = {}
 
 def _kron_upper(F: Array) -> Array:
     """Rows of ``F kron F`` for the upper triangle: ``vec_u(F P F^T) = K_u vec(P)``."""
-    return np.ascontiguousarray(np.kron(F, F)[_triu(F.shape[0]).flat])
+    return np.ascontiguousarray(np.kron(F, F)[triu(F.shape[0]).flat])
 
 
 def _noise_upper(Q: Array) -> Array:
@@ -72,10 +72,10 @@ def _noise_upper(Q: Array) -> Array:
     n = Q.shape[-1]
     if not (Q == Q.mT).all():
         Q = symmetrize(Q)
-    return Q.reshape(Q.shape[:-2] + (n * n,))[..., _triu(n).flat]
+    return Q.reshape(Q.shape[:-2] + (n * n,))[..., triu(n).flat]
 
 
-def _predict_matrices(F: Array, Q: Array) -> tuple[Array, Array, Array]:
+def predict_matrices(F: Array, Q: Array) -> tuple[Array, Array, Array]:
     """``(K_u, K_u^T, Q_u)`` for an unbatched F (n x n, float) and Q (K_u^T contiguous: a
     GEMM with a transposed operand is slower); remembered (by value) when Q is unbatched
     too (the usual case: a model's cached matrices for one step size)."""
@@ -135,8 +135,8 @@ def sandwich(A: Array, P: Array) -> Array:
         P = np.ascontiguousarray(P)
         if n <= _KRON_MAX_N and k == n:
             A = np.asarray(A, dtype=float)
-            upper = P.reshape(-1, n * n).dot(_predict_matrices(A, _zeros(n))[1])
-            return _mirror(upper, n).reshape(P.shape)
+            upper = P.reshape(-1, n * n).dot(predict_matrices(A, _zeros(n))[1])
+            return mirror(upper, n).reshape(P.shape)
         PAt = (P.reshape(-1, n) @ A.T).reshape(P.shape[:-1] + (k,))
         return (np.ascontiguousarray(PAt.mT).reshape(-1, n) @ A.T).reshape(
             P.shape[:-2] + (k, k)
@@ -144,7 +144,7 @@ def sandwich(A: Array, P: Array) -> Array:
     return mmT(mm(A, P), A)
 
 
-def _predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
+def predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
     """``P- = F P F^T + Q``, exactly symmetric (the upper triangle, mirrored); None when F or
     Q is not n x n like P (a model with other shapes: the caller takes the formula as it
     comes).
@@ -160,8 +160,8 @@ def _predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
             K_u, Q_u, twin = hit[2], hit[3], hit[4]
         elif (n <= _KRON_MAX_N and type(F) is np.ndarray and type(Q) is np.ndarray
                 and F.dtype is _F64 and Q.dtype is _F64 and F.shape == Q.shape == (n, n)):
-            K_u, _, Q_u = _predict_matrices(F, Q)
-            twin = _triu(n).twin
+            K_u, _, Q_u = predict_matrices(F, Q)
+            twin = triu(n).twin
             if not (F.flags.writeable or Q.flags.writeable):  # a model's cached matrices
                 if len(_SAME) > 64:
                     _SAME.clear()
@@ -176,9 +176,9 @@ def _predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
     Q = np.asarray(Q, dtype=float)
     if F.shape[-2:] != (n, n) or Q.shape[-2:] != (n, n):
         return None
-    flat = _triu(n).flat
+    flat = triu(n).flat
     if F.ndim == 2 and n <= _KRON_MAX_N:
-        K_u, K_uT, Q_u = _predict_matrices(F, Q)
+        K_u, K_uT, Q_u = predict_matrices(F, Q)
         if P.ndim == 2:
             upper = K_u.dot(P.ravel())
         else:
@@ -187,7 +187,7 @@ def _predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
             if Q_u.ndim == 1:  # + Q as one contiguous pass (a short broadcast row is slow)
                 flat_upper = upper.reshape(-1)
                 flat_upper += _tiled(Q_u, upper.shape[0])
-                return _mirror(upper, n).reshape(P.shape)
+                return mirror(upper, n).reshape(P.shape)
             upper = upper.reshape(P.shape[:-2] + (flat.size,))
     else:
         M = sandwich(F, P)
@@ -197,7 +197,7 @@ def _predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
         upper += Q_u
     else:
         upper = upper + Q_u
-    return _mirror(upper, n)
+    return mirror(upper, n)
 
 
 # -- update ----------------------------------------------------------------------------------
@@ -218,7 +218,7 @@ def _transposed(H: Array) -> Array:
     return HT
 
 
-def _condition_one(x: Array, P: Array, r: Array, H: Array, R: Array):
+def update_one(x: Array, P: Array, r: Array, H: Array, R: Array):
     """The Joseph update of one problem (x ``(n,)``, P ``(n, n)``, float H and R): returns
     ``(x+, P+, S)`` with ``x+ = x + A U r`` and ``P+ = P - A G A^T``, ``G = U + U^T - U S U^T``
     (the module docstring), U the computed inverse of ``S = H P H^T + R``.
@@ -261,7 +261,7 @@ def _condition_one(x: Array, P: Array, r: Array, H: Array, R: Array):
         Kr = AT.T.dot(U.dot(r))
         GAT = (U + U.T - U.dot(S).dot(U.T)).dot(AT)
     M = P - AT.T.dot(GAT)  # P - A G A^T
-    return x + Kr, M.ravel()[_triu(n).full_twin].reshape(n, n), S
+    return x + Kr, M.ravel()[triu(n).full_twin].reshape(n, n), S
 
 
 def _flat(a: Array, batch: tuple[int, ...], N: int, core: tuple[int, ...]) -> Array:
@@ -271,7 +271,7 @@ def _flat(a: Array, batch: tuple[int, ...], N: int, core: tuple[int, ...]) -> Ar
     return a.reshape((N,) + core)
 
 
-def _condition_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
+def update_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
     """The Joseph update on any batch shapes (broadcast together, flattened to N rows):
     returns ``(x+, P+, S)``, ``x+ = x + K r`` and the upper triangle of P+ mirrored.
 
@@ -285,7 +285,7 @@ def _condition_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
     N = math.prod(batch)
     P2 = _flat(P, batch, N, (n, n))
     x2, r2 = _flat(x, batch, N, (n,)), _flat(r, batch, N, (m,))
-    tri = _triu(n)
+    tri = triu(n)
     i, j = tri.i, tri.j
     Pu = P2.reshape(N, n * n)[:, tri.flat]
     if m == 1:
@@ -323,5 +323,5 @@ def _condition_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
         E = np.matmul(K, A.mT)
         E += np.matmul(W, K.mT)
         Pu -= E.reshape(N, n * n)[:, tri.flat]
-    return (xn.reshape(batch + (n,)), _mirror(Pu, n).reshape(batch + (n, n)),
+    return (xn.reshape(batch + (n,)), mirror(Pu, n).reshape(batch + (n, n)),
             S.reshape(batch + (m, m)))
