@@ -26,7 +26,7 @@ import pytest
 import trackkit as tk
 from trackkit import linalg
 from trackkit.angles import wrap
-from trackkit.filters import CKF, EKF, KF, UKF
+from trackkit.filters import CKF, EKF, KF, UKF, kalman, kalman_fast
 from trackkit.filters import sigma as sigma_mod
 from trackkit.models import (
     AzimuthElevation,
@@ -377,22 +377,98 @@ def test_sigma_singular_covariance_names_quantity_and_row(fname, B):
 
 
 def _textbook(x, P, z, sensor):
-    """One unbatched update, textbook Joseph form, in plain numpy."""
-    zhat = sensor.h(x)
+    """One unbatched update by the textbook Joseph form (``kalman.joseph_update``)."""
     H = np.broadcast_to(sensor.jacobian(x), (sensor.dim_z, x.size))
-    R = sensor.noise
-    r = sensor.residual(z, zhat)
-    S = H @ P @ H.T + R
-    K = np.linalg.solve(S, H @ P).T  # P H^T S^-1 (S, P symmetric)
-    IKH = np.eye(x.size) - K @ H
-    return x + K @ r, IKH @ P @ IKH.T + K @ R @ K.T, S
+    r = sensor.residual(z, sensor.h(x))
+    return kalman.joseph_update(x, P, r, H, np.asarray(sensor.noise, dtype=float))
+
+
+def test_joseph_update_is_the_textbook_formula():
+    # the src textbook form against the formula typed out once more (inverse and all), one
+    # problem and a batch with H and R per row
+    rng = np.random.default_rng(19)
+    for shape, n, m in [((), 4, 1), ((), 5, 3), ((6,), 4, 2), ((2, 3), 6, 4)]:
+        x = rng.uniform(-100, 100, shape + (n,))
+        P = _spd(rng, shape, n)
+        H = rng.standard_normal(shape + (m, n))
+        R = _spd(rng, shape, m)
+        r = rng.standard_normal(shape + (m,))
+        xn, Pn, S = kalman.joseph_update(x, P, r, H, R)
+        S_ref = H @ P @ np.swapaxes(H, -1, -2) + R
+        K = P @ np.swapaxes(H, -1, -2) @ np.linalg.inv(S_ref)
+        IKH = np.eye(n) - K @ H
+        P_ref = (IKH @ P @ np.swapaxes(IKH, -1, -2)
+                 + K @ R @ np.swapaxes(K, -1, -2))
+        _assert_symmetric(Pn, f"{shape} P+")
+        _close(S, S_ref, _cov_scale(S_ref), what=f"{shape} S")
+        _close(Pn, P_ref, _cov_scale(P), what=f"{shape} P+")
+        _close(xn, x + (K @ r[..., None])[..., 0], _mean_scale(x, P), what=f"{shape} x+")
+
+
+def _kernel_problem(rng, shape, n, m):
+    x = rng.uniform(-100, 100, shape + (n,))
+    P = _spd(rng, shape, n)
+    H = rng.standard_normal((m, n))
+    return x, P, rng.standard_normal(shape + (m,)), H, _spd(rng, (), m)
+
+
+@pytest.mark.parametrize("n, m", [(n, m) for n in (1, 2, 4, 6, 7)
+                                  for m in range(1, kalman_fast.FAST_MAX_M + 1) if m <= n])
+@pytest.mark.parametrize("shape", [(), (1,), (9,), (2, 3)], ids=str)
+def test_fast_update_kernels_equal_the_textbook_form(shape, n, m):
+    # random well-conditioned problems (condition numbers <= 1e3): the fast kernels
+    # (update_one for one problem, update_batch for a batch) and the Joseph form as written
+    # agree to 1e-12 of |P| (the module docstring's tolerance)
+    rng = np.random.default_rng(100 * n + 10 * m + len(shape))
+    x, P, r, H, R = _kernel_problem(rng, shape, n, m)
+    fast = kalman_fast.update_one if shape == () else kalman_fast.update_batch
+    xf, Pf, Sf = fast(x, P, r, H, R)
+    xt, Pt, St = kalman.joseph_update(x, P, r, H, R)
+    _assert_symmetric(Pf, "fast P+")
+    _close(Sf, St, _cov_scale(St), what="S")
+    _close(Pf, Pt, _cov_scale(P), what="P+")
+    _close(xf, xt, _mean_scale(x, P), what="x+")
+
+
+@pytest.mark.parametrize("shape", [(), (5,)], ids=str)
+def test_condition_takes_the_fast_kernels_exactly_up_to_fast_max_m(shape, monkeypatch):
+    calls = {}
+    for name in ("update_one", "update_batch", "joseph_update"):
+        spy = _Spy(getattr(kalman, name))
+        calls[name] = spy
+        monkeypatch.setattr(kalman, name, spy)
+    fast = "update_one" if shape == () else "update_batch"
+    rng = np.random.default_rng(17)
+    for m in range(1, kalman_fast.FAST_MAX_M + 3):
+        x, P, r, H, R = _kernel_problem(rng, shape, 6, m)
+        for spy in calls.values():
+            spy.calls = 0
+        kalman.condition(x, P, r, H, R)
+        took = {k for k, spy in calls.items() if spy.calls}
+        assert took == ({fast} if m <= kalman_fast.FAST_MAX_M else {"joseph_update"}), m
+        if m > 3:
+            continue
+        # and the KF's own update (its lean path for one problem included)
+        for spy in calls.values():
+            spy.calls = 0
+        sensor = Position(dim=m, sigma=1.0 + np.arange(m))
+        KF().update(tk.Gaussian(x, P), x[..., :m] + 0.5, sensor)
+        took = {k for k, spy in calls.items() if spy.calls}
+        assert took == ({fast} if m <= kalman_fast.FAST_MAX_M else {"joseph_update"}), m
+
+
+def test_update_one_refuses_a_measurement_above_fast_max_m():
+    rng = np.random.default_rng(18)
+    x, P, r, H, R = _kernel_problem(rng, (), 6, kalman_fast.FAST_MAX_M + 1)
+    with pytest.raises(ValueError, match="update_one takes measurements of 1 to 2"):
+        kalman_fast.update_one(x, P, r, H, R)
 
 
 KALMAN_CASES = {
     # name: (filter, sensor, n)        measurement size m and the path it takes
     "KF-Position1": (KF, Position(dim=1, sigma=3.0), 4),  # m = 1
     "KF-Position2": (KF, Position(dim=2, sigma=[3.0, 0.5]), 4),  # m = 2
-    "KF-Position3": (KF, Position(dim=3, sigma=[3.0, 0.5, 1.0]), 6),  # m = 3 (generic)
+    "KF-Position3": (KF, Position(dim=3, sigma=[3.0, 0.5, 1.0]), 6),  # m = 3 (textbook)
     "EKF-Bearing": (EKF, Bearing(origin=(40.0, -60.0), sigma=0.002), 4),  # m = 1
     "EKF-Bearing-math": (EKF, Bearing(origin=(40.0, -60.0), sigma=0.01, convention="math"),
                          4),

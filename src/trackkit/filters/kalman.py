@@ -24,6 +24,7 @@ from trackkit.filters.base import (
     register,
 )
 from trackkit.filters.kalman_fast import (
+    FAST_MAX_M,
     predict_cov,
     sandwich,
     update_batch,
@@ -61,19 +62,47 @@ def kalman_gain(P: Array, H: Array, R: Array) -> tuple[Array, Array, Array]:
     return A, S, solve_psd(S, A.mT).mT
 
 
+def joseph_update(x: Array, P: Array, r: Array, H: Array, R: Array
+                  ) -> tuple[Array, Array, Array]:
+    """The Kalman update for residual r as the textbook writes it (Bar-Shalom, Li and
+    Kirubarajan 2001, section 5.2.3; the covariance in Joseph form, Bucy and Joseph 1968):
+
+        S  = H P H^T + R
+        K  = P H^T S^{-1}
+        x+ = x + K r
+        P+ = (I - K H) P (I - K H)^T + K R K^T
+
+    on any batch shapes; returns ``(x+, P+, S)``, S and P+ symmetrised (exactly symmetric).
+    The reference of the fast kernels in :mod:`trackkit.filters.kalman_fast`, and what
+    :func:`condition` runs for measurements of more than ``FAST_MAX_M`` components.
+    """
+    n = P.shape[-1]
+    S = symmetrize(H @ P @ H.mT + R)
+    K = solve_psd(S, (P @ H.mT).mT).mT  # P H^T S^{-1}, as (S^{-1} (P H^T)^T)^T: S symmetric
+    I_KH = np.eye(n) - K @ H
+    x_new = x + (K @ r[..., None])[..., 0]
+    P_new = symmetrize(I_KH @ P @ I_KH.mT + K @ R @ K.mT)
+    return x_new, P_new, S
+
+
 def condition(
     x: Array, P: Array, r: Array, H: Array, R: Array
 ) -> tuple[Array, Array, Array]:
-    """Kalman update for residual r: returns ``(x+, P+, S)``, P+ exactly symmetric.
+    """The Kalman update for residual r, :func:`joseph_update`: returns ``(x+, P+, S)``, P+
+    exactly symmetric.
 
-    ``S = H P H^T + R``, ``K = P H^T S^{-1}``, ``x+ = x + K r`` and the Joseph form
-    ``P+ = (I - K H) P (I - K H)^T + K R K^T``.
+    Measurements of up to ``FAST_MAX_M`` components (every sensor model but a 3-D position
+    or a stack) take the fast kernels, the same equations ordered for speed
+    (:func:`~trackkit.filters.kalman_fast.update_one` for one problem,
+    :func:`~trackkit.filters.kalman_fast.update_batch` for a batch); larger ones the
+    textbook form as written.
     """
     if type(H) is not np.ndarray or H.dtype is not _F64:
         H = np.asarray(H, dtype=float)
     if type(R) is not np.ndarray or R.dtype is not _F64:
         R = np.asarray(R, dtype=float)
-    # the fast paths (kalman_fast) evaluate the Joseph form without forming I - K H
+    if H.shape[-2] > FAST_MAX_M:
+        return joseph_update(x, P, r, H, R)
     if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and r.ndim == 1:
         return update_one(x, P, r, H, R)
     return update_batch(x, P, r, H, R)
@@ -156,7 +185,8 @@ class KF(Linearised):
             r = np.where(np.isnan(r), 0.0, r)
         R = sensor.noise
         if (x.ndim == 1 and r.ndim == 1 and H.ndim == 2 and type(R) is np.ndarray
-                and R.ndim == 2 and R.dtype is _F64 and H.dtype is _F64):
+                and R.ndim == 2 and R.dtype is _F64 and H.dtype is _F64
+                and H.shape[0] <= FAST_MAX_M):
             xn, Pn, S = update_one(x, P, r, H, R)
         else:
             xn, Pn, S = condition(x, P, r, H, R)
