@@ -80,13 +80,12 @@ from trackkit.filters.base import (
     produced,
     register,
 )
-from trackkit.filters.kalman import KF, linearize
+from trackkit.filters.kalman import KF, condition, linearize
 from trackkit.filters.kalman_fast import predict_matrices
 from trackkit.linalg import (
     check_covariance,
     gaussian_loglik,
     mirror,
-    solve_psd,
     symmetrize,
     triu,
 )
@@ -103,7 +102,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-_LOG_2PI = float(np.log(2.0 * np.pi))
 _PROB_TOL = 1e-9  # how far a probability vector's sum may be from 1 (rounding of a user's)
 #: carriers' total weight below which :func:`combine` rescales the weights first: above it,
 #: a product ``mu_j v`` of a weight and an entry |v| >= eps^2 is a normal float
@@ -681,12 +679,9 @@ class IMM(Filter):
 # ``P- = F P0 F^T + Q`` is one GEMM per model on the triangles,
 # ``vec_u(P-) = vec_u(P0) K_uu^T + vec_u(Q)``, with ``K_uu`` the rows of ``F kron F`` for the
 # upper triangle (``kalman_fast.predict_matrices``) with the columns of each mirrored pair of
-# entries added. The update of every model and row at once: ``A = P H^T``,
-# ``S = H P H^T + R``, U the inverse of S (explicit for m <= 2), ``x+ = x + A U nu`` and the
-# Joseph form evaluated as ``P+ = P - A G A^T`` with ``G = U + U^T - U S U^T`` (the
-# kalman_fast module docstring: equal to the Joseph form for the computed gain, and
-# insensitive to first order to the error of U). The combined estimate of models of one state
-# is the same weighted sum on the triangles (:func:`_fast_combine`).
+# entries added. The update of every model and row at once is the Kalman filters' own
+# (``kalman.condition`` on the N r rows: the general path's arithmetic). The combined estimate
+# of models of one state is the same weighted sum on the triangles (:func:`_fast_combine`).
 
 _UPPER_PREDICT: dict[tuple[bytes, bytes], tuple[Array, Array]] = {}
 
@@ -709,14 +704,6 @@ def _dot_rows(a: Array, B: Array) -> Array:
     for s in range(0, N, step):
         np.dot(a[s:s + step], B, out=out[s:s + step])
     return out
-
-
-def _selected(H: Array) -> Array | None:
-    """The state indices a 0/1 selection matrix H picks (each row a unit vector), or None."""
-    k = H.argmax(axis=1)
-    if (H == np.eye(H.shape[1])[k]).all():
-        return k
-    return None
 
 
 def _upper_predict_matrices(F: Array, Q: Array) -> tuple[Array, Array]:
@@ -769,76 +756,16 @@ def _fast_update_models(X: Array, P: Array, z: Array, zhat: Array, sensor, H: Ar
                         R: Array):
     """Every model's KF update at once (``X (N, r, n)``, ``P (N, r, n, n)``, ``z (N, m)``,
     ``zhat = h(X) (N, r, m)``, H and R unbatched): ``(x+, P+, nu (N, r, m), S (N, r, m, m),
-    log Lambda (N, r))``."""
+    log Lambda (N, r))``. The N r rows go through the Kalman filters' own update
+    (:func:`~trackkit.filters.kalman.condition`) and ``log N(nu; 0, S)``, as each model's
+    filter on the general path."""
     N, r, n = X.shape
     m, Nr = H.shape[0], N * r
-    tri = triu(n)
     nu = sensor.residual(z[:, None, :], zhat)
-    v = nu.reshape(Nr, m)
-    x = X.reshape(Nr, n)
-    Pu = P.reshape(Nr, n * n)[:, tri.flat]
-    if m > 2:
-        A = P.reshape(-1, n).dot(H.T).reshape(Nr, n, m)  # P H^T (P symmetric)
-        S = symmetrize(H @ A + R)
-        U = solve_psd(S, np.broadcast_to(np.eye(m), S.shape))
-        G = U + U.mT - U @ S @ U.mT
-        Uv = (U @ v[..., None])[..., 0]
-        GA = G @ A.mT  # (N r, m, n)
-        Pu -= (A[:, tri.i, :] * GA[:, :, tri.j].transpose(0, 2, 1)).sum(-1)
-        xn = x + (A @ Uv[..., None])[..., 0]
-        logdet, quad = np.linalg.slogdet(S)[1], (v * Uv).sum(-1)
-    else:
-        # the columns of A = P H^T, one contiguous (N r, n) array each: Ac[a] = P h_a, and
-        # HA[b, :, a] = (H P H^T)_ab; for a sensor that picks state components (a position)
-        # both are entries of P
-        k = _selected(H)
-        P3 = P.reshape(Nr, n, n)
-        if k is not None:
-            Ac = np.stack([P3[:, :, ka] for ka in k])
-            HA = np.stack([np.stack([P3[:, ka, kb] for ka in k], -1) for kb in k])
-        else:
-            Ac = np.ascontiguousarray(_dot_rows(P.reshape(-1, n), H.T).reshape(Nr, n, m)
-                                      .transpose(2, 0, 1))
-            HA = _dot_rows(Ac.reshape(m * Nr, n), H.T).reshape(m, Nr, m)
-        if m == 1:
-            s = HA[0, :, 0] + R[0, 0]
-            if not (s > 0).all():
-                solve_psd(s.reshape(Nr, 1, 1), np.ones((Nr, 1, 1)))  # raises, naming the row
-            u = 1.0 / s
-            g = u * (2.0 - s * u)  # G = 2 U - U S U
-            Uv0 = u * v[:, 0]
-            xn = x + Ac[0] * Uv0[:, None]
-            B0 = g[:, None] * Ac[0]
-            Pu -= B0[:, tri.i] * Ac[0][:, tri.j]
-            S = s.reshape(Nr, 1, 1)
-            logdet, quad = np.log(s), Uv0 * v[:, 0]
-        else:
-            a = HA[0, :, 0] + R[0, 0]
-            b = ((HA[1, :, 0] + R[0, 1]) + (HA[0, :, 1] + R[1, 0])) * 0.5  # symmetrised
-            d = HA[1, :, 1] + R[1, 1]
-            det = a * d - b * b
-            if not ((a > 0) & (det > 0)).all():
-                Sb = np.stack([a, b, b, d], -1).reshape(Nr, 2, 2)
-                solve_psd(Sb, np.ones((Nr, 2, 1)))  # raises, naming the row
-            u0, u1, u2 = d / det, -b / det, a / det  # U = [[u0, u1], [u1, u2]]
-            # G = 2 U - U S U, entry by entry
-            s0, s1 = u0 * a + u1 * b, u0 * b + u1 * d  # first row of U S
-            s2, s3 = u1 * a + u2 * b, u1 * b + u2 * d  # second row
-            g0 = 2.0 * u0 - (s0 * u0 + s1 * u1)
-            g1 = 2.0 * u1 - (s0 * u1 + s1 * u2)
-            g2 = 2.0 * u2 - (s2 * u1 + s3 * u2)
-            Uv0 = u0 * v[:, 0] + u1 * v[:, 1]
-            Uv1 = u1 * v[:, 0] + u2 * v[:, 1]
-            xn = x + Ac[0] * Uv0[:, None] + Ac[1] * Uv1[:, None]
-            # A G A^T on the upper triangle: sum_b (A G)_b[i] A_b[j]
-            B0 = g0[:, None] * Ac[0] + g1[:, None] * Ac[1]
-            B1 = g1[:, None] * Ac[0] + g2[:, None] * Ac[1]
-            Pu -= B0[:, tri.i] * Ac[0][:, tri.j] + B1[:, tri.i] * Ac[1][:, tri.j]
-            S = np.stack([a, b, b, d], -1).reshape(Nr, 2, 2)
-            logdet, quad = np.log(det), Uv0 * v[:, 0] + Uv1 * v[:, 1]
-    loglik = -0.5 * (quad + logdet + m * _LOG_2PI)
-    return (xn.reshape(N, r, n), mirror(Pu, n).reshape(N, r, n, n), nu,
-            S.reshape(N, r, m, m), loglik.reshape(N, r))
+    xn, Pn, S = condition(X.reshape(Nr, n), P.reshape(Nr, n, n), nu.reshape(Nr, m), H, R)
+    loglik = gaussian_loglik(nu.reshape(Nr, m), S)
+    return (xn.reshape(N, r, n), Pn.reshape(N, r, n, n), nu, S.reshape(N, r, m, m),
+            loglik.reshape(N, r))
 
 
 def _pair_spreads(X: Array, tri) -> list[tuple[int, int, Array]]:
