@@ -32,6 +32,8 @@ one problem and batches, m = 1, 2 and 3) against the textbook formulas.
 from __future__ import annotations
 
 import math
+from collections.abc import Hashable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,18 +54,51 @@ FAST_MAX_M = 2
 #: has n^2 (n + 1) / 2 entries
 _KRON_MAX_N = 6
 
-# Caches of small constant matrices. Those keyed by id hold the keyed arrays themselves (so
-# an id cannot be reused while its entry exists) and take only read-only arrays (a model's
-# or sensor's cached matrices); the others are keyed by value. All stay small (a few models
-# and step sizes) and are simply cleared when they grow.
+
+
+class IdentityCache:
+    """Values computed from read-only arrays (a model's or sensor's cached matrices), found
+    again by those very arrays.
+
+    An entry holds its key arrays, so no other object can take their ids while it exists,
+    and is returned only to the same objects (``is``): an array never gets another's value.
+    Only read-only arrays are kept (they cannot change after the value was computed). At
+    most ``size`` entries (a few models and step sizes at a time): cleared when full.
+    """
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._entries: dict[tuple, tuple[tuple[Array, ...], Any]] = {}
+
+    def get(self, arrays: tuple[Array, ...], tag: Hashable = None) -> Any:
+        """The value stored for exactly these arrays (and ``tag``), or None."""
+        hit = self._entries.get((*map(id, arrays), tag))
+        if hit is None:
+            return None
+        for a, b in zip(hit[0], arrays, strict=True):
+            if a is not b:
+                return None
+        return hit[1]
+
+    def put(self, arrays: tuple[Array, ...], value: Any, tag: Hashable = None) -> None:
+        """Remember ``value`` for these arrays (and ``tag``) if none of them is writeable."""
+        for a in arrays:
+            if a.flags.writeable:
+                return
+        if len(self._entries) >= self.size:
+            self._entries.clear()
+        self._entries[(*map(id, arrays), tag)] = (arrays, value)
+
+
+# Caches of small constant matrices: by value (bytes), or by identity for read-only arrays.
 # (F bytes, Q bytes) -> (K_u, K_u^T, Q_u), see predict_matrices
 _PREDICT_CACHE: dict[tuple[bytes, bytes], tuple[Array, Array, Array]] = {}
-# (id(F), id(Q)) -> (F, Q, K_u, Q_u, twin): the unbatched prediction without checks
-_SAME: dict[tuple[int, int], tuple] = {}
-# (id(Q_u), N) -> (Q_u, Q_u tiled N times): + Q on a stack as one contiguous pass
-_TILED: dict[tuple[int, int], tuple[Array, Array]] = {}
-# id(H) -> (H, contiguous H^T)
-_HT: dict[int, tuple[Array, Array]] = {}
+# (F, Q) -> (K_u, Q_u, twin): the unbatched prediction without checks
+_SAME = IdentityCache(65)
+# (Q_u; N) -> Q_u tiled N times: + Q on a stack as one contiguous pass
+_TILED = IdentityCache(9)
+# H -> contiguous H^T
+_HT = IdentityCache(65)
 _ZEROS: dict[int, Array] = {}
 
 
@@ -106,16 +141,11 @@ def predict_matrices(F: Array, Q: Array) -> tuple[Array, Array, Array]:
 
 def _tiled(Q_u: Array, N: int) -> Array:
     """``Q_u`` repeated N times (flat), remembered for a read-only ``Q_u``."""
-    hit = _TILED.get((id(Q_u), N))
-    if hit is not None and hit[0] is Q_u:
-        return hit[1]
-    tiled = np.tile(Q_u, N)
-    if Q_u.flags.writeable:
-        return tiled
-    tiled.flags.writeable = False
-    if len(_TILED) > 8:
-        _TILED.clear()
-    _TILED[(id(Q_u), N)] = (Q_u, tiled)
+    tiled = _TILED.get((Q_u,), N)
+    if tiled is None:
+        tiled = np.tile(Q_u, N)
+        tiled.flags.writeable = False
+        _TILED.put((Q_u,), tiled, N)
     return tiled
 
 
@@ -164,17 +194,14 @@ def predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
     """
     n = P.shape[-1]
     if P.ndim == 2:  # one problem (or a covariance shared by a batch): the shortest path
-        hit = _SAME.get((id(F), id(Q)))
-        if hit is not None and hit[0] is F and hit[1] is Q:
-            K_u, Q_u, twin = hit[2], hit[3], hit[4]
+        hit = _SAME.get((F, Q))
+        if hit is not None:
+            K_u, Q_u, twin = hit
         elif (n <= _KRON_MAX_N and type(F) is np.ndarray and type(Q) is np.ndarray
                 and F.dtype is _F64 and Q.dtype is _F64 and F.shape == Q.shape == (n, n)):
             K_u, _, Q_u = predict_matrices(F, Q)
             twin = triu(n).twin
-            if not (F.flags.writeable or Q.flags.writeable):  # a model's cached matrices
-                if len(_SAME) > 64:
-                    _SAME.clear()
-                _SAME[(id(F), id(Q))] = (F, Q, K_u, Q_u, twin)
+            _SAME.put((F, Q), (K_u, Q_u, twin))  # (a model's read-only matrices only)
         else:
             K_u = None
         if K_u is not None:
@@ -215,15 +242,12 @@ def predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
 def _transposed(H: Array) -> Array:
     """``H^T`` as a contiguous array (a dot with a transposed operand costs more), kept for
     a read-only H (a sensor's cached Jacobian)."""
-    hit = _HT.get(id(H))
-    if hit is not None and hit[0] is H:
-        return hit[1]
-    if H.flags.writeable:
-        return H.T
-    if len(_HT) > 64:
-        _HT.clear()
-    HT = np.ascontiguousarray(H.T)
-    _HT[id(H)] = (H, HT)
+    HT = _HT.get((H,))
+    if HT is None:
+        if H.flags.writeable:
+            return H.T
+        HT = np.ascontiguousarray(H.T)
+        _HT.put((H,), HT)
     return HT
 
 
