@@ -460,7 +460,7 @@ def test_condition_takes_the_fast_kernels_exactly_up_to_fast_max_m(shape, monkey
 def test_update_one_refuses_a_measurement_above_fast_max_m():
     rng = np.random.default_rng(18)
     x, P, r, H, R = _kernel_problem(rng, (), 6, kalman_fast.FAST_MAX_M + 1)
-    with pytest.raises(ValueError, match="update_one takes measurements of 1 to 2"):
+    with pytest.raises(ValueError, match="update_one takes measurements of 1 to 3"):
         kalman_fast.update_one(x, P, r, H, R)
 
 
@@ -468,13 +468,15 @@ KALMAN_CASES = {
     # name: (filter, sensor, n)        measurement size m and the path it takes
     "KF-Position1": (KF, Position(dim=1, sigma=3.0), 4),  # m = 1
     "KF-Position2": (KF, Position(dim=2, sigma=[3.0, 0.5]), 4),  # m = 2
-    "KF-Position3": (KF, Position(dim=3, sigma=[3.0, 0.5, 1.0]), 6),  # m = 3 (textbook)
+    "KF-Position3": (KF, Position(dim=3, sigma=[3.0, 0.5, 1.0]), 6),  # m = 3 (generic)
     "EKF-Bearing": (EKF, Bearing(origin=(40.0, -60.0), sigma=0.002), 4),  # m = 1
     "EKF-Bearing-math": (EKF, Bearing(origin=(40.0, -60.0), sigma=0.01, convention="math"),
                          4),
     "EKF-RangeBearing": (EKF, RangeBearing(origin=(40.0, -60.0), sigma_range=2.0,
                                            sigma_bearing=0.005), 4),  # m = 2
     "EKF-RangeBearing-n5": (EKF, RangeBearing(origin=(40.0, -60.0)), 5),
+    "EKF-two-radars": (EKF, Stack((RangeBearing(origin=(40.0, -60.0)),  # m = 4 (textbook)
+                                   RangeBearing(origin=(-300.0, 90.0), sigma_range=5.0))), 4),
 }
 
 

@@ -91,8 +91,8 @@ def condition(
     """The Kalman update for residual r, :func:`joseph_update`: returns ``(x+, P+, S)``, P+
     exactly symmetric.
 
-    Measurements of up to ``FAST_MAX_M`` components (every sensor model but a 3-D position
-    or a stack) take the fast kernels, the same equations ordered for speed
+    Measurements of up to ``FAST_MAX_M`` components (every sensor model but a stack of
+    them) take the fast kernels, the same equations ordered for speed
     (:func:`~trackkit.filters.kalman_fast.update_one` for one problem,
     :func:`~trackkit.filters.kalman_fast.update_batch` for a batch); larger ones the
     textbook form as written.

@@ -43,12 +43,13 @@ from trackkit.linalg import mirror, mm, mmT, solve_psd, symmetrize, triu
 Array = NDArray[np.float64]
 _F64 = np.dtype(np.float64)
 
-#: the largest measurement (m components) the update kernels take. Up to it they beat the
+#: the largest measurement (m components) the update kernels take. At m = 1, 2 they beat the
 #: textbook Joseph form 3x for one problem and 1.2-5x for batches of 100-1000 rows (n = 4, 6;
-#: below about 30 rows the two are within 20%). Above it their gain is within 25% either
-#: way (m = 3, 4, 6 with n = 6 .. 12, one problem to 1000 rows) and they lose 2.4x at
-#: n = 12, m = 6, 1000 rows: ``kalman.condition`` runs the textbook form as written
-FAST_MAX_M = 2
+#: below about 30 rows the two are within 20%). From m = 3 the two are within 15% either way
+#: (n = 6 .. 10, 1000 rows) but at n = 12, m = 6 the textbook form is 2.2x faster; m = 3 (a
+#: multipath-delay sensor) stays here so that its numbers do not move. Above it
+#: ``kalman.condition`` runs the textbook form as written
+FAST_MAX_M = 3
 
 #: the Kronecker (upper-triangle GEMM) prediction is used up to this state size: its matrix
 #: has n^2 (n + 1) / 2 entries
@@ -258,7 +259,7 @@ def update_one(x: Array, P: Array, r: Array, H: Array, R: Array):
     ``S = H P H^T + R``.
 
     ndarray.dot on contiguous operands (the cheapest call for tiny arrays), the m x m algebra
-    in Python floats."""
+    in Python floats for m <= 2."""
     AT = H.dot(P)  # A^T = H P (P symmetric)
     m, n = AT.shape
     if m == 2:  # S symmetrised as symmetrize() would, and inverted explicitly
@@ -289,6 +290,11 @@ def update_one(x: Array, P: Array, r: Array, H: Array, R: Array):
         u = 1.0 / s
         Kr = AT[0] * (u * float(r[0]))
         GAT = AT * (2.0 * u - u * s * u)
+    elif m <= FAST_MAX_M:
+        S = symmetrize(AT.dot(H.T) + R)
+        U = solve_psd(S, np.eye(m))
+        Kr = AT.T.dot(U.dot(r))
+        GAT = (U + U.T - U.dot(S).dot(U.T)).dot(AT)
     else:
         raise ValueError(f"update_one takes measurements of 1 to {FAST_MAX_M} components; "
                          f"got {m} (kalman.condition gives larger ones the textbook form)")
