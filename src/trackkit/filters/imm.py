@@ -70,7 +70,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.belief import Gaussian, Innovation
+from trackkit.belief import Gaussian, Innovation, moment_match
 from trackkit.filters.base import (
     Filter,
     check_belief,
@@ -172,15 +172,12 @@ def mix(mu: Array, X: Array, P: Array, p: Array, carry: Array | None = None,
     P0 = np.empty(X0.shape + X.shape[-1:])
     for j in range(r):
         Xa, Pa = _augmented(X, P, carry, j, fill)
-        w = W[..., :, j]
-        x0 = np.einsum("...i,...in->...n", w, Xa)
-        d = Xa - x0[..., None, :]
-        Pj = np.einsum("...i,...iab->...ab", w, Pa + d[..., :, None] * d[..., None, :])
+        x0, Pj = moment_match(W[..., :, j], Xa, Pa)
         if not carry[j].all():
             x0 = np.where(carry[j], x0, 0.0)
             Pj = np.where(carry[j][:, None] & carry[j][None, :], Pj, 0.0)
         X0[..., j, :] = x0
-        P0[..., j, :, :] = symmetrize(Pj)
+        P0[..., j, :, :] = Pj
     return c, X0, P0
 
 
@@ -194,11 +191,9 @@ def combine(mu: Array, X: Array, P: Array, carry: Array | None = None,
     weights. Rows where some carriers' total weight is below ``_SMALL_WEIGHT`` (a mode
     probability that underflowed, possibly to exactly 0) take the limit instead of 0/0
     (:func:`_combine_limit`)."""
-    x = np.einsum("...j,...jn->...n", mu, X)
     if carry is None or carry.all() or fill == "zero":
-        d = X - x[..., None, :]
-        Pm = np.einsum("...j,...jab->...ab", mu, P + d[..., :, None] * d[..., None, :])
-        return x, symmetrize(Pm)
+        return moment_match(mu, X, P)
+    x = np.einsum("...j,...jn->...n", mu, X)
     cf = carry.astype(float)
     total = np.einsum("...j,jn->...n", mu, cf)  # each component's carriers' weight
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -262,10 +257,7 @@ def mixture_innovation(c: Array, nu: Array, S: Array) -> tuple[Array, Array]:
     ``sum_j c_j N(zhat_j, S_j)``: ``nu = sum_j c_j nu_j`` and
     ``S = sum_j c_j (S_j + (nu_j - nu)(nu_j - nu)^T)`` (``nu (..., r, m)``,
     ``S (..., r, m, m)``)."""
-    v = np.einsum("...j,...jm->...m", c, nu)
-    d = nu - v[..., None, :]
-    Sm = np.einsum("...j,...jab->...ab", c, S + d[..., :, None] * d[..., None, :])
-    return v, symmetrize(Sm)
+    return moment_match(c, nu, S)
 
 
 # --------------------------------------------------------------------------------------------
@@ -518,8 +510,8 @@ class IMM(Filter):
             x_j = (beta_0 c_j x_j- + sum_h beta_h mu_{j|h} x_{j|h}) / mu_j
             P_j = (beta_0 c_j (P_j- + d d^T) + sum_h beta_h mu_{j|h} (P_{j|h} + d d^T)) / mu_j
 
-        with d the deviation from x_j. A model whose mu_j underflows to 0 keeps its
-        prediction.
+        with d the deviation from x_j (:func:`~trackkit.belief.moment_match` per model). A
+        model whose mu_j underflows to 0 keeps its prediction.
         """
         track = np.asarray(track, dtype=np.intp)
         b0 = np.asarray(beta0, dtype=float)
@@ -530,16 +522,14 @@ class IMM(Filter):
         np.add.at(mu, track, wh)
         ok = mu > 0
         safe = np.where(ok, mu, 1.0)
-        a0, ah = w0 / safe, wh / safe[track]  # per-model weights, summing to 1
-        # x_j = x_j- + sum_h a_h (x_{j|h} - x_j-): a track without hypotheses keeps x_j-
-        x = prior.mean.copy()
-        np.add.at(x, track, ah[..., None] * (post.mean - prior.mean[track]))
-        d0 = prior.mean - x
-        dh = post.mean - x[track]
-        P = a0[..., None, None] * (prior.cov + d0[..., :, None] * d0[..., None, :])
-        np.add.at(P, track, ah[..., None, None] * (post.cov + dh[..., :, None]
-                                                    * dh[..., None, :]))
-        P = np.where(ok[..., None, None], symmetrize(P), prior.cov)
+        T = prior.mu.shape[0]
+        # per model, the prediction and the hypotheses with weights summing to 1
+        x, P = moment_match(np.concatenate([w0 / safe, wh / safe[track]]),
+                            np.concatenate([prior.mean, post.mean]),
+                            np.concatenate([prior.cov, post.cov]),
+                            np.concatenate([np.arange(T), track]), T)
+        x = np.where(ok[..., None], x, prior.mean)
+        P = np.where(ok[..., None, None], P, prior.cov)
         # mu sums to beta_0 + sum_h beta_h = 1 up to rounding; make it exact
         return IMMBelief(mu / mu.sum(-1, keepdims=True), x, register(P))
 
