@@ -20,13 +20,16 @@ Update, the Joseph form ``P+ = (I - K H) P (I - K H)^T + K R K^T``, evaluated wi
   ``P+ = M - (M H^T) K^T + K R K^T = M - W K^T``, ``W = A - K S``, so
   ``P+ = P - K A^T - W K^T`` (W vanishes for the optimal gain).
 
-These kernels take over from :func:`trackkit.filters.kalman.joseph_update` (the textbook form)
-for measurements of up to ``FAST_MAX_M`` components. Both expressions are symmetric in exact
-arithmetic; only their upper triangle is kept, and
+Both expressions are symmetric in exact arithmetic; only their upper triangle is kept, and
 mirrored (for m >= 2 the two products ``K A^T`` and ``W K^T`` are whole batched GEMMs, whose
 upper triangle is taken: gathering the triangle's rows of K, A and W first costs 3-30 times
-more). ``tests/test_fast_paths.py`` pins every path (both sides of ``_KRON_MAX_N``,
-one problem and batches, m = 1, 2 and 3) against the textbook formulas.
+more).
+
+The update kernels take over from the textbook form
+(:func:`trackkit.filters.kalman.joseph_update`) for measurements of up to ``FAST_MAX_M``
+components; the IMM's fast path updates every model through them too.
+``tests/test_fast_paths.py`` pins every path (both sides of ``_KRON_MAX_N``, one problem and
+batches, m = 1, 2 and 3) against the textbook form.
 """
 
 from __future__ import annotations
