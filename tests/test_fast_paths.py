@@ -460,7 +460,7 @@ def test_condition_takes_the_fast_kernels_exactly_up_to_fast_max_m(shape, monkey
 def test_update_one_refuses_a_measurement_above_fast_max_m():
     rng = np.random.default_rng(18)
     x, P, r, H, R = _kernel_problem(rng, (), 6, kalman_fast.FAST_MAX_M + 1)
-    with pytest.raises(ValueError, match="update_one takes measurements of 1 to 3"):
+    with pytest.raises(ValueError, match="update_one takes measurements of 1 to 4"):
         kalman_fast.update_one(x, P, r, H, R)
 
 
@@ -475,8 +475,11 @@ KALMAN_CASES = {
     "EKF-RangeBearing": (EKF, RangeBearing(origin=(40.0, -60.0), sigma_range=2.0,
                                            sigma_bearing=0.005), 4),  # m = 2
     "EKF-RangeBearing-n5": (EKF, RangeBearing(origin=(40.0, -60.0)), 5),
-    "EKF-two-radars": (EKF, Stack((RangeBearing(origin=(40.0, -60.0)),  # m = 4 (textbook)
+    "EKF-two-radars": (EKF, Stack((RangeBearing(origin=(40.0, -60.0)),  # m = 4 (generic)
                                    RangeBearing(origin=(-300.0, 90.0), sigma_range=5.0))), 4),
+    "EKF-three-radars": (EKF, Stack((RangeBearing(origin=(40.0, -60.0)),  # m = 6 (textbook)
+                                     RangeBearing(origin=(-300.0, 90.0), sigma_range=5.0),
+                                     RangeBearing(origin=(900.0, 500.0)))), 4),
 }
 
 

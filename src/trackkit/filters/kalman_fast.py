@@ -29,7 +29,7 @@ The update kernels take over from the textbook form
 (:func:`trackkit.filters.kalman.joseph_update`) for measurements of up to ``FAST_MAX_M``
 components; the IMM's fast path updates every model through them too.
 ``tests/test_fast_paths.py`` pins every path (both sides of ``_KRON_MAX_N``, one problem and
-batches, m = 1, 2 and 3) against the textbook form.
+batches, m = 1 to 4) against the textbook form.
 """
 
 from __future__ import annotations
@@ -49,10 +49,11 @@ _F64 = np.dtype(np.float64)
 #: the largest measurement (m components) the update kernels take. At m = 1, 2 they beat the
 #: textbook Joseph form 3x for one problem and 1.2-5x for batches of 100-1000 rows (n = 4, 6;
 #: below about 30 rows the two are within 20%). From m = 3 the two are within 15% either way
-#: (n = 6 .. 10, 1000 rows) but at n = 12, m = 6 the textbook form is 2.2x faster; m = 3 (a
-#: multipath-delay sensor) stays here so that its numbers do not move. Above it
-#: ``kalman.condition`` runs the textbook form as written
-FAST_MAX_M = 3
+#: (n = 6 .. 10, 1000 rows) but at n = 12, m = 6 the textbook form is 2.2x faster. Up to
+#: m = 4 (a multipath-delay sensor's four delays, two azimuth-elevation arrays) the
+#: measurements stay here so that their numbers do not move; above it ``kalman.condition``
+#: runs the textbook form as written
+FAST_MAX_M = 4
 
 #: the Kronecker (upper-triangle GEMM) prediction is used up to this state size: its matrix
 #: has n^2 (n + 1) / 2 entries
