@@ -81,7 +81,7 @@ from trackkit.filters.base import (
     register,
 )
 from trackkit.filters.kalman import KF, condition, linearize
-from trackkit.filters.kalman_fast import predict_matrices
+from trackkit.filters.kalman_fast import dot_rows, predict_matrices
 from trackkit.linalg import (
     check_covariance,
     gaussian_loglik,
@@ -675,27 +675,6 @@ class IMM(Filter):
 
 _UPPER_PREDICT: dict[tuple[bytes, bytes], tuple[Array, Array]] = {}
 
-#: multiply-adds per GEMM call above which OpenBLAS starts a second thread (its
-#: SMP_THRESHOLD_MIN x GEMM_MULTITHREAD_THRESHOLD); see :func:`_dot_rows`
-_ONE_THREAD_GEMM = 65536 * 4
-
-
-def _dot_rows(a: Array, B: Array) -> Array:
-    """``a @ B`` for a tall ``a (N, k)`` and a small ``B (k, m)``, in blocks of rows small
-    enough for OpenBLAS to use one thread. These products are memory-bound: a second thread
-    gains little on an idle machine and, when the other core is busy, makes the product
-    several times slower (measured at 10 000 runs: 3.6 ms against 0.3 ms per call)."""
-    N, k = a.shape
-    m = B.shape[1]
-    if N * k * m <= _ONE_THREAD_GEMM:
-        return a.dot(B)
-    out = np.empty((N, m))
-    step = max(1, _ONE_THREAD_GEMM // (k * m))
-    for s in range(0, N, step):
-        np.dot(a[s:s + step], B, out=out[s:s + step])
-    return out
-
-
 def _upper_predict_matrices(F: Array, Q: Array) -> tuple[Array, Array]:
     """``(K_uu^T (T, T), vec_u(Q) (T,))`` for an unbatched F and Q, remembered by value."""
     key = (F.tobytes(), Q.tobytes())
@@ -737,8 +716,8 @@ def _fast_predict(mu: Array, X: Array, P: Array, p: Array, motions, dt) -> IMMBe
         w = W[:, :, j]
         x0 = np.einsum("ni,nia->na", w, X)
         P0u = _weighted_upper(w, Pu, spreads)
-        Ppu[:, j] = _dot_rows(P0u, K_uuT) + Q_u
-        Xp[:, j] = _dot_rows(x0, F.T)
+        Ppu[:, j] = dot_rows(P0u, K_uuT) + Q_u
+        Xp[:, j] = dot_rows(x0, F.T)
     return IMMBelief(c, Xp, register(mirror(Ppu, n)))
 
 

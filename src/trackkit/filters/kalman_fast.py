@@ -306,6 +306,91 @@ def update_one(x: Array, P: Array, r: Array, H: Array, R: Array):
     return x + Kr, M.ravel()[triu(n).full_twin].reshape(n, n), S
 
 
+#: multiply-adds per GEMM call above which OpenBLAS starts a second thread (its
+#: SMP_THRESHOLD_MIN x GEMM_MULTITHREAD_THRESHOLD); see :func:`dot_rows`
+_ONE_THREAD_GEMM = 65536 * 4
+
+#: batch rows from which :func:`update_batch` hands measurements of m <= 2 with one H and R
+#: to :func:`update_columns`: from 1024 rows it is 1.5-2x faster at m = 2 (3-4x at 20 000),
+#: and as fast at m = 1 (1.5x at 20 000); n = 4, 6, a position sensor and a general H
+COLUMNS_MIN_ROWS = 1024
+
+
+def dot_rows(a: Array, B: Array) -> Array:
+    """``a @ B`` for a tall ``a (N, k)`` and a small ``B (k, m)``, in blocks of rows small
+    enough for OpenBLAS to use one thread. These products are memory-bound: a second thread
+    gains little on an idle machine and, when the other core is busy, makes the product
+    several times slower (measured at 10 000 runs: 3.6 ms against 0.3 ms per call)."""
+    N, k = a.shape
+    m = B.shape[1]
+    if N * k * m <= _ONE_THREAD_GEMM:
+        return a.dot(B)
+    out = np.empty((N, m))
+    step = max(1, _ONE_THREAD_GEMM // (k * m))
+    for s in range(0, N, step):
+        np.dot(a[s:s + step], B, out=out[s:s + step])
+    return out
+
+
+def _selected(H: Array) -> Array | None:
+    """The state indices a 0/1 selection matrix H picks (each row a unit vector), or None."""
+    k = H.argmax(axis=1)
+    if (H == np.eye(H.shape[1])[k]).all():
+        return k
+    return None
+
+
+def update_columns(x: Array, P: Array, r: Array, H: Array, R: Array):
+    """The Joseph update of N rows (``x (N, n)``, ``P (N, n, n)``, ``r (N, m)``) with one H
+    and R and m <= 2, as :func:`update_one` on whole columns: ``A = P H^T`` as m contiguous
+    ``(N, n)`` columns (for a sensor that picks state components, entries of P), the m x m
+    algebra entry by entry, ``x+ = x + A U r`` and the upper triangle of
+    ``P+ = P - A G A^T``, ``G = 2 U - U S U`` (the module docstring). Returns
+    ``(x+, P+, S)``."""
+    N, n = x.shape
+    m = H.shape[0]
+    tri = triu(n)
+    Pu = P.reshape(N, n * n)[:, tri.flat]
+    k = _selected(H)
+    if k is not None:
+        Ac = np.stack([P[:, :, ka] for ka in k])
+        HA = np.stack([np.stack([P[:, ka, kb] for ka in k], -1) for kb in k])
+    else:
+        Ac = np.ascontiguousarray(dot_rows(P.reshape(-1, n), H.T).reshape(N, n, m)
+                                  .transpose(2, 0, 1))
+        HA = dot_rows(Ac.reshape(m * N, n), H.T).reshape(m, N, m)
+    if m == 1:
+        s = HA[0, :, 0] + R[0, 0]
+        if not (s > 0).all():
+            solve_psd(s.reshape(N, 1, 1), np.ones((N, 1, 1)))  # raises, naming the row
+        u = 1.0 / s
+        g = u * (2.0 - s * u)  # G = 2 U - U S U
+        xn = x + Ac[0] * (u * r[:, 0])[:, None]
+        B0 = g[:, None] * Ac[0]
+        Pu -= B0[:, tri.i] * Ac[0][:, tri.j]
+        return xn, mirror(Pu, n), s.reshape(N, 1, 1)
+    a = HA[0, :, 0] + R[0, 0]
+    b = ((HA[1, :, 0] + R[0, 1]) + (HA[0, :, 1] + R[1, 0])) * 0.5  # symmetrised
+    d = HA[1, :, 1] + R[1, 1]
+    det = a * d - b * b
+    if not ((a > 0) & (det > 0)).all():
+        solve_psd(np.stack([a, b, b, d], -1).reshape(N, 2, 2), np.ones((N, 2, 1)))  # raises
+    u0, u1, u2 = d / det, -b / det, a / det  # U = [[u0, u1], [u1, u2]]
+    s0, s1 = u0 * a + u1 * b, u0 * b + u1 * d  # first row of U S
+    s2, s3 = u1 * a + u2 * b, u1 * b + u2 * d  # second row
+    g0 = 2.0 * u0 - (s0 * u0 + s1 * u1)  # G = 2 U - U S U, entry by entry
+    g1 = 2.0 * u1 - (s0 * u1 + s1 * u2)
+    g2 = 2.0 * u2 - (s2 * u1 + s3 * u2)
+    Ur0 = u0 * r[:, 0] + u1 * r[:, 1]
+    Ur1 = u1 * r[:, 0] + u2 * r[:, 1]
+    xn = x + Ac[0] * Ur0[:, None] + Ac[1] * Ur1[:, None]
+    # A G A^T on the upper triangle: sum_b (A G)_b[i] A_b[j]
+    B0 = g0[:, None] * Ac[0] + g1[:, None] * Ac[1]
+    B1 = g1[:, None] * Ac[0] + g2[:, None] * Ac[1]
+    Pu -= B0[:, tri.i] * Ac[0][:, tri.j] + B1[:, tri.i] * Ac[1][:, tri.j]
+    return xn, mirror(Pu, n), np.stack([a, b, b, d], -1).reshape(N, 2, 2)
+
+
 def _flat(a: Array, batch: tuple[int, ...], N: int, core: tuple[int, ...]) -> Array:
     """``a`` broadcast to ``batch + core`` and reshaped to ``(N,) + core``."""
     if a.shape[: a.ndim - len(core)] != batch:
@@ -325,6 +410,11 @@ def update_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
     batch = np.broadcast_shapes(x.shape[:-1], P.shape[:-2], r.shape[:-1], H.shape[:-2],
                                 R.shape[:-2])
     N = math.prod(batch)
+    if N >= COLUMNS_MIN_ROWS and m <= 2 and H.ndim == 2 and R.ndim == 2:
+        xn, Pn, S = update_columns(_flat(x, batch, N, (n,)), _flat(P, batch, N, (n, n)),
+                                   _flat(r, batch, N, (m,)), H, R)
+        return (xn.reshape(batch + (n,)), Pn.reshape(batch + (n, n)),
+                S.reshape(batch + (m, m)))
     P2 = _flat(P, batch, N, (n, n))
     x2, r2 = _flat(x, batch, N, (n,)), _flat(r, batch, N, (m,))
     tri = triu(n)
