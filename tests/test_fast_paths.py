@@ -457,6 +457,43 @@ def test_condition_takes_the_fast_kernels_exactly_up_to_fast_max_m(shape, monkey
         assert took == ({fast} if m <= kalman_fast.FAST_MAX_M else {"joseph_update"}), m
 
 
+@pytest.mark.parametrize("m", [1, 2])
+@pytest.mark.parametrize("H_kind", ["position", "general"])
+def test_column_kernel_equals_the_textbook_form(m, H_kind):
+    # update_columns, the large-batch kernel (and the IMM's), against the Joseph form as
+    # written, row by row: a sensor that picks state components (H P H^T read off P) and one
+    # that does not
+    rng = np.random.default_rng(20 + m)
+    N, n = kalman_fast.COLUMNS_MIN_ROWS, 6
+    x, P, r, H, R = _kernel_problem(rng, (N,), n, m)
+    if H_kind == "position":
+        H = np.eye(n)[[1, 0][:m]]
+    xc, Pc, Sc = kalman_fast.update_columns(x, P, r, H, R)
+    xt, Pt, St = kalman.joseph_update(x, P, r, H, R)
+    _assert_symmetric(Pc, "columns P+")
+    _close(Sc, St, _cov_scale(St), what="S")
+    _close(Pc, Pt, _cov_scale(P), what="P+")
+    _close(xc, xt, _mean_scale(x, P), what="x+")
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_update_batch_takes_the_column_kernel_exactly_from_columns_min_rows(m, monkeypatch):
+    spy = _Spy(kalman_fast.update_columns)
+    monkeypatch.setattr(kalman_fast, "update_columns", spy)
+    rng = np.random.default_rng(30 + m)
+    T = kalman_fast.COLUMNS_MIN_ROWS
+    for shape, batched_R in [((T - 1,), False), ((T,), False), ((2, T // 2), False),
+                             ((T,), True)]:
+        x, P, r, H, R = _kernel_problem(rng, shape, 6, m)
+        if batched_R:
+            R = np.broadcast_to(R, shape + R.shape)
+        spy.calls = 0
+        xn, Pn, S = kalman_fast.update_batch(x, P, r, H, R)
+        assert xn.shape == x.shape and Pn.shape == P.shape and S.shape == shape + (m, m)
+        take = m <= 2 and np.prod(shape) >= T and not batched_R
+        assert spy.calls == int(take), (shape, batched_R)
+
+
 def test_update_one_refuses_a_measurement_above_fast_max_m():
     rng = np.random.default_rng(18)
     x, P, r, H, R = _kernel_problem(rng, (), 6, kalman_fast.FAST_MAX_M + 1)
