@@ -615,19 +615,21 @@ def test_identity_cache_gives_a_value_only_to_the_same_read_only_arrays():
     a.flags.writeable = False
     b = a.copy()  # equal values, another object
     b.flags.writeable = False
-    cache.put((a,), "A")
-    assert cache.get((a,)) == "A" and cache.get((b,)) is None
+    cache.put("A", a)
+    assert cache.get(a) == "A" and cache.get(b) is None
     w = np.eye(2)  # writeable: could change after the value was computed, so not kept
-    cache.put((w,), "W")
-    assert cache.get((w,)) is None
-    cache.put((a,), "A3", tag=3)
-    assert cache.get((a,), 3) == "A3" and cache.get((a,)) == "A" and cache.get((a,), 4) is None
-    cache.put((b,), "B")  # full: cleared first
-    assert cache.get((a,)) is None and cache.get((a,), 3) is None and cache.get((b,)) == "B"
+    cache.put("W", w)
+    cache.put("AW", a, w)
+    assert cache.get(w) is None and cache.get(a, w) is None
+    cache.put("A3", a, tag=3)
+    assert cache.get(a, tag=3) == "A3" and cache.get(a) == "A" and cache.get(a, tag=4) is None
+    cache.put("B", b)  # full: cleared first
+    assert cache.get(a) is None and cache.get(a, tag=3) is None and cache.get(b) == "B"
     # an entry keeps its arrays alive, so no new array can come back with their ids
-    cache.put((a, b), "AB")
+    cache.put("AB", a, b)
+    assert cache.get(a, b) == "AB" and cache.get(b, a) is None
     del a
-    assert all(cache.get((np.eye(2), b)) is None for _ in range(100))
+    assert all(cache.get(np.eye(2), b) is None for _ in range(100))
 
 
 @pytest.mark.parametrize("model", [ConstantVelocity(dim=1, q=0.2), ConstantVelocity(dim=2, q=0.5),

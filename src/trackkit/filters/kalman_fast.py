@@ -73,26 +73,23 @@ class IdentityCache:
 
     def __init__(self, size: int) -> None:
         self.size = size
-        self._entries: dict[tuple, tuple[tuple[Array, ...], Any]] = {}
+        self._entries: dict[tuple[int, int, Hashable], tuple[Array, Any, Any]] = {}
 
-    def get(self, arrays: tuple[Array, ...], tag: Hashable = None) -> Any:
-        """The value stored for exactly these arrays (and ``tag``), or None."""
-        hit = self._entries.get((*map(id, arrays), tag))
-        if hit is None:
-            return None
-        for a, b in zip(hit[0], arrays, strict=True):
-            if a is not b:
-                return None
-        return hit[1]
+    def get(self, a: Array, b: Array | None = None, tag: Hashable = None) -> Any:
+        """The value stored for exactly the arrays ``a`` (and ``b``) and ``tag``, or None."""
+        hit = self._entries.get((id(a), id(b), tag))
+        if hit is not None and hit[0] is a and hit[1] is b:
+            return hit[2]
+        return None
 
-    def put(self, arrays: tuple[Array, ...], value: Any, tag: Hashable = None) -> None:
-        """Remember ``value`` for these arrays (and ``tag``) if none of them is writeable."""
-        for a in arrays:
-            if a.flags.writeable:
-                return
+    def put(self, value: Any, a: Array, b: Array | None = None, tag: Hashable = None) -> None:
+        """Remember ``value`` for the arrays ``a`` (and ``b``) and ``tag`` if neither is
+        writeable."""
+        if a.flags.writeable or (b is not None and b.flags.writeable):
+            return
         if len(self._entries) >= self.size:
             self._entries.clear()
-        self._entries[(*map(id, arrays), tag)] = (arrays, value)
+        self._entries[(id(a), id(b), tag)] = (a, b, value)
 
 
 # Caches of small constant matrices: by value (bytes), or by identity for read-only arrays.
@@ -146,11 +143,11 @@ def predict_matrices(F: Array, Q: Array) -> tuple[Array, Array, Array]:
 
 def _tiled(Q_u: Array, N: int) -> Array:
     """``Q_u`` repeated N times (flat), remembered for a read-only ``Q_u``."""
-    tiled = _TILED.get((Q_u,), N)
+    tiled = _TILED.get(Q_u, tag=N)
     if tiled is None:
         tiled = np.tile(Q_u, N)
         tiled.flags.writeable = False
-        _TILED.put((Q_u,), tiled, N)
+        _TILED.put(tiled, Q_u, tag=N)
     return tiled
 
 
@@ -199,14 +196,14 @@ def predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
     """
     n = P.shape[-1]
     if P.ndim == 2:  # one problem (or a covariance shared by a batch): the shortest path
-        hit = _SAME.get((F, Q))
+        hit = _SAME.get(F, Q)
         if hit is not None:
             K_u, Q_u, twin = hit
         elif (n <= _KRON_MAX_N and type(F) is np.ndarray and type(Q) is np.ndarray
                 and F.dtype is _F64 and Q.dtype is _F64 and F.shape == Q.shape == (n, n)):
             K_u, _, Q_u = predict_matrices(F, Q)
             twin = triu(n).twin
-            _SAME.put((F, Q), (K_u, Q_u, twin))  # (a model's read-only matrices only)
+            _SAME.put((K_u, Q_u, twin), F, Q)  # (a model's read-only matrices only)
         else:
             K_u = None
         if K_u is not None:
@@ -247,12 +244,12 @@ def predict_cov(F: Array, P: Array, Q: Array) -> Array | None:
 def _transposed(H: Array) -> Array:
     """``H^T`` as a contiguous array (a dot with a transposed operand costs more), kept for
     a read-only H (a sensor's cached Jacobian)."""
-    HT = _HT.get((H,))
+    HT = _HT.get(H)
     if HT is None:
         if H.flags.writeable:
             return H.T
         HT = np.ascontiguousarray(H.T)
-        _HT.put((H,), HT)
+        _HT.put(HT, H)
     return HT
 
 
