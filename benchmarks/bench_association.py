@@ -31,10 +31,11 @@ import numpy as np
 
 import trackkit as tk
 from trackkit.filters.base import register
-from trackkit.tracking.association import gnn, jpda, jpda_update, loglik_costs, pda_costs
+from trackkit.tracking.association import gnn, jpda, loglik_costs, pda_costs
 from trackkit.tracking.gating import _lambda_max, gate, gate_threshold, predict_measurement
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+from tests.tracking.pdaf import jpda_update  # noqa: E402
 from tests.tracking.scenes import scene  # noqa: E402
 
 P_G = 0.99

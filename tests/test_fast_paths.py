@@ -26,7 +26,7 @@ import pytest
 import trackkit as tk
 from trackkit import linalg
 from trackkit.angles import wrap
-from trackkit.filters import CKF, EKF, KF, UKF
+from trackkit.filters import CKF, EKF, KF, UKF, kalman, kalman_fast
 from trackkit.filters import sigma as sigma_mod
 from trackkit.models import (
     AzimuthElevation,
@@ -93,15 +93,15 @@ def _assert_symmetric(P, what=""):
 # ============================================================================================
 
 # batch sizes just below and at each threshold, and well above
-BATCHES = sorted({199, 200, 299, 300, 1000, linalg._CHOL_MIN_BATCH - 1, linalg._CHOL_MIN_BATCH,
-                  linalg._CHOL_MIN_BATCH_FULL - 1, linalg._CHOL_MIN_BATCH_FULL})
+BATCHES = sorted({199, 200, 299, 300, 1000, linalg.CHOL_MIN_BATCH - 1, linalg.CHOL_MIN_BATCH,
+                  linalg.CHOL_MIN_BATCH_FULL - 1, linalg.CHOL_MIN_BATCH_FULL})
 
 
 def test_thresholds_are_what_the_batches_straddle():
     # the batch sizes below were chosen around these values: keep them honest
-    assert linalg._CHOL_MIN_BATCH == 200
-    assert linalg._CHOL_MIN_BATCH_FULL == 300
-    assert linalg._CHOL_MAX_N == 6
+    assert linalg.CHOL_MIN_BATCH == 200
+    assert linalg.CHOL_MIN_BATCH_FULL == 300
+    assert linalg.CHOL_MAX_N == 6
 
 
 class _Spy:
@@ -121,10 +121,10 @@ def test_cholesky_fast_path_equals_lapack_row_by_row(n, B, monkeypatch):
     rng = np.random.default_rng(1000 * n + B)
     # magnitudes over six decades across rows: each row is held to its own scale
     P = _spd(rng, (B,), n, scale=10.0 ** rng.uniform(-3, 3, B))
-    spy = _Spy(linalg._cholesky_t)
-    monkeypatch.setattr(linalg, "_cholesky_t", spy)
+    spy = _Spy(linalg.cholesky_t)
+    monkeypatch.setattr(linalg, "cholesky_t", spy)
     L = linalg.cholesky(P, "P")
-    assert spy.calls == (1 if B >= linalg._CHOL_MIN_BATCH_FULL else 0)
+    assert spy.calls == (1 if B >= linalg.CHOL_MIN_BATCH_FULL else 0)
     assert L.shape == P.shape and L.flags.c_contiguous
     # every |L_ij| <= sqrt(P_ii): that is the scale of the factor's rounding
     scale = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1).max(-1))
@@ -139,15 +139,15 @@ def test_cholesky_fast_path_equals_lapack_row_by_row(n, B, monkeypatch):
 @pytest.mark.parametrize("n", range(1, 7))
 @pytest.mark.parametrize("B", BATCHES)
 def test_cholesky_t_columns_equal_lapack(n, B):
-    # the sigma-point filters use _cholesky_t directly (from _CHOL_MIN_BATCH): batch axis
+    # the sigma-point filters use cholesky_t directly (from CHOL_MIN_BATCH): batch axis
     # last, C[j, i] = L[:, i, j]
     rng = np.random.default_rng(7 + 100 * n + B)
     P = _spd(rng, (B,), n, scale=10.0 ** rng.uniform(-3, 3, B))
-    C = linalg._cholesky_t(P)
+    C = linalg.cholesky_t(P)
     assert C is not None and C.shape == (n, n, B)
     Lref = np.linalg.cholesky(P)
     scale = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1).max(-1))[:, None, None]
-    _close(C.transpose(2, 1, 0), Lref, scale, what="_cholesky_t")
+    _close(C.transpose(2, 1, 0), Lref, scale, what="cholesky_t")
 
 
 @pytest.mark.parametrize("n", [2, 4, 6])
@@ -203,7 +203,7 @@ def test_cholesky_non_positive_definite_row_same_error_in_small_and_big_stacks(B
 
 @pytest.mark.parametrize("B", [10, 300])
 def test_cholesky_nan_row_behaves_the_same_in_small_and_big_stacks(B):
-    # _cholesky_t rejects a nan pivot and hands the stack to LAPACK: same result both ways
+    # cholesky_t rejects a nan pivot and hands the stack to LAPACK: same result both ways
     P = np.broadcast_to(np.eye(3), (B, 3, 3)).copy()
     P[5] = np.nan
     np.testing.assert_array_equal(linalg.cholesky(P, "P"), np.linalg.cholesky(P))
@@ -214,7 +214,7 @@ def test_cholesky_nan_row_behaves_the_same_in_small_and_big_stacks(B):
 # ============================================================================================
 
 SIGMA_FILTERS = {"UKF": UKF, "UKF-a1": lambda: UKF(alpha=1.0, kappa=0.0), "CKF": CKF}
-B_SIGMA = 301  # above _CHOL_MIN_BATCH (200): the vectorised Cholesky; one row: LAPACK
+B_SIGMA = 301  # above CHOL_MIN_BATCH (200): the vectorised Cholesky; one row: LAPACK
 
 
 def _sigma_problem(B, seed):
@@ -225,14 +225,14 @@ def _sigma_problem(B, seed):
 
 
 def _spy_factor(monkeypatch):
-    spy = _Spy(sigma_mod._cholesky_t)
-    monkeypatch.setattr(sigma_mod, "_cholesky_t", spy)
+    spy = _Spy(sigma_mod.cholesky_t)
+    monkeypatch.setattr(sigma_mod, "cholesky_t", spy)
     return spy
 
 
 @pytest.mark.parametrize("fname", SIGMA_FILTERS)
 @pytest.mark.parametrize("dt_kind", ["scalar", "per-row array"])
-@pytest.mark.parametrize("B", [linalg._CHOL_MIN_BATCH - 1, linalg._CHOL_MIN_BATCH, B_SIGMA])
+@pytest.mark.parametrize("B", [linalg.CHOL_MIN_BATCH - 1, linalg.CHOL_MIN_BATCH, B_SIGMA])
 def test_sigma_predict_batch_equals_rows_alone(fname, dt_kind, B, monkeypatch):
     filt = SIGMA_FILTERS[fname]()
     cv = ConstantVelocity(dim=2, q=[0.3, 2.0])
@@ -240,8 +240,8 @@ def test_sigma_predict_batch_equals_rows_alone(fname, dt_kind, B, monkeypatch):
     dt = 0.8 if dt_kind == "scalar" else rng.uniform(0.1, 3.0, B)
     spy = _spy_factor(monkeypatch)
     pred, C = filt.predict_with_cross(tk.Gaussian(x, P), cv, dt)
-    # the vectorised factor from _CHOL_MIN_BATCH rows (LAPACK below)
-    assert spy.calls == (1 if B >= linalg._CHOL_MIN_BATCH else 0)
+    # the vectorised factor from CHOL_MIN_BATCH rows (LAPACK below)
+    assert spy.calls == (1 if B >= linalg.CHOL_MIN_BATCH else 0)
     pred2 = filt.predict(tk.Gaussian(x, P), cv, dt)
     np.testing.assert_array_equal(pred2.mean, pred.mean)
     np.testing.assert_array_equal(pred2.cov, pred.cov)
@@ -377,15 +377,128 @@ def test_sigma_singular_covariance_names_quantity_and_row(fname, B):
 
 
 def _textbook(x, P, z, sensor):
-    """One unbatched update, textbook Joseph form, in plain numpy."""
-    zhat = sensor.h(x)
+    """One unbatched update by the textbook Joseph form (``kalman.joseph_update``)."""
     H = np.broadcast_to(sensor.jacobian(x), (sensor.dim_z, x.size))
-    R = sensor.noise
-    r = sensor.residual(z, zhat)
-    S = H @ P @ H.T + R
-    K = np.linalg.solve(S, H @ P).T  # P H^T S^-1 (S, P symmetric)
-    IKH = np.eye(x.size) - K @ H
-    return x + K @ r, IKH @ P @ IKH.T + K @ R @ K.T, S
+    r = sensor.residual(z, sensor.h(x))
+    return kalman.joseph_update(x, P, r, H, np.asarray(sensor.noise, dtype=float))
+
+
+def test_joseph_update_is_the_textbook_formula():
+    # the src textbook form against the formula typed out once more (inverse and all), one
+    # problem and a batch with H and R per row
+    rng = np.random.default_rng(19)
+    for shape, n, m in [((), 4, 1), ((), 5, 3), ((6,), 4, 2), ((2, 3), 6, 4)]:
+        x = rng.uniform(-100, 100, shape + (n,))
+        P = _spd(rng, shape, n)
+        H = rng.standard_normal(shape + (m, n))
+        R = _spd(rng, shape, m)
+        r = rng.standard_normal(shape + (m,))
+        xn, Pn, S = kalman.joseph_update(x, P, r, H, R)
+        S_ref = H @ P @ np.swapaxes(H, -1, -2) + R
+        K = P @ np.swapaxes(H, -1, -2) @ np.linalg.inv(S_ref)
+        IKH = np.eye(n) - K @ H
+        P_ref = (IKH @ P @ np.swapaxes(IKH, -1, -2)
+                 + K @ R @ np.swapaxes(K, -1, -2))
+        _assert_symmetric(Pn, f"{shape} P+")
+        _close(S, S_ref, _cov_scale(S_ref), what=f"{shape} S")
+        _close(Pn, P_ref, _cov_scale(P), what=f"{shape} P+")
+        _close(xn, x + (K @ r[..., None])[..., 0], _mean_scale(x, P), what=f"{shape} x+")
+
+
+def _kernel_problem(rng, shape, n, m):
+    x = rng.uniform(-100, 100, shape + (n,))
+    P = _spd(rng, shape, n)
+    H = rng.standard_normal((m, n))
+    return x, P, rng.standard_normal(shape + (m,)), H, _spd(rng, (), m)
+
+
+@pytest.mark.parametrize("n, m", [(n, m) for n in (1, 2, 4, 6, 7)
+                                  for m in range(1, kalman_fast.FAST_MAX_M + 1) if m <= n])
+@pytest.mark.parametrize("shape", [(), (1,), (9,), (2, 3)], ids=str)
+def test_fast_update_kernels_equal_the_textbook_form(shape, n, m):
+    # random well-conditioned problems (condition numbers <= 1e3): the fast kernels
+    # (update_one for one problem, update_batch for a batch) and the Joseph form as written
+    # agree to 1e-12 of |P| (the module docstring's tolerance)
+    rng = np.random.default_rng(100 * n + 10 * m + len(shape))
+    x, P, r, H, R = _kernel_problem(rng, shape, n, m)
+    fast = kalman_fast.update_one if shape == () else kalman_fast.update_batch
+    xf, Pf, Sf = fast(x, P, r, H, R)
+    xt, Pt, St = kalman.joseph_update(x, P, r, H, R)
+    _assert_symmetric(Pf, "fast P+")
+    _close(Sf, St, _cov_scale(St), what="S")
+    _close(Pf, Pt, _cov_scale(P), what="P+")
+    _close(xf, xt, _mean_scale(x, P), what="x+")
+
+
+@pytest.mark.parametrize("shape", [(), (5,)], ids=str)
+def test_condition_takes_the_fast_kernels_exactly_up_to_fast_max_m(shape, monkeypatch):
+    calls = {}
+    for name in ("update_one", "update_batch", "joseph_update"):
+        spy = _Spy(getattr(kalman, name))
+        calls[name] = spy
+        monkeypatch.setattr(kalman, name, spy)
+    fast = "update_one" if shape == () else "update_batch"
+    rng = np.random.default_rng(17)
+    for m in range(1, kalman_fast.FAST_MAX_M + 3):
+        x, P, r, H, R = _kernel_problem(rng, shape, 6, m)
+        for spy in calls.values():
+            spy.calls = 0
+        kalman.condition(x, P, r, H, R)
+        took = {k for k, spy in calls.items() if spy.calls}
+        assert took == ({fast} if m <= kalman_fast.FAST_MAX_M else {"joseph_update"}), m
+        if m > 3:
+            continue
+        # and the KF's own update (its lean path for one problem included)
+        for spy in calls.values():
+            spy.calls = 0
+        sensor = Position(dim=m, sigma=1.0 + np.arange(m))
+        KF().update(tk.Gaussian(x, P), x[..., :m] + 0.5, sensor)
+        took = {k for k, spy in calls.items() if spy.calls}
+        assert took == ({fast} if m <= kalman_fast.FAST_MAX_M else {"joseph_update"}), m
+
+
+@pytest.mark.parametrize("m", [1, 2])
+@pytest.mark.parametrize("H_kind", ["position", "general"])
+def test_column_kernel_equals_the_textbook_form(m, H_kind):
+    # update_columns, the large-batch kernel (and the IMM's), against the Joseph form as
+    # written, row by row: a sensor that picks state components (H P H^T read off P) and one
+    # that does not
+    rng = np.random.default_rng(20 + m)
+    N, n = kalman_fast.COLUMNS_MIN_ROWS, 6
+    x, P, r, H, R = _kernel_problem(rng, (N,), n, m)
+    if H_kind == "position":
+        H = np.eye(n)[[1, 0][:m]]
+    xc, Pc, Sc = kalman_fast.update_columns(x, P, r, H, R)
+    xt, Pt, St = kalman.joseph_update(x, P, r, H, R)
+    _assert_symmetric(Pc, "columns P+")
+    _close(Sc, St, _cov_scale(St), what="S")
+    _close(Pc, Pt, _cov_scale(P), what="P+")
+    _close(xc, xt, _mean_scale(x, P), what="x+")
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_update_batch_takes_the_column_kernel_exactly_from_columns_min_rows(m, monkeypatch):
+    spy = _Spy(kalman_fast.update_columns)
+    monkeypatch.setattr(kalman_fast, "update_columns", spy)
+    rng = np.random.default_rng(30 + m)
+    T = kalman_fast.COLUMNS_MIN_ROWS
+    for shape, batched_R in [((T - 1,), False), ((T,), False), ((2, T // 2), False),
+                             ((T,), True)]:
+        x, P, r, H, R = _kernel_problem(rng, shape, 6, m)
+        if batched_R:
+            R = np.broadcast_to(R, shape + R.shape)
+        spy.calls = 0
+        xn, Pn, S = kalman_fast.update_batch(x, P, r, H, R)
+        assert xn.shape == x.shape and Pn.shape == P.shape and S.shape == shape + (m, m)
+        take = m <= 2 and np.prod(shape) >= T and not batched_R
+        assert spy.calls == int(take), (shape, batched_R)
+
+
+def test_update_one_refuses_a_measurement_above_fast_max_m():
+    rng = np.random.default_rng(18)
+    x, P, r, H, R = _kernel_problem(rng, (), 6, kalman_fast.FAST_MAX_M + 1)
+    with pytest.raises(ValueError, match="update_one takes measurements of 1 to 4"):
+        kalman_fast.update_one(x, P, r, H, R)
 
 
 KALMAN_CASES = {
@@ -399,6 +512,11 @@ KALMAN_CASES = {
     "EKF-RangeBearing": (EKF, RangeBearing(origin=(40.0, -60.0), sigma_range=2.0,
                                            sigma_bearing=0.005), 4),  # m = 2
     "EKF-RangeBearing-n5": (EKF, RangeBearing(origin=(40.0, -60.0)), 5),
+    "EKF-two-radars": (EKF, Stack((RangeBearing(origin=(40.0, -60.0)),  # m = 4 (generic)
+                                   RangeBearing(origin=(-300.0, 90.0), sigma_range=5.0))), 4),
+    "EKF-three-radars": (EKF, Stack((RangeBearing(origin=(40.0, -60.0)),  # m = 6 (textbook)
+                                     RangeBearing(origin=(-300.0, 90.0), sigma_range=5.0),
+                                     RangeBearing(origin=(900.0, 500.0)))), 4),
 }
 
 
@@ -489,6 +607,29 @@ def test_joseph_update_with_a_suboptimal_gain_tolerance_is_meaningful(name):
     joseph_b = IKH @ P @ IKH.T + Kb @ sensor.noise @ Kb.T
     short_b = P - Kb @ S @ Kb.T
     assert np.abs(joseph_b - short_b).max() > 1e3 * TOL * _cov_scale(P).max()
+
+
+def test_identity_cache_gives_a_value_only_to_the_same_read_only_arrays():
+    cache = kalman_fast.IdentityCache(2)
+    a = np.eye(2)
+    a.flags.writeable = False
+    b = a.copy()  # equal values, another object
+    b.flags.writeable = False
+    cache.put("A", a)
+    assert cache.get(a) == "A" and cache.get(b) is None
+    w = np.eye(2)  # writeable: could change after the value was computed, so not kept
+    cache.put("W", w)
+    cache.put("AW", a, w)
+    assert cache.get(w) is None and cache.get(a, w) is None
+    cache.put("A3", a, tag=3)
+    assert cache.get(a, tag=3) == "A3" and cache.get(a) == "A" and cache.get(a, tag=4) is None
+    cache.put("B", b)  # full: cleared first
+    assert cache.get(a) is None and cache.get(a, tag=3) is None and cache.get(b) == "B"
+    # an entry keeps its arrays alive, so no new array can come back with their ids
+    cache.put("AB", a, b)
+    assert cache.get(a, b) == "AB" and cache.get(b, a) is None
+    del a
+    assert all(cache.get(np.eye(2), b) is None for _ in range(100))
 
 
 @pytest.mark.parametrize("model", [ConstantVelocity(dim=1, q=0.2), ConstantVelocity(dim=2, q=0.5),
@@ -778,15 +919,15 @@ def test_residual_wrap_equals_angles_wrap(sensor):
 
 
 def test_cheap_wrap_helper_equals_wrap():
-    from trackkit.models.sensors import _wrap_small
+    from trackkit.models.sensors import wrap_small
 
     rng = np.random.default_rng(61)
     for a in [WRAP_VALUES, WRAP_VALUES[np.abs(WRAP_VALUES) < 3.0],
               rng.uniform(-2.999, 2.999, 1000), rng.uniform(-20, 20, 1000),
               np.array([0.1, np.nan, -0.2]), np.zeros(0)]:
-        np.testing.assert_array_equal(_wrap_small(a), wrap(a))
+        np.testing.assert_array_equal(wrap_small(a), wrap(a))
     for v in WRAP_VALUES:
-        np.testing.assert_array_equal(_wrap_small(np.array([v])), wrap(np.array([v])))
+        np.testing.assert_array_equal(wrap_small(np.array([v])), wrap(np.array([v])))
 
 
 # ============================================================================================

@@ -12,6 +12,7 @@ import pytest
 from scipy.stats import multivariate_normal
 
 import trackkit as tk
+from trackkit.filters import imm as imm_module
 from trackkit.filters.imm import (
     IMM,
     IMMBelief,
@@ -776,6 +777,33 @@ def test_fast_path_equals_the_general_path(case):
         close(fast.log_likelihood(pred, np.nan_to_num(z), sensor),
               slow.log_likelihood(pred, np.nan_to_num(z), sensor), what="log-likelihood")
     assert r == 1 or mu_moved > 0.2  # the mode probabilities were exercised
+
+
+@pytest.mark.parametrize("case", [c for c, v in FAST_CASES.items() if v[2]])
+def test_fast_update_is_the_kalman_filters_own_update(case, monkeypatch):
+    # the fast path updates every model and row at once through the Kalman filters' own
+    # kernel (kalman.condition): from one predicted belief, the numbers of each model's KF
+    # on the general path, bit for bit (a batch: a single problem's KF takes the one-problem
+    # kernel instead)
+    models, sensor, batch = FAST_CASES[case]
+    r, n, m = len(models), models[0].dim_x, sensor.dim_z
+    p = np.ones((1, 1)) if r == 1 else np.full((r, r), 1.0 / r)
+    fast, slow = IMM(models, tk.filters.KF(), p), IMM(models, TextbookKF(), p)
+    calls = []
+    kernel = imm_module._fast_update_models
+    monkeypatch.setattr(imm_module, "_fast_update_models",
+                        lambda *a: calls.append(1) or kernel(*a))
+    rng = np.random.default_rng(12)
+    prior = tk.Gaussian(rng.normal(0, 1, batch + (n,)), np.eye(n) * 2.0)
+    pred = slow.predict(slow.init(prior), None, 0.7)
+    z = rng.normal(0, 1, batch + (m,))
+    z.reshape(-1, m)[0] = np.nan
+    (bf, inf_), (bs, ins) = fast.update(pred, z, sensor), slow.update(pred, z, sensor)
+    for a, b in zip([*bf, *inf_], [*bs, *ins], strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(fast.log_likelihood(pred, np.nan_to_num(z), sensor),
+                                  slow.log_likelihood(pred, np.nan_to_num(z), sensor))
+    assert len(calls) == 2  # the fast path's update, in update and in log_likelihood
 
 
 def test_fast_path_steps_aside_for_what_it_does_not_cover():

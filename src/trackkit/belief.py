@@ -11,9 +11,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.linalg import check_covariance
+from trackkit.linalg import check_covariance, symmetrize
 
-__all__ = ["Gaussian", "Particles", "Innovation", "check_gaussian"]
+__all__ = ["Gaussian", "Particles", "Innovation", "check_gaussian", "moment_match"]
 
 
 class _GaussianFields(NamedTuple):
@@ -214,3 +214,32 @@ def check_gaussian(mean: ArrayLike, cov: ArrayLike, name: str = "belief") -> Gau
             "do not broadcast"
         ) from None
     return Gaussian._make((m, P))
+
+
+def moment_match(w: NDArray[np.float64], X: NDArray[np.float64], P: NDArray[np.float64],
+                 group: NDArray[np.intp] | None = None, size: int | None = None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The Gaussian with the first two moments of the mixture ``sum_k w_k N(x_k, P_k)``
+    (weights summing to 1):
+
+        x = sum_k w_k x_k
+        P = sum_k w_k (P_k + (x_k - x)(x_k - x)^T)          (symmetrised)
+
+    Without ``group``, one mixture per batch row, its components along the last batch axis:
+    ``w (..., K)``, ``X (..., K, n)``, ``P (..., K, n, n)``. With ``group (K,)``, ``size``
+    mixtures whose components are scattered along axis 0 (``w (K, ...)``, ``X (K, ..., n)``,
+    ``P (K, ..., n, n)``), component k in mixture ``group[k]`` (e.g. a track's prediction
+    and its gated hypotheses), summed in the order of k; a mixture without components gets
+    zeros. Returns ``(x, P)``.
+    """
+    if group is None:
+        x = np.einsum("...k,...kn->...n", w, X)
+        d = X - x[..., None, :]
+        Pm = np.einsum("...k,...kab->...ab", w, P + d[..., :, None] * d[..., None, :])
+        return x, symmetrize(Pm)
+    x = np.zeros((size,) + X.shape[1:])
+    np.add.at(x, group, w[..., None] * X)
+    d = X - x[group]
+    Pm = np.zeros((size,) + P.shape[1:])
+    np.add.at(Pm, group, w[..., None, None] * (P + d[..., :, None] * d[..., None, :]))
+    return x, symmetrize(Pm)

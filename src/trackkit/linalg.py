@@ -71,8 +71,8 @@ class _Triu(NamedTuple):
 _TRIU: dict[int, _Triu] = {}
 
 
-def _triu(n: int) -> _Triu:
-    """Cached upper-triangle indices for n x n matrices (see ``_mirror``)."""
+def triu(n: int) -> _Triu:
+    """Cached upper-triangle indices for n x n matrices (see ``mirror``)."""
     t = _TRIU.get(n)
     if t is None:
         i, j = np.triu_indices(n)
@@ -87,11 +87,11 @@ def _triu(n: int) -> _Triu:
     return t
 
 
-def _mirror(upper: Array, n: int) -> Array:
+def mirror(upper: Array, n: int) -> Array:
     """Full symmetric matrices ``(..., n, n)`` from their upper triangles ``(..., T)``
-    (row-major order, as ``_triu(n).flat``): exactly symmetric, whatever rounding produced
+    (row-major order, as ``triu(n).flat``): exactly symmetric, whatever rounding produced
     the upper triangle."""
-    return upper[..., _triu(n).twin].reshape(upper.shape[:-1] + (n, n))
+    return upper[..., triu(n).twin].reshape(upper.shape[:-1] + (n, n))
 
 
 def _where_bad(mask: NDArray[np.bool_]) -> str:
@@ -103,13 +103,13 @@ def _where_bad(mask: NDArray[np.bool_]) -> str:
 #: smallest stack for which the vectorised small-matrix Cholesky (factor columns, batch
 #: last) beats LAPACK's per-matrix calls (numpy 2.4, n = 4: about equal at 200 matrices,
 #: twice as fast at 1000); :func:`cholesky`, which also transposes the result back to
-#: ``(..., n, n)``, switches at ``_CHOL_MIN_BATCH_FULL``
-_CHOL_MIN_BATCH = 200
-_CHOL_MIN_BATCH_FULL = 300
-_CHOL_MAX_N = 6
+#: ``(..., n, n)``, switches at ``CHOL_MIN_BATCH_FULL``
+CHOL_MIN_BATCH = 200
+CHOL_MIN_BATCH_FULL = 300
+CHOL_MAX_N = 6
 
 
-def _cholesky_t(P: Array) -> Array | None:
+def cholesky_t(P: Array) -> Array | None:
     """Lower Cholesky factors of a stack ``P (N, n, n)``, batch axis last:
     ``C[j, i] = L[:, i, j]`` (shape ``(n, n, N)``, zeros above the diagonal), or ``None``
     when some matrix is not positive definite (a pivot not > 0, or nan).
@@ -146,13 +146,13 @@ def cholesky(P: Array, name: str = "covariance") -> Array:
 
     Raises ``ValueError`` naming ``name`` and the first failing batch row when some ``P`` is
     not positive definite; nothing is repaired (no jitter is added). Large stacks of small
-    matrices are factored by :func:`_cholesky_t` (same factor up to rounding).
+    matrices are factored by :func:`cholesky_t` (same factor up to rounding).
     """
     P = np.asarray(P)
     n = P.shape[-1] if P.ndim > 2 and P.shape[-2] == P.shape[-1] else 0
-    if (0 < n <= _CHOL_MAX_N and P.dtype == np.float64
-            and P.size >= _CHOL_MIN_BATCH_FULL * n * n):
-        C = _cholesky_t(P.reshape(-1, n, n))
+    if (0 < n <= CHOL_MAX_N and P.dtype == np.float64
+            and P.size >= CHOL_MIN_BATCH_FULL * n * n):
+        C = cholesky_t(P.reshape(-1, n, n))
         if C is not None:
             return np.ascontiguousarray(C.transpose(2, 1, 0)).reshape(P.shape)
     try:

@@ -19,13 +19,13 @@ from trackkit.tracking.association import (
     distance_costs,
     gnn,
     jpda,
-    jpda_update,
     loglik_costs,
     pda_costs,
     seed004_costs,
 )
 from trackkit.tracking.gating import Gate, gate, predict_measurement
 
+from .pdaf import jpda_update
 from .scenes import scene
 
 

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 import trackkit as tk
-from trackkit.tracking.association import _log_ratio, jpda, jpda_update
+from trackkit.tracking.association import _log_ratio, jpda
 from trackkit.tracking.gating import Gate, gate, predict_measurement
 from trackkit.tracking.tracker import JPDA
+
+from .pdaf import jpda_update
 
 PD, LAM = 0.9, 1e-3
 

@@ -46,11 +46,11 @@ from trackkit.tracking.association import (
     distance_costs,
     gnn,
     jpda,
-    jpda_update,
     pda_costs,
 )
 from trackkit.tracking.gating import gate, gate_threshold, predict_measurement
 
+from .pdaf import jpda_update
 from .scenes import scene, scene_range_bearing
 
 T0 = datetime(2025, 1, 1)

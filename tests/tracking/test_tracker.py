@@ -15,11 +15,12 @@ from trackkit.tracking import (
     gate,
     gnn,
     jpda,
-    jpda_update,
     loglik_costs,
     predict_measurement,
 )
 from trackkit.tracking.tracker import GNN, JPDA, SinglePoint, Tracker, Tracks, TwoPoint
+
+from .pdaf import jpda_update
 
 CV = tk.models.ConstantVelocity(dim=2, q=0.05)
 POS = tk.models.Position(dim=2, sigma=20.0)

@@ -32,10 +32,10 @@ from trackkit.filters.base import (
     output,
 )
 from trackkit.filters.kalman import (
-    _condition,
-    _dim_x,
-    _Linearised,
-    _predict,
+    Linearised,
+    condition,
+    dim_x_of,
+    jacobian_predict,
     kalman_gain,
     sandwich,
 )
@@ -150,7 +150,7 @@ def _mc_update(x: Array, P: Array, r: Array, H: Array, R: Array, sensor,
     delta = K @ r if (r.ndim == 1 and K.ndim == 2) else mm(K, r[..., None])[..., 0]
     x_new = x + delta
     H_plus = _jacobian(sensor, x_new, second_order)
-    _, P_new, _ = _condition(x_new, P, np.zeros_like(r), H_plus, R)  # Joseph with K+, H+
+    _, P_new, _ = condition(x_new, P, np.zeros_like(r), H_plus, R)  # Joseph with K+, H+
     return x_new, P_new, S, K, delta
 
 
@@ -318,7 +318,7 @@ def _keep_mask(miss: Array | None, batch: tuple[int, ...]) -> Array:
 # --------------------------------------------------------------------------------------------
 
 
-class MCEKF(_Linearised):
+class MCEKF(Linearised):
     """Modified-covariance EKF (Hashemi and Alfi 2019, eqs. 10-11).
 
     Prediction as the EKF: ``x- = f(x)``, ``P- = F P F^T + Q``. Update::
@@ -462,14 +462,14 @@ class AMCEKF(Filter):
     def predict(self, belief: AdaptiveBelief, motion, dt: ArrayLike) -> AdaptiveBelief:
         """``x- = f(x)``, ``P- = F P F^T + q_scale Q0(x, dt)``."""
         b = self.init(belief)
-        x, P = check_belief(b, _dim_x(motion), f"{self.name}.predict belief")
+        x, P = check_belief(b, dim_x_of(motion), f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
         if self.adapt_q:
             F = np.asarray(motion.jacobian(x, dt))
             Q = b.q_scale[..., None, None] * np.asarray(motion.noise(x, dt))
             g = output(motion.f(x, dt), sandwich(F, P) + Q)
         else:
-            g = _predict(x, P, motion, dt)
+            g = jacobian_predict(x, P, motion, dt)
         return b._replace(mean=g.mean, cov=g.cov)
 
     def update(self, belief: AdaptiveBelief, z: ArrayLike,
@@ -570,10 +570,10 @@ class AEKF(Filter):
     def predict(self, belief: SageHusaBelief, motion, dt: ArrayLike) -> SageHusaBelief:
         """``x- = f(x)``, ``P- = F P F^T + Q`` (Q the estimate when ``adapt_q``)."""
         b = self.init(belief)
-        x, P = check_belief(b, _dim_x(motion), f"{self.name}.predict belief")
+        x, P = check_belief(b, dim_x_of(motion), f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
         if not self.adapt_q:
-            g = _predict(x, P, motion, dt)
+            g = jacobian_predict(x, P, motion, dt)
             return b._replace(mean=g.mean, cov=g.cov)
         n = x.shape[-1]
         Q = b.Q
@@ -611,7 +611,7 @@ class AEKF(Filter):
         R_new = symmetrize((1.0 - d) * R_prev + d * (rrT - HPHt))
         R_k = np.where((keep & _positive_definite(R_new))[..., None, None], R_new, R_prev)
 
-        xn, Pn, S = _condition(x, P, r, H, R_k)
+        xn, Pn, S = condition(x, P, r, H, R_k)
         post, innov = keep_prior_where_missing(miss, (x, P), output(xn, Pn), Innovation(r, S))
 
         Q_k = b.Q

@@ -48,7 +48,7 @@ from trackkit.filters.base import (
     register,
 )
 from trackkit.filters.imm import combine, mixture_innovation
-from trackkit.filters.kalman import EKF, _condition, _predict
+from trackkit.filters.kalman import EKF, condition, jacobian_predict
 from trackkit.filters.particle import PF, resample_rows
 from trackkit.linalg import gaussian_loglik, mm, mmT, psd_factor, solve_psd, symmetrize
 from trackkit.models.motion import ConstantVelocity
@@ -692,7 +692,7 @@ class MPEKF(Filter):
             cart = ~polar
             xc, Pc = _rows(cart, y, P)
             step = dt if np.ndim(dt) == 0 else np.broadcast_to(dt, cart.shape)[cart]
-            g = _predict(xc, Pc, motion, step)
+            g = jacobian_predict(xc, Pc, motion, step)
             mean[cart], cov[cart] = g.mean, g.cov
         return MPBelief(mean, register(symmetrize(cov)), origin, b.velocity, polar)
 
@@ -730,7 +730,7 @@ class MPEKF(Filter):
         r = sensor.residual(z, zhat)
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
-        yn, Pn, S = _condition(y, P, r, H, R)
+        yn, Pn, S = condition(y, P, r, H, R)
         if first.any():  # those rows start from their first bearing, which is in them
             r, S = r.copy(), S.copy()
             (yn[first], Pn[first]), (r[first], S[first]) = start, cart

@@ -70,7 +70,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.belief import Gaussian, Innovation
+from trackkit.belief import Gaussian, Innovation, moment_match
 from trackkit.filters.base import (
     Filter,
     check_belief,
@@ -80,15 +80,14 @@ from trackkit.filters.base import (
     produced,
     register,
 )
-from trackkit.filters.kalman import KF, _linearize
-from trackkit.filters.kalman_fast import _predict_matrices
+from trackkit.filters.kalman import KF, condition, linearize
+from trackkit.filters.kalman_fast import dot_rows, predict_matrices
 from trackkit.linalg import (
-    _mirror,
-    _triu,
     check_covariance,
     gaussian_loglik,
-    solve_psd,
+    mirror,
     symmetrize,
+    triu,
 )
 
 __all__ = [
@@ -103,7 +102,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-_LOG_2PI = float(np.log(2.0 * np.pi))
 _PROB_TOL = 1e-9  # how far a probability vector's sum may be from 1 (rounding of a user's)
 #: carriers' total weight below which :func:`combine` rescales the weights first: above it,
 #: a product ``mu_j v`` of a weight and an entry |v| >= eps^2 is a normal float
@@ -174,15 +172,12 @@ def mix(mu: Array, X: Array, P: Array, p: Array, carry: Array | None = None,
     P0 = np.empty(X0.shape + X.shape[-1:])
     for j in range(r):
         Xa, Pa = _augmented(X, P, carry, j, fill)
-        w = W[..., :, j]
-        x0 = np.einsum("...i,...in->...n", w, Xa)
-        d = Xa - x0[..., None, :]
-        Pj = np.einsum("...i,...iab->...ab", w, Pa + d[..., :, None] * d[..., None, :])
+        x0, Pj = moment_match(W[..., :, j], Xa, Pa)
         if not carry[j].all():
             x0 = np.where(carry[j], x0, 0.0)
             Pj = np.where(carry[j][:, None] & carry[j][None, :], Pj, 0.0)
         X0[..., j, :] = x0
-        P0[..., j, :, :] = symmetrize(Pj)
+        P0[..., j, :, :] = Pj
     return c, X0, P0
 
 
@@ -196,11 +191,9 @@ def combine(mu: Array, X: Array, P: Array, carry: Array | None = None,
     weights. Rows where some carriers' total weight is below ``_SMALL_WEIGHT`` (a mode
     probability that underflowed, possibly to exactly 0) take the limit instead of 0/0
     (:func:`_combine_limit`)."""
-    x = np.einsum("...j,...jn->...n", mu, X)
     if carry is None or carry.all() or fill == "zero":
-        d = X - x[..., None, :]
-        Pm = np.einsum("...j,...jab->...ab", mu, P + d[..., :, None] * d[..., None, :])
-        return x, symmetrize(Pm)
+        return moment_match(mu, X, P)
+    x = np.einsum("...j,...jn->...n", mu, X)
     cf = carry.astype(float)
     total = np.einsum("...j,jn->...n", mu, cf)  # each component's carriers' weight
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -264,10 +257,7 @@ def mixture_innovation(c: Array, nu: Array, S: Array) -> tuple[Array, Array]:
     ``sum_j c_j N(zhat_j, S_j)``: ``nu = sum_j c_j nu_j`` and
     ``S = sum_j c_j (S_j + (nu_j - nu)(nu_j - nu)^T)`` (``nu (..., r, m)``,
     ``S (..., r, m, m)``)."""
-    v = np.einsum("...j,...jm->...m", c, nu)
-    d = nu - v[..., None, :]
-    Sm = np.einsum("...j,...jab->...ab", c, S + d[..., :, None] * d[..., None, :])
-    return v, symmetrize(Sm)
+    return moment_match(c, nu, S)
 
 
 # --------------------------------------------------------------------------------------------
@@ -520,8 +510,8 @@ class IMM(Filter):
             x_j = (beta_0 c_j x_j- + sum_h beta_h mu_{j|h} x_{j|h}) / mu_j
             P_j = (beta_0 c_j (P_j- + d d^T) + sum_h beta_h mu_{j|h} (P_{j|h} + d d^T)) / mu_j
 
-        with d the deviation from x_j. A model whose mu_j underflows to 0 keeps its
-        prediction.
+        with d the deviation from x_j (:func:`~trackkit.belief.moment_match` per model). A
+        model whose mu_j underflows to 0 keeps its prediction.
         """
         track = np.asarray(track, dtype=np.intp)
         b0 = np.asarray(beta0, dtype=float)
@@ -532,16 +522,14 @@ class IMM(Filter):
         np.add.at(mu, track, wh)
         ok = mu > 0
         safe = np.where(ok, mu, 1.0)
-        a0, ah = w0 / safe, wh / safe[track]  # per-model weights, summing to 1
-        # x_j = x_j- + sum_h a_h (x_{j|h} - x_j-): a track without hypotheses keeps x_j-
-        x = prior.mean.copy()
-        np.add.at(x, track, ah[..., None] * (post.mean - prior.mean[track]))
-        d0 = prior.mean - x
-        dh = post.mean - x[track]
-        P = a0[..., None, None] * (prior.cov + d0[..., :, None] * d0[..., None, :])
-        np.add.at(P, track, ah[..., None, None] * (post.cov + dh[..., :, None]
-                                                    * dh[..., None, :]))
-        P = np.where(ok[..., None, None], symmetrize(P), prior.cov)
+        T = prior.mu.shape[0]
+        # per model, the prediction and the hypotheses with weights summing to 1
+        x, P = moment_match(np.concatenate([w0 / safe, wh / safe[track]]),
+                            np.concatenate([prior.mean, post.mean]),
+                            np.concatenate([prior.cov, post.cov]),
+                            np.concatenate([np.arange(T), track]), T)
+        x = np.where(ok[..., None], x, prior.mean)
+        P = np.where(ok[..., None, None], P, prior.cov)
         # mu sums to beta_0 + sum_h beta_h = 1 up to rounding; make it exact
         return IMMBelief(mu / mu.sum(-1, keepdims=True), x, register(P))
 
@@ -616,7 +604,7 @@ class IMM(Filter):
         r, n = self._carry.shape
         N = int(np.prod(batch))
         X = b.mean.reshape(N, r, n)
-        zhat, H = _linearize(sensor, X)
+        zhat, H = linearize(sensor, X)
         R = sensor.noise
         m = z.shape[-1]
         if not (type(R) is np.ndarray and H.shape == (m, n) and R.shape == (m, m)
@@ -675,49 +663,17 @@ class IMM(Filter):
 # --------------------------------------------------------------------------------------------
 #
 # Covariances are handled as their upper triangles (T = n (n + 1) / 2 entries, row-major as
-# ``_triu(n).flat``) until they are stored. Mixing is the formula of :func:`mix` on the
+# ``triu(n).flat``) until they are stored. Mixing is the formula of :func:`mix` on the
 # triangles, with the spread of the means as pairwise differences (one outer product per pair
 # of models, shared by every j; :func:`_weighted_upper`). The prediction
 # ``P- = F P0 F^T + Q`` is one GEMM per model on the triangles,
 # ``vec_u(P-) = vec_u(P0) K_uu^T + vec_u(Q)``, with ``K_uu`` the rows of ``F kron F`` for the
-# upper triangle (``kalman_fast._predict_matrices``) with the columns of each mirrored pair of
-# entries added. The update of every model and row at once: ``A = P H^T``,
-# ``S = H P H^T + R``, U the inverse of S (explicit for m <= 2), ``x+ = x + A U nu`` and the
-# Joseph form evaluated as ``P+ = P - A G A^T`` with ``G = U + U^T - U S U^T`` (the
-# kalman_fast module docstring: equal to the Joseph form for the computed gain, and
-# insensitive to first order to the error of U). The combined estimate of models of one state
-# is the same weighted sum on the triangles (:func:`_fast_combine`).
+# upper triangle (``kalman_fast.predict_matrices``) with the columns of each mirrored pair of
+# entries added. The update of every model and row at once is the Kalman filters' own
+# (``kalman.condition`` on the N r rows: the general path's arithmetic). The combined estimate
+# of models of one state is the same weighted sum on the triangles (:func:`_fast_combine`).
 
 _UPPER_PREDICT: dict[tuple[bytes, bytes], tuple[Array, Array]] = {}
-
-#: multiply-adds per GEMM call above which OpenBLAS starts a second thread (its
-#: SMP_THRESHOLD_MIN x GEMM_MULTITHREAD_THRESHOLD); see :func:`_dot_rows`
-_ONE_THREAD_GEMM = 65536 * 4
-
-
-def _dot_rows(a: Array, B: Array) -> Array:
-    """``a @ B`` for a tall ``a (N, k)`` and a small ``B (k, m)``, in blocks of rows small
-    enough for OpenBLAS to use one thread. These products are memory-bound: a second thread
-    gains little on an idle machine and, when the other core is busy, makes the product
-    several times slower (measured at 10 000 runs: 3.6 ms against 0.3 ms per call)."""
-    N, k = a.shape
-    m = B.shape[1]
-    if N * k * m <= _ONE_THREAD_GEMM:
-        return a.dot(B)
-    out = np.empty((N, m))
-    step = max(1, _ONE_THREAD_GEMM // (k * m))
-    for s in range(0, N, step):
-        np.dot(a[s:s + step], B, out=out[s:s + step])
-    return out
-
-
-def _selected(H: Array) -> Array | None:
-    """The state indices a 0/1 selection matrix H picks (each row a unit vector), or None."""
-    k = H.argmax(axis=1)
-    if (H == np.eye(H.shape[1])[k]).all():
-        return k
-    return None
-
 
 def _upper_predict_matrices(F: Array, Q: Array) -> tuple[Array, Array]:
     """``(K_uu^T (T, T), vec_u(Q) (T,))`` for an unbatched F and Q, remembered by value."""
@@ -725,10 +681,10 @@ def _upper_predict_matrices(F: Array, Q: Array) -> tuple[Array, Array]:
     hit = _UPPER_PREDICT.get(key)
     if hit is None:
         n = F.shape[0]
-        K_u, _, Q_u = _predict_matrices(F, Q)  # (T, n^2): vec_u(F P F^T) = K_u vec(P)
+        K_u, _, Q_u = predict_matrices(F, Q)  # (T, n^2): vec_u(F P F^T) = K_u vec(P)
         T = K_u.shape[0]
         fold = np.zeros((n * n, T))
-        fold[np.arange(n * n), _triu(n).twin] = 1.0  # vec(P) = fold vec_u(P)
+        fold[np.arange(n * n), triu(n).twin] = 1.0  # vec(P) = fold vec_u(P)
         hit = (np.ascontiguousarray((K_u @ fold).T), np.array(Q_u))
         for a in hit:
             a.flags.writeable = False
@@ -750,7 +706,7 @@ def _fast_predict(mu: Array, X: Array, P: Array, p: Array, motions, dt) -> IMMBe
                 and Q.shape == (n, n) and F.dtype == Q.dtype == np.float64):
             return None
         mats.append((F, _upper_predict_matrices(F, Q)))
-    tri = _triu(n)
+    tri = triu(n)
     c, W = mixing_probabilities(mu, p)
     Pu = P.reshape(N, r, n * n)[:, :, tri.flat]
     spreads = _pair_spreads(X, tri)
@@ -760,85 +716,25 @@ def _fast_predict(mu: Array, X: Array, P: Array, p: Array, motions, dt) -> IMMBe
         w = W[:, :, j]
         x0 = np.einsum("ni,nia->na", w, X)
         P0u = _weighted_upper(w, Pu, spreads)
-        Ppu[:, j] = _dot_rows(P0u, K_uuT) + Q_u
-        Xp[:, j] = _dot_rows(x0, F.T)
-    return IMMBelief(c, Xp, register(_mirror(Ppu, n)))
+        Ppu[:, j] = dot_rows(P0u, K_uuT) + Q_u
+        Xp[:, j] = dot_rows(x0, F.T)
+    return IMMBelief(c, Xp, register(mirror(Ppu, n)))
 
 
 def _fast_update_models(X: Array, P: Array, z: Array, zhat: Array, sensor, H: Array,
                         R: Array):
     """Every model's KF update at once (``X (N, r, n)``, ``P (N, r, n, n)``, ``z (N, m)``,
     ``zhat = h(X) (N, r, m)``, H and R unbatched): ``(x+, P+, nu (N, r, m), S (N, r, m, m),
-    log Lambda (N, r))``."""
+    log Lambda (N, r))``. The N r rows go through the Kalman filters' own update
+    (:func:`~trackkit.filters.kalman.condition`) and ``log N(nu; 0, S)``, as each model's
+    filter on the general path."""
     N, r, n = X.shape
     m, Nr = H.shape[0], N * r
-    tri = _triu(n)
     nu = sensor.residual(z[:, None, :], zhat)
-    v = nu.reshape(Nr, m)
-    x = X.reshape(Nr, n)
-    Pu = P.reshape(Nr, n * n)[:, tri.flat]
-    if m > 2:
-        A = P.reshape(-1, n).dot(H.T).reshape(Nr, n, m)  # P H^T (P symmetric)
-        S = symmetrize(H @ A + R)
-        U = solve_psd(S, np.broadcast_to(np.eye(m), S.shape))
-        G = U + U.mT - U @ S @ U.mT
-        Uv = (U @ v[..., None])[..., 0]
-        GA = G @ A.mT  # (N r, m, n)
-        Pu -= (A[:, tri.i, :] * GA[:, :, tri.j].transpose(0, 2, 1)).sum(-1)
-        xn = x + (A @ Uv[..., None])[..., 0]
-        logdet, quad = np.linalg.slogdet(S)[1], (v * Uv).sum(-1)
-    else:
-        # the columns of A = P H^T, one contiguous (N r, n) array each: Ac[a] = P h_a, and
-        # HA[b, :, a] = (H P H^T)_ab; for a sensor that picks state components (a position)
-        # both are entries of P
-        k = _selected(H)
-        P3 = P.reshape(Nr, n, n)
-        if k is not None:
-            Ac = np.stack([P3[:, :, ka] for ka in k])
-            HA = np.stack([np.stack([P3[:, ka, kb] for ka in k], -1) for kb in k])
-        else:
-            Ac = np.ascontiguousarray(_dot_rows(P.reshape(-1, n), H.T).reshape(Nr, n, m)
-                                      .transpose(2, 0, 1))
-            HA = _dot_rows(Ac.reshape(m * Nr, n), H.T).reshape(m, Nr, m)
-        if m == 1:
-            s = HA[0, :, 0] + R[0, 0]
-            if not (s > 0).all():
-                solve_psd(s.reshape(Nr, 1, 1), np.ones((Nr, 1, 1)))  # raises, naming the row
-            u = 1.0 / s
-            g = u * (2.0 - s * u)  # G = 2 U - U S U
-            Uv0 = u * v[:, 0]
-            xn = x + Ac[0] * Uv0[:, None]
-            B0 = g[:, None] * Ac[0]
-            Pu -= B0[:, tri.i] * Ac[0][:, tri.j]
-            S = s.reshape(Nr, 1, 1)
-            logdet, quad = np.log(s), Uv0 * v[:, 0]
-        else:
-            a = HA[0, :, 0] + R[0, 0]
-            b = ((HA[1, :, 0] + R[0, 1]) + (HA[0, :, 1] + R[1, 0])) * 0.5  # symmetrised
-            d = HA[1, :, 1] + R[1, 1]
-            det = a * d - b * b
-            if not ((a > 0) & (det > 0)).all():
-                Sb = np.stack([a, b, b, d], -1).reshape(Nr, 2, 2)
-                solve_psd(Sb, np.ones((Nr, 2, 1)))  # raises, naming the row
-            u0, u1, u2 = d / det, -b / det, a / det  # U = [[u0, u1], [u1, u2]]
-            # G = 2 U - U S U, entry by entry
-            s0, s1 = u0 * a + u1 * b, u0 * b + u1 * d  # first row of U S
-            s2, s3 = u1 * a + u2 * b, u1 * b + u2 * d  # second row
-            g0 = 2.0 * u0 - (s0 * u0 + s1 * u1)
-            g1 = 2.0 * u1 - (s0 * u1 + s1 * u2)
-            g2 = 2.0 * u2 - (s2 * u1 + s3 * u2)
-            Uv0 = u0 * v[:, 0] + u1 * v[:, 1]
-            Uv1 = u1 * v[:, 0] + u2 * v[:, 1]
-            xn = x + Ac[0] * Uv0[:, None] + Ac[1] * Uv1[:, None]
-            # A G A^T on the upper triangle: sum_b (A G)_b[i] A_b[j]
-            B0 = g0[:, None] * Ac[0] + g1[:, None] * Ac[1]
-            B1 = g1[:, None] * Ac[0] + g2[:, None] * Ac[1]
-            Pu -= B0[:, tri.i] * Ac[0][:, tri.j] + B1[:, tri.i] * Ac[1][:, tri.j]
-            S = np.stack([a, b, b, d], -1).reshape(Nr, 2, 2)
-            logdet, quad = np.log(det), Uv0 * v[:, 0] + Uv1 * v[:, 1]
-    loglik = -0.5 * (quad + logdet + m * _LOG_2PI)
-    return (xn.reshape(N, r, n), _mirror(Pu, n).reshape(N, r, n, n), nu,
-            S.reshape(N, r, m, m), loglik.reshape(N, r))
+    xn, Pn, S = condition(X.reshape(Nr, n), P.reshape(Nr, n, n), nu.reshape(Nr, m), H, R)
+    loglik = gaussian_loglik(nu.reshape(Nr, m), S)
+    return (xn.reshape(N, r, n), Pn.reshape(N, r, n, n), nu, S.reshape(N, r, m, m),
+            loglik.reshape(N, r))
 
 
 def _pair_spreads(X: Array, tri) -> list[tuple[int, int, Array]]:
@@ -872,7 +768,7 @@ def _fast_combine(mu: Array, X: Array, P: Array) -> tuple[Array, Array]:
     ``P = sum_j mu_j (P_j + d_j d_j^T)`` (the spread as pairwise differences, see
     :func:`_weighted_upper`), mirrored (exactly symmetric)."""
     N, r, n = X.shape
-    tri = _triu(n)
+    tri = triu(n)
     x = np.einsum("nj,nja->na", mu, X)
     Pu = P.reshape(N, r, n * n)[:, :, tri.flat]
-    return x, _mirror(_weighted_upper(mu, Pu, _pair_spreads(X, tri)), n)
+    return x, mirror(_weighted_upper(mu, Pu, _pair_spreads(X, tri)), n)

@@ -82,7 +82,7 @@ from trackkit.models.classes import (
     ALONG,
     PAPER_CLASSES,
     TargetClass,
-    _step,
+    mode_step_components,
     turn_terms,
 )
 from trackkit.models.sensors import RangeBearing
@@ -146,8 +146,9 @@ Parts = tuple[Array, Array, Array, Array]
 def _propagate(X: Parts, rows: Ints, tab: _Tables, wx: Array, wy: Array, dt: float,
                along: str) -> Parts:
     """``x_k = F(omega_r) x_{k-1} + G (a_r + w)`` per particle, r its (class, mode) row."""
-    return _step(*X, np.take(tab.s, rows), np.take(tab.c, rows), np.take(tab.cos, rows),
-                 np.take(tab.sin, rows), np.take(tab.u, rows), dt, wx, wy, along)
+    return mode_step_components(*X, np.take(tab.s, rows), np.take(tab.c, rows),
+                                np.take(tab.cos, rows), np.take(tab.sin, rows),
+                                np.take(tab.u, rows), dt, wx, wy, along)
 
 
 def _residuals(X: Parts, z: Array, sensor) -> tuple[Array, ...]:
@@ -163,7 +164,7 @@ def _residuals(X: Parts, z: Array, sensor) -> tuple[Array, ...]:
     ``residual``.
     """
     if type(sensor) is RangeBearing and np.shape(sensor.origin) == (2,):
-        # in place throughout (see classes._step: fresh temporaries cost page faults)
+        # in place throughout (see classes.mode_step_components: fresh temporaries cost page faults)
         dx = np.subtract(X[0], sensor.origin[0])
         dy = np.subtract(X[1], sensor.origin[1])
         if sensor.convention != "nautical":  # math: the roles of x and y swap

@@ -24,10 +24,11 @@ from trackkit.filters.base import (
     register,
 )
 from trackkit.filters.kalman_fast import (
-    _condition_batch,
-    _condition_one,
-    _predict_cov,
+    FAST_MAX_M,
+    predict_cov,
     sandwich,
+    update_batch,
+    update_one,
 )
 from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
 
@@ -37,7 +38,7 @@ Array = NDArray[np.float64]
 _F64 = np.dtype(np.float64)
 
 
-def _predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
+def jacobian_predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
     """``x- = f(x, dt)``, ``P- = F P F^T + Q`` with F the Jacobian of f at x.
 
     P- is exactly symmetric. A model whose F or Q is not n x n gets the formula as written.
@@ -45,7 +46,7 @@ def _predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
     F = motion.jacobian(x, dt)
     Q = motion.noise(x, dt)
     # the fast path (kalman_fast): the Kronecker GEMM up to _KRON_MAX_N states, else sandwich
-    Pp = _predict_cov(F, P, Q)
+    Pp = predict_cov(F, P, Q)
     if Pp is not None:
         return Gaussian._make((motion.f(x, dt), register(Pp)))  # Pp exactly symmetric
     F, Q = np.asarray(F, dtype=float), np.asarray(Q, dtype=float)
@@ -61,22 +62,50 @@ def kalman_gain(P: Array, H: Array, R: Array) -> tuple[Array, Array, Array]:
     return A, S, solve_psd(S, A.mT).mT
 
 
-def _condition(
+def joseph_update(x: Array, P: Array, r: Array, H: Array, R: Array
+                  ) -> tuple[Array, Array, Array]:
+    """The Kalman update for residual r as the textbook writes it (Bar-Shalom, Li and
+    Kirubarajan 2001, section 5.2.3; the covariance in Joseph form, Bucy and Joseph 1968):
+
+        S  = H P H^T + R
+        K  = P H^T S^{-1}
+        x+ = x + K r
+        P+ = (I - K H) P (I - K H)^T + K R K^T
+
+    on any batch shapes; returns ``(x+, P+, S)``, S and P+ symmetrised (exactly symmetric).
+    The reference of the fast kernels in :mod:`trackkit.filters.kalman_fast`, and what
+    :func:`condition` runs for measurements of more than ``FAST_MAX_M`` components.
+    """
+    n = P.shape[-1]
+    S = symmetrize(H @ P @ H.mT + R)
+    K = solve_psd(S, (P @ H.mT).mT).mT  # P H^T S^{-1}, as (S^{-1} (P H^T)^T)^T: S symmetric
+    I_KH = np.eye(n) - K @ H
+    x_new = x + (K @ r[..., None])[..., 0]
+    P_new = symmetrize(I_KH @ P @ I_KH.mT + K @ R @ K.mT)
+    return x_new, P_new, S
+
+
+def condition(
     x: Array, P: Array, r: Array, H: Array, R: Array
 ) -> tuple[Array, Array, Array]:
-    """Kalman update for residual r: returns ``(x+, P+, S)``, P+ exactly symmetric.
+    """The Kalman update for residual r, :func:`joseph_update`: returns ``(x+, P+, S)``, P+
+    exactly symmetric.
 
-    ``S = H P H^T + R``, ``K = P H^T S^{-1}``, ``x+ = x + K r`` and the Joseph form
-    ``P+ = (I - K H) P (I - K H)^T + K R K^T``.
+    Measurements of up to ``FAST_MAX_M`` components (every sensor model but a stack of
+    them) take the fast kernels, the same equations ordered for speed
+    (:func:`~trackkit.filters.kalman_fast.update_one` for one problem,
+    :func:`~trackkit.filters.kalman_fast.update_batch` for a batch); larger ones the
+    textbook form as written.
     """
     if type(H) is not np.ndarray or H.dtype is not _F64:
         H = np.asarray(H, dtype=float)
     if type(R) is not np.ndarray or R.dtype is not _F64:
         R = np.asarray(R, dtype=float)
-    # the fast paths (kalman_fast) evaluate the Joseph form without forming I - K H
+    if H.shape[-2] > FAST_MAX_M:
+        return joseph_update(x, P, r, H, R)
     if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and r.ndim == 1:
-        return _condition_one(x, P, r, H, R)
-    return _condition_batch(x, P, r, H, R)
+        return update_one(x, P, r, H, R)
+    return update_batch(x, P, r, H, R)
 
 
 def _second_order_terms(Hs: Array, P: Array) -> tuple[Array, Array]:
@@ -91,18 +120,18 @@ def _second_order_terms(Hs: Array, P: Array) -> tuple[Array, Array]:
     return dz, B
 
 
-def _linearize(sensor, x: Array) -> tuple[Array, Array]:
+def linearize(sensor, x: Array) -> tuple[Array, Array]:
     """``(h(x), H(x))``: the sensor's fused ``linearize`` when it has one."""
     lin = getattr(sensor, "linearize", None)
     zhat, H = (sensor.h(x), sensor.jacobian(x)) if lin is None else lin(x)
     return zhat, H if type(H) is np.ndarray else np.asarray(H)
 
 
-def _dim_x(motion_or_sensor) -> int | None:
+def dim_x_of(motion_or_sensor) -> int | None:
     return getattr(motion_or_sensor, "dim_x", None)
 
 
-class _Linearised(Filter):
+class Linearised(Filter):
     """Shared prediction of the Jacobian-based filters."""
 
     def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
@@ -110,14 +139,14 @@ class _Linearised(Filter):
         x, P = check_belief(belief, getattr(motion, "dim_x", None),
                             f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
-        return _predict(x, P, motion, dt)
+        return jacobian_predict(x, P, motion, dt)
 
     def predict_with_cross(self, belief: Gaussian, motion, dt: ArrayLike):
         """Prediction and the cross-covariance ``Cov(x_k, x_{k+1}) = P F^T`` (for RTS)."""
-        x, P = check_belief(belief, _dim_x(motion), f"{self.name}.predict belief")
+        x, P = check_belief(belief, dim_x_of(motion), f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
         F = np.asarray(motion.jacobian(x, dt))
-        return _predict(x, P, motion, dt), mmT(P, F)
+        return jacobian_predict(x, P, motion, dt), mmT(P, F)
 
     def _inputs(self, belief, z, sensor):
         x, P = check_belief(belief, None, f"{self.name}.update belief")
@@ -125,7 +154,7 @@ class _Linearised(Filter):
         return x, P, z
 
 
-class KF(_Linearised):
+class KF(Linearised):
     """Linear Kalman filter: motion and sensor must be linear (``model.linear``)."""
 
     name = "KF"
@@ -137,7 +166,7 @@ class KF(_Linearised):
         x, P = check_belief(belief, getattr(motion, "dim_x", None),
                             f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
-        return _predict(x, P, motion, dt)
+        return jacobian_predict(x, P, motion, dt)
 
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
         """``r = z - H x-``; ``K = P- H^T S^{-1}``; Joseph-form covariance."""
@@ -149,24 +178,25 @@ class KF(_Linearised):
                 and x.ndim == 1 and math.isfinite(sum(z.tolist()))):
             # (the lean path: one problem, one finite float z, nothing to convert or check)
             z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
-        zhat, H = _linearize(sensor, x)
+        zhat, H = linearize(sensor, x)
         miss = missing_rows(z)
         r = sensor.residual(z, zhat)
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
         R = sensor.noise
         if (x.ndim == 1 and r.ndim == 1 and H.ndim == 2 and type(R) is np.ndarray
-                and R.ndim == 2 and R.dtype is _F64 and H.dtype is _F64):
-            xn, Pn, S = _condition_one(x, P, r, H, R)
+                and R.ndim == 2 and R.dtype is _F64 and H.dtype is _F64
+                and H.shape[0] <= FAST_MAX_M):
+            xn, Pn, S = update_one(x, P, r, H, R)
         else:
-            xn, Pn, S = _condition(x, P, r, H, R)
+            xn, Pn, S = condition(x, P, r, H, R)
         post, innov = Gaussian._make((xn, register(Pn))), Innovation(r, S)  # Pn exactly symmetric
         if miss is None:
             return post, innov
         return keep_prior_where_missing(miss, (x, P), post, innov)
 
 
-class EKF(_Linearised):
+class EKF(Linearised):
     """Extended Kalman filter, first order (``order=1``) or second order (``order=2``).
 
     The second-order filter adds the measurement-Hessian terms of Athans, Wishner and
@@ -185,7 +215,7 @@ class EKF(_Linearised):
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
         x, P, z = self._inputs(belief, z, sensor)
         miss = missing_rows(z)
-        zhat, H = _linearize(sensor, x)
+        zhat, H = linearize(sensor, x)
         R = sensor.noise
         if self.order == 2:
             dz, B = _second_order_terms(sensor.hessian(x), P)
@@ -193,12 +223,12 @@ class EKF(_Linearised):
         r = sensor.residual(z, zhat)
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
-        xn, Pn, S = _condition(x, P, r, H, R)
+        xn, Pn, S = condition(x, P, r, H, R)
         return keep_prior_where_missing(miss, (x, P), output(xn, Pn, symmetric=True),
                                         Innovation(r, S))
 
 
-class IEKF(_Linearised):
+class IEKF(Linearised):
     """Iterated EKF: Gauss-Newton on the MAP cost of the update (Bell and Cathey 1993).
 
     From ``x_0 = x-``: ``H_i = J_h(x_i)``, ``K_i = P- H_i^T (H_i P- H_i^T + R)^{-1}`` and the
@@ -246,7 +276,7 @@ class IEKF(_Linearised):
         for i in range(self.iterations):
             H = np.asarray(sensor.jacobian(xi))
             r = sensor.residual(z, sensor.h(xi)) - mm(H, (x0 - xi)[..., None])[..., 0]
-            x_gn, Pn, S = _condition(x0, P, r, H, R)
+            x_gn, Pn, S = condition(x0, P, r, H, R)
             if i == 0:
                 innov = Innovation(r, S)
             if not self.line_search:

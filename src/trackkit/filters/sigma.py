@@ -29,16 +29,16 @@ from trackkit.filters.base import (
     output,
 )
 from trackkit.linalg import (
-    _CHOL_MAX_N,
-    _CHOL_MIN_BATCH,
-    _cholesky_t,
-    _mirror,
-    _triu,
+    CHOL_MAX_N,
+    CHOL_MIN_BATCH,
     cholesky,
+    cholesky_t,
+    mirror,
     solve_psd,
     symmetrize,
+    triu,
 )
-from trackkit.models.sensors import _wrap_small
+from trackkit.models.sensors import wrap_small
 
 __all__ = ["UKF", "CKF", "SigmaPoints"]
 
@@ -69,8 +69,8 @@ def _factor_columns(P: Array, batch: tuple[int, ...], name: str) -> Array:
     n = P.shape[-1]
     Pb = P.reshape((-1, n, n))
     C = None
-    if Pb.shape[0] >= _CHOL_MIN_BATCH and n <= _CHOL_MAX_N:
-        C = _cholesky_t(Pb)
+    if Pb.shape[0] >= CHOL_MIN_BATCH and n <= CHOL_MAX_N:
+        C = cholesky_t(Pb)
     if C is None:  # small stacks: LAPACK; and the diagnosis when a factor does not exist
         C = cholesky(P, name).reshape(Pb.shape).transpose(2, 1, 0)
     if P.shape[:-2] != batch:
@@ -132,7 +132,7 @@ def _deviation(Y: Array, y: Array, angular: tuple[bool, ...] | None) -> Array:
     d = Y - y
     if angular is not None and any(angular):
         if all(angular):
-            return _wrap_small(d)
+            return wrap_small(d)
         mask = np.asarray(angular)
         d[..., mask] = wrap(d[..., mask])
     return d
@@ -148,13 +148,13 @@ def _cross(wc: Array, dA: Array, dB: Array) -> Array:
 def _upper_of(M: Array) -> Array:
     """Upper triangles ``(N, T)`` of square matrices ``M (N, n, n)``."""
     n = M.shape[-1]
-    return M.reshape(M.shape[0], n * n)[:, _triu(n).flat]
+    return M.reshape(M.shape[0], n * n)[:, triu(n).flat]
 
 
 def _noise_upper(Q: Array, batch: tuple[int, ...], n: int) -> Array:
     """Upper triangle of Q (``(T,)`` or ``(N, T)``), averaged with the lower one when Q is
     not exactly symmetric (as symmetrising the sum would)."""
-    flat = _triu(n).flat
+    flat = triu(n).flat
     if Q.ndim == 2:
         if not (Q == Q.T).all():
             Q = symmetrize(Q)
@@ -203,7 +203,7 @@ class _SigmaPointFilter(Filter):
         n = dY.shape[-1]
         upper = _upper_of(_cross(rule.wc, dY, dY))
         upper += _noise_upper(Q, batch, n)
-        return _mirror(upper, n)
+        return mirror(upper, n)
 
     def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
         """Sigma points regenerated from the prediction; ``S = sum Wc dZ dZ^T + R``,
@@ -246,12 +246,12 @@ class _SigmaPointFilter(Filter):
             C = _cross(rule.wc, dX, dZ)
         K = solve_psd(S, C.mT).mT  # (N, n, m)
         if m == 1:
-            i, j = _triu(n)[:2]
+            i, j = triu(n)[:2]
             k0 = K[..., 0]
             upper = _upper_of(P) - S[:, 0] * (k0[:, i] * k0[:, j])
         else:  # whole batched products, then the triangle (gathering it first is slower)
             upper = _upper_of(P) - _upper_of(np.matmul(K @ S, K.mT))
-        return K, S, _mirror(upper, n)
+        return K, S, mirror(upper, n)
 
 
 _RULES: dict[tuple, SigmaPoints] = {}

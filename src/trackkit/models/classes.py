@@ -238,13 +238,13 @@ def mode_step(x: ArrayLike, omega: ArrayLike, u: ArrayLike, dt: float,
         return np.broadcast_to(a, shape).reshape(-1)
 
     s, c, cos, sin = turn_terms(flat(omega), dt)
-    parts = _step(*(flat(x[..., i]) for i in range(4)), s, c, cos, sin, flat(u), dt,
+    parts = mode_step_components(*(flat(x[..., i]) for i in range(4)), s, c, cos, sin, flat(u), dt,
                   None if w is None else flat(w[..., 0]), None if w is None else flat(w[..., 1]),
                   along)
     return np.stack(parts, -1).reshape(shape + (4,))
 
 
-def _step(px: Array, py: Array, vx: Array, vy: Array, s: Array, c: Array, cos: Array,
+def mode_step_components(px: Array, py: Array, vx: Array, vy: Array, s: Array, c: Array, cos: Array,
           sin: Array, u: Array, dt: float, wx: Array | None, wy: Array | None,
           along: str) -> tuple[Array, Array, Array, Array]:
     """:func:`mode_step` on the components ``(x, y, vx, vy)``, with the turn terms given (a

@@ -68,7 +68,7 @@ def _offset(x: Array, origin: Array) -> tuple[Array, Array]:
     return x[..., 0] - origin[..., 0], x[..., 1] - origin[..., 1]
 
 
-def _wrap_small(a: Array) -> Array:
+def wrap_small(a: Array) -> Array:
     """``wrap(a)`` for a float array, returning ``a`` itself when every entry is within
     (-3, 3): there ``wrap`` is the identity (``ceil((a - pi) / (2 pi))`` is -0), so the
     common case of small angle residuals costs two reductions instead of a dozen passes."""
@@ -171,14 +171,14 @@ class SensorModel:
         if mask is None:
             return r
         if mask is True:
-            return _wrap_small(r)
+            return wrap_small(r)
         if r.ndim == 0 or r.shape[-1] != mask.size:
             return np.where(mask, wrap(r), r)
         # r is a fresh array: wrap only its angle columns, in place (a range or a Doppler
         # column is left alone rather than wrapped and then thrown away)
         for j in np.flatnonzero(mask):
             a = r[..., j]
-            w = _wrap_small(a)
+            w = wrap_small(a)
             if w is not a:
                 r[..., j] = w
         return r

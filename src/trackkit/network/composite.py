@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
 from trackkit.linalg import symmetrize
-from trackkit.models.sensors import _wrap_small, check_convention
+from trackkit.models.sensors import check_convention, wrap_small
 
 __all__ = [
     "CONVERGED",
@@ -179,7 +179,7 @@ def _linearize(X: Array, p: _Problem) -> tuple[Array, Array]:
     else:
         np.arctan2(v, u, out=r)
     np.subtract(p.z, r, out=r)
-    r = _wrap_small(r)
+    r = wrap_small(r)
     r *= p.w
     np.multiply(u, u, out=q)
     np.multiply(v, v, out=A[2])

@@ -24,7 +24,6 @@ from trackkit.tracking.association import (
     distance_costs,
     gnn,
     jpda,
-    jpda_update,
     loglik_costs,
     pda_costs,
     seed004_costs,
@@ -74,7 +73,7 @@ from trackkit.tracking.tracker import (
 
 __all__ = [
     "GNN_DENSE_MAX_CELLS", "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult",
-    "clusters", "distance_costs", "gnn", "jpda", "jpda_update", "loglik_costs", "pda_costs",
+    "clusters", "distance_costs", "gnn", "jpda", "loglik_costs", "pda_costs",
     "seed004_costs", "GATE_PROBABILITY", "KDTREE_MIN_PAIRS", "Gate", "MeasurementPrediction",
     "gate", "gate_threshold", "predict_measurement", "convert_range_bearing",
     "converted_cov_given_truth", "pair_plots", "single_point", "two_point", "HistoryLogic",

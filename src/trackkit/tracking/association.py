@@ -21,7 +21,8 @@ Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of ga
   Kardehi Moghaddam (2021).
 
 * :func:`jpda`: marginal association probabilities from the feasible joint events of each
-  cluster, and :func:`jpda_update`, the combined-innovation state update.
+  cluster (the tracker updates a track with each of its gated detections and moment-matches
+  the mixture, :func:`trackkit.belief.moment_match`).
 """
 
 from __future__ import annotations
@@ -35,8 +36,6 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite_matching
 from scipy.stats import chi2
 
-from trackkit.belief import Gaussian
-from trackkit.linalg import symmetrize
 from trackkit.tracking.gating import Gate
 
 __all__ = [
@@ -49,7 +48,6 @@ __all__ = [
     "distance_costs",
     "gnn",
     "jpda",
-    "jpda_update",
     "loglik_costs",
     "pda_costs",
     "seed004_costs",
@@ -555,34 +553,3 @@ def _one_plus_others(v: Array, seg: Index, n: int) -> Array:
     total = np.bincount(seg, v, minlength=n)
     rest = np.bincount(seg, np.where(is_top, 0.0, v), minlength=n)
     return 1.0 + np.where(is_top, rest[seg], total[seg] - v)
-
-
-def jpda_update(prior: Gaussian, K: Array, S: Array, track: Index, residual: Array,
-                beta: Array, beta0: Array, P_upd: Array | None = None) -> Gaussian:
-    """JPDA (PDAF) state update of every track at once (Bar-Shalom):
-
-        nu_i = sum_j beta_ij nu_ij                                  (combined innovation)
-        x_i+ = x_i + K_i nu_i
-        P_i+ = beta_i0 P_i + (1 - beta_i0) P_i^c
-               + K_i [sum_j beta_ij nu_ij nu_ij^T - nu_i nu_i^T] K_i^T
-
-    with ``P^c = P - K S K^T`` the covariance after a certain detection (pass ``P_upd`` to
-    use the filter's own, e.g. Joseph form). ``prior`` is the predicted belief ``(T, n)``;
-    ``K (T, n, m)``, ``S (T, m, m)``; pairs given by ``track (P,)``, ``residual (P, m)``,
-    ``beta (P,)``; ``beta0 (T,)``. A track with no gated detection (beta_i0 = 1) keeps its
-    prediction.
-    """
-    x, P = np.asarray(prior.mean, dtype=float), np.asarray(prior.cov, dtype=float)
-    T, m = x.shape[0], S.shape[-1]
-    nP = track.shape[0]
-    # one sparse (T x P) matrix of the betas sums every track's pairs in one product
-    Bm = sp.csr_matrix((beta, (track, np.arange(nP))), shape=(T, nP))
-    nu = np.asarray(Bm @ residual).reshape(T, m)
-    outer = (residual[:, :, None] * residual[:, None, :]).reshape(nP, m * m)
-    spread = np.asarray(Bm @ outer).reshape(T, m, m) - nu[:, :, None] * nu[:, None, :]
-    x_new = x + (K @ nu[:, :, None])[:, :, 0]
-    if P_upd is None:
-        P_upd = P - K @ S @ K.mT
-    b0 = np.asarray(beta0, dtype=float)[:, None, None]
-    P_new = b0 * P + (1.0 - b0) * P_upd + K @ spread @ K.mT
-    return Gaussian(x_new, symmetrize(P_new))

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from trackkit.angles import wrap
-from trackkit.belief import Gaussian
+from trackkit.belief import Gaussian, moment_match
 from trackkit.filters.base import register
 from trackkit.filters.kalman import EKF, KF
 from trackkit.io.scans import Scan
@@ -400,14 +400,10 @@ class Tracker:
         else:
             xj, Pj = np.zeros((0, n)), np.zeros((0, n, n))
         # the mixture beta_0 N(x-, P-) + sum_j beta_j N(x_j, P_j), moment-matched
-        b0 = r.beta0
-        x = b0[:, None] * prior.mean
-        np.add.at(x, g.track, r.beta[:, None] * xj)
-        d0 = prior.mean - x
-        dj = xj - x[g.track]
-        P = b0[:, None, None] * (prior.cov + d0[:, :, None] * d0[:, None, :])
-        np.add.at(P, g.track, r.beta[:, None, None] * (Pj + dj[:, :, None] * dj[:, None, :]))
-        P = 0.5 * (P + P.mT)
+        T = prior.mean.shape[0]
+        x, P = moment_match(np.concatenate([r.beta0, r.beta]),
+                            np.concatenate([prior.mean, xj]), np.concatenate([prior.cov, Pj]),
+                            np.concatenate([np.arange(T), g.track]), T)
         mixed = Gaussian._make((x, P))
         belief = self.filter.init(mixed) if hasattr(self.filter, "init") else mixed
         return belief, *self._jpda_outcome(g, r, z.shape[0])
