@@ -201,12 +201,12 @@ def test_gnn_auto_takes_dense_below_the_threshold_and_clusters_above(T, monkeypa
 
 
 @settings(max_examples=60, deadline=None)
-@given(g=random_gates(max_t=5, max_d=5), p_d=st.floats(0.3, 0.99),
+@given(g=random_gates(max_t=5, max_d=5), pd=st.floats(0.3, 0.99),
        lam=st.floats(1e-4, 1.0))
-def test_gnn_loglik_is_the_most_probable_event(g, p_d, lam):
+def test_gnn_loglik_is_the_most_probable_event(g, pd, lam):
     """With loglik costs the GNN picks the joint event of largest JPDA weight."""
-    a = gnn(g, loglik_costs(g, p_d, lam))
-    w = _brute_events(g, p_d, lam)
+    a = gnn(g, loglik_costs(g, pd, lam))
+    w = _brute_events(g, pd, lam)
     best = max(w, key=w.get)
     assert w[tuple(a.det.tolist())] == pytest.approx(w[best], rel=1e-9)
 
@@ -232,8 +232,11 @@ def test_cost_functions_hand_computed():
     np.testing.assert_allclose(-c.pair, [L[0] / (b + L[0] + L[1]), L[1] / (b + L[0] + L[1]),
                                          L[2] / (b + L[2])], rtol=1e-12)
     np.testing.assert_allclose(-c.miss, [b / (b + L[0] + L[1]), b / (b + L[2])], rtol=1e-12)
-    with pytest.raises(ValueError, match="p_d"):
+    with pytest.raises(ValueError, match="pd"):
         loglik_costs(g, 0.0, 1.0)
+    for costs in (loglik_costs, pda_costs, jpda):
+        with pytest.raises(TypeError, match="'p_d' is now spelled 'pd'"):
+            costs(g, p_d=0.9, clutter_density=1.0)
     with pytest.raises(ValueError, match="clutter_density"):
         pda_costs(g, 0.5, 0.0)
     with pytest.raises(ValueError, match="distance"):
@@ -275,7 +278,7 @@ def test_gnn_methods_agree_on_scenes():
         sc = scene(np.random.default_rng(seed), 300, side=3000.0, clutter=40.0)
         mp = predict_measurement(sc.predicted, sc.sensor)
         g = gate(mp.zhat, mp.S, sc.z)
-        c = loglik_costs(g, sc.p_d, sc.clutter_density)
+        c = loglik_costs(g, sc.pd, sc.clutter_density)
         a, b = gnn(g, c, "sparse"), gnn(g, c, "clusters")
         np.testing.assert_array_equal(a.det, b.det)
         np.testing.assert_array_equal(a.unassigned, b.unassigned)
@@ -285,7 +288,7 @@ def test_gnn_methods_agree_on_scenes():
 # -- JPDA -------------------------------------------------------------------------------------
 
 
-def _brute_events(g, p_d, lam, p_g=None):
+def _brute_events(g, pd, lam, p_g=None):
     """Weight of every feasible joint event, keyed by each track's detection (-1 = miss)."""
     p_g = chi2.cdf(g.threshold, g.residual.shape[1]) if p_g is None else p_g
     options = [[-1] + [int(j) for j in g.det[g.track == i]] for i in range(g.n_tracks)]
@@ -295,13 +298,13 @@ def _brute_events(g, p_d, lam, p_g=None):
         dets = [j for j in ev if j >= 0]
         if len(dets) != len(set(dets)):
             continue
-        w[ev] = np.prod([1 - p_d * p_g if j < 0 else p_d * np.exp(ll[(i, j)]) / lam
+        w[ev] = np.prod([1 - pd * p_g if j < 0 else pd * np.exp(ll[(i, j)]) / lam
                          for i, j in enumerate(ev)])
     return w
 
 
-def _brute_marginals(g, p_d, lam):
-    w = _brute_events(g, p_d, lam)
+def _brute_marginals(g, pd, lam):
+    w = _brute_events(g, pd, lam)
     total = sum(w.values())
     beta = np.array([sum(v for ev, v in w.items() if ev[t] == d)
                      for t, d in zip(g.track, g.det, strict=True)]) / total
@@ -313,28 +316,28 @@ def _brute_marginals(g, p_d, lam):
 def test_jpda_hand_computed():
     """Two tracks sharing one detection: events {-, -}, {d, -}, {-, d}, weights b^2, r0 b,
     r1 b, with r_i = P_D N_i / lambda and b = 1 - P_D P_G."""
-    p_d, lam, p_g = 0.8, 0.01, 0.99
+    pd, lam, p_g = 0.8, 0.01, 0.99
     g = make_gate([(0, 0), (1, 0)], T=2, D=1, loglik=[np.log(0.05), np.log(0.02)])
-    r0, r1, b = p_d * 0.05 / lam, p_d * 0.02 / lam, 1 - p_d * p_g
+    r0, r1, b = pd * 0.05 / lam, pd * 0.02 / lam, 1 - pd * p_g
     Z = b * b + r0 * b + r1 * b
-    res = jpda(g, p_d, lam, p_g)
+    res = jpda(g, pd, lam, p_g)
     np.testing.assert_allclose(res.beta, [r0 * b / Z, r1 * b / Z], rtol=1e-14)
     np.testing.assert_allclose(res.beta0, [(b * b + r1 * b) / Z, (b * b + r0 * b) / Z],
                                rtol=1e-14)
     assert not res.approximated.any()
     # a single track: the PDA, beta_j = r_j / (b + sum r)
     g = make_gate([(0, 0), (0, 1)], T=2, D=3, loglik=[np.log(0.05), np.log(0.02)])
-    res = jpda(g, p_d, lam, p_g)
+    res = jpda(g, pd, lam, p_g)
     np.testing.assert_allclose(res.beta, np.array([r0, r1]) / (b + r0 + r1), rtol=1e-14)
     np.testing.assert_allclose(res.beta0, [b / (b + r0 + r1), 1.0], rtol=1e-14)
 
 
 @settings(max_examples=150, deadline=None)
-@given(g=random_gates(), p_d=st.floats(0.2, 1.0), lam=st.floats(1e-4, 10.0))
-def test_jpda_exact_equals_brute_force(g, p_d, lam):
-    res = jpda(g, p_d, lam)
+@given(g=random_gates(), pd=st.floats(0.2, 1.0), lam=st.floats(1e-4, 10.0))
+def test_jpda_exact_equals_brute_force(g, pd, lam):
+    res = jpda(g, pd, lam)
     assert not res.approximated.any()
-    beta, beta0 = _brute_marginals(g, p_d, lam)
+    beta, beta0 = _brute_marginals(g, pd, lam)
     np.testing.assert_allclose(res.beta, beta, rtol=1e-10, atol=1e-300)
     np.testing.assert_allclose(res.beta0, beta0, rtol=1e-10, atol=1e-300)
     # per track the marginals sum to one; per detection at most one
@@ -344,13 +347,13 @@ def test_jpda_exact_equals_brute_force(g, p_d, lam):
 
 
 @settings(max_examples=80, deadline=None)
-@given(g=random_gates(max_t=7, max_d=7), p_d=st.floats(0.2, 1.0), lam=st.floats(1e-3, 10.0))
-def test_jpda_approximation_is_flagged_and_consistent(g, p_d, lam):
+@given(g=random_gates(max_t=7, max_d=7), pd=st.floats(0.2, 1.0), lam=st.floats(1e-3, 10.0))
+def test_jpda_approximation_is_flagged_and_consistent(g, pd, lam):
     """With max_events = 1 every multi-track cluster is approximated (LBP); its marginals still
     sum to one per track and at most one per detection. (How close they are to the exact
     ones depends on the cluster: loopy belief propagation has no error bound on a loopy
     graph; tests/tracking/test_stonesoup_association.py checks it against Stone Soup's.)"""
-    res = jpda(g, p_d, lam, max_events=1)
+    res = jpda(g, pd, lam, max_events=1)
     ntr = np.bincount(res.clusters.track, minlength=res.clusters.count)
     has_pairs = np.bincount(res.clusters.track[g.track], minlength=res.clusters.count) > 0
     np.testing.assert_array_equal(res.approximated, (ntr > 1) & has_pairs)
@@ -394,12 +397,12 @@ def test_jpda_large_cluster_falls_back():
     sc = scene(np.random.default_rng(7), 60, side=500.0, clutter=30.0)
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z)
-    res = jpda(g, sc.p_d, sc.clutter_density, max_events=2000)
+    res = jpda(g, sc.pd, sc.clutter_density, max_events=2000)
     assert res.approximated.any()
     np.testing.assert_allclose(np.bincount(g.track, res.beta, g.n_tracks) + res.beta0, 1.0,
                                rtol=1e-12)
     exact_clusters = ~res.approximated[res.clusters.track[g.track]]
-    ref = jpda(g, sc.p_d, sc.clutter_density)
+    ref = jpda(g, sc.pd, sc.clutter_density)
     np.testing.assert_allclose(res.beta[exact_clusters], ref.beta[exact_clusters], rtol=1e-12)
 
 
@@ -431,7 +434,7 @@ def test_jpda_update_is_the_moment_matched_mixture(seed):
     sc = scene(rng, 6, side=300.0, clutter=15.0)
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z)
-    res = jpda(g, sc.p_d, sc.clutter_density)
+    res = jpda(g, sc.pd, sc.clutter_density)
     P_upd = sc.predicted.cov - mp.K @ mp.S @ mp.K.mT
     post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.residual, res.beta, res.beta0,
                        P_upd=P_upd)

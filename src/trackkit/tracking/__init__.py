@@ -2,7 +2,7 @@
 
     from trackkit import tracking as tt
     g = tt.gate(zhat, S, z, p_gate=0.99)                 # KD-tree pre-gate, batched fine test
-    a = tt.gnn(g, tt.loglik_costs(g, p_d=0.9, clutter_density=1e-6))     # or tt.jpda(...)
+    a = tt.gnn(g, tt.loglik_costs(g, pd=0.9, clutter_density=1e-6))     # or tt.jpda(...)
     logic = tt.HistoryLogic(confirm=(2, 3), delete=(3, 3))   # M-of-N, or tt.ScoreLogic
     new = tt.single_point(z[a.unassigned], R, v_max=30.0)     # or two_point, converted plots
 

@@ -37,6 +37,7 @@ from scipy.stats import chi2
 
 from trackkit.belief import Gaussian
 from trackkit.linalg import symmetrize
+from trackkit.renamed import renamed_keywords
 from trackkit.tracking.gating import Gate
 
 __all__ = [
@@ -167,21 +168,22 @@ def _p_gate(g: Gate, p_gate: float | None) -> float:
     return float(chi2.cdf(g.threshold, g.residual.shape[1])) if p_gate is None else p_gate
 
 
-def _log_ratio(g: Gate, p_d: float, clutter_density: float, p_gate: float | None) -> Array:
+def _log_ratio(g: Gate, pd: float, clutter_density: float, p_gate: float | None) -> Array:
     """``log(P_D N_ij / lambda) - log(1 - P_D P_G)``: a pair's weight over the miss's."""
-    _check_pd(p_d, clutter_density)
+    _check_pd(pd, clutter_density)
     pg = _p_gate(g, p_gate)
-    return np.log(p_d) + g.loglik - np.log(clutter_density) - np.log1p(-p_d * pg)
+    return np.log(pd) + g.loglik - np.log(clutter_density) - np.log1p(-pd * pg)
 
 
-def _check_pd(p_d: float, clutter_density: float) -> None:
-    if not 0.0 < p_d <= 1.0:
-        raise ValueError(f"p_d = {p_d!r}; expected 0 < P_D <= 1")
+def _check_pd(pd: float, clutter_density: float) -> None:
+    if not 0.0 < pd <= 1.0:
+        raise ValueError(f"pd = {pd!r}; expected 0 < pd <= 1 (the detection probability P_D)")
     if not clutter_density > 0:
         raise ValueError(f"clutter_density = {clutter_density!r}; expected lambda > 0")
 
 
-def loglik_costs(g: Gate, p_d: float, clutter_density: float,
+@renamed_keywords(p_d="pd")
+def loglik_costs(g: Gate, pd: float, clutter_density: float,
                  p_gate: float | None = None) -> Costs:
     """Negative log-likelihood-ratio costs: ``c_ij = -log(P_D N_ij / lambda)`` and
     ``c_i0 = -log(1 - P_D P_G)`` (``P_G`` defaults to the gate's, chi2.cdf(gamma, m)).
@@ -189,10 +191,10 @@ def loglik_costs(g: Gate, p_d: float, clutter_density: float,
     Summed over an assignment this is minus the log of the joint event's weight (see
     :func:`jpda`), so the GNN picks the most probable joint event.
     """
-    _check_pd(p_d, clutter_density)
+    _check_pd(pd, clutter_density)
     pg = _p_gate(g, p_gate)
-    pair = -(np.log(p_d) + g.loglik - np.log(clutter_density))
-    return Costs(pair, np.full(g.n_tracks, -np.log1p(-p_d * pg)))
+    pair = -(np.log(pd) + g.loglik - np.log(clutter_density))
+    return Costs(pair, np.full(g.n_tracks, -np.log1p(-pd * pg)))
 
 
 def distance_costs(g: Gate, missed_distance: float | None = None) -> Costs:
@@ -206,7 +208,8 @@ def distance_costs(g: Gate, missed_distance: float | None = None) -> Costs:
     return Costs(np.where(d < md, d, np.inf), np.full(g.n_tracks, md))
 
 
-def pda_costs(g: Gate, p_d: float, clutter_density: float,
+@renamed_keywords(p_d="pd")
+def pda_costs(g: Gate, pd: float, clutter_density: float,
               p_gate: float | None = None) -> Costs:
     """``c_ij = -beta_ij``, ``c_i0 = -beta_i0``, with the single-track PDA probabilities
     ``beta_ij = L_ij / (1 - P_D P_G + sum_j L_ij)``, ``L_ij = P_D N_ij / lambda``.
@@ -214,7 +217,7 @@ def pda_costs(g: Gate, p_d: float, clutter_density: float,
     The GNN then maximises the sum of the per-track probabilities, which is what Stone Soup's
     ``GNNWith2DAssignment`` does with a ``PDAHypothesiser``; kept for comparison with it.
     """
-    beta, beta0 = _pda(g.track, _log_ratio(g, p_d, clutter_density, p_gate), g.n_tracks)
+    beta, beta0 = _pda(g.track, _log_ratio(g, pd, clutter_density, p_gate), g.n_tracks)
     return Costs(-beta, -beta0)
 
 
@@ -390,7 +393,8 @@ class JPDAResult(NamedTuple):
     approximated: NDArray[np.bool_]
 
 
-def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = None, *,
+@renamed_keywords(p_d="pd")
+def jpda(g: Gate, pd: float, clutter_density: float, p_gate: float | None = None, *,
          max_events: int = JPDA_MAX_EVENTS, cl: Clusters | None = None,
          star: bool = False) -> JPDAResult:
     """Parametric JPDA marginals (Bar-Shalom): a feasible joint event theta (each detection
@@ -412,7 +416,7 @@ def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = Non
     JPDA (still reported in ``approximated``).
     """
     T = g.n_tracks
-    lr = _log_ratio(g, p_d, clutter_density, p_gate)
+    lr = _log_ratio(g, pd, clutter_density, p_gate)
     cl = clusters(g) if cl is None else cl
     beta = np.zeros(g.size)
     beta0 = np.ones(T)
