@@ -80,7 +80,7 @@ def scan_jpda(sc):
     mp = predict_measurement(pred, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, P_G)
     r = jpda(g, sc.pd, sc.clutter_density, P_G)
-    return jpda_update(pred, mp.K, mp.S, g.track, g.residual, r.beta, r.beta0)
+    return jpda_update(pred, mp.K, mp.S, g.track, g.nu, r.beta, r.beta0)
 
 
 def gate_gnn(mp, sc):

@@ -459,7 +459,7 @@ def test_batched_rows_equal_rows_alone_bitwise():
                 b = f.reset(b, rows)
             b = f.predict(b, motion, dt)
             b, inn = f.update(b, zn, sensor)
-            out.append((b.mean, b.cov, inn.residual, inn.cov, b.k, b.tau))
+            out.append((b.mean, b.cov, inn.nu, inn.cov, b.k, b.tau))
         return out
 
     mean0 = rng.normal(0, 5.0, batch + (4,))
@@ -500,7 +500,7 @@ def test_nan_coasts_and_the_gap_is_spanned():
     pred = b
     b, inn = f.update(b, [np.nan], sensor)
     assert np.array_equal(b.mean, pred.mean) and np.array_equal(b.cov, pred.cov)
-    assert np.isnan(inn.residual).all() and b.k == 1 and b.tau == 1.0
+    assert np.isnan(inn.nu).all() and b.k == 1 and b.tau == 1.0
     b = f.predict(b, None, 1.5)
     assert b.tau == 2.5
     b, _ = f.update(b, [15.0], sensor)

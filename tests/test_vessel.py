@@ -300,7 +300,7 @@ def test_augmented_vessel_runs_in_the_filters(make):
                                atol=1e-6)
     post, innov = f.update(pred, np.array([[9.2, 0.1, 0.01], [9.3, -0.1, 0.0]]), sensor)
     assert post.mean.shape == (2, 19) and post.cov.shape == (2, 19, 19)
-    assert np.all(np.isfinite(post.cov)) and innov.residual.shape == (2, 3)
+    assert np.all(np.isfinite(post.cov)) and innov.nu.shape == (2, 3)
     assert np.all(np.diagonal(post.cov, axis1=-2, axis2=-1) <= np.diagonal(pred.cov, 0, -2, -1)
                   + 1e-15)
 

@@ -30,3 +30,13 @@ def renamed_keywords(**old_to_new: str) -> Callable[[F], F]:
         return wrapper  # type: ignore[return-value]
 
     return decorate
+
+
+def renamed_attribute(owner: str, old: str, new: str) -> property:
+    """A property that refuses ``owner.old`` with an ``AttributeError`` naming ``owner.new``
+    (for a field renamed on a NamedTuple, where an alias would keep the old name alive)."""
+
+    def refuse(self: Any) -> Any:
+        raise AttributeError(f"{owner}.{old} is now spelled {owner}.{new}")
+
+    return property(refuse)

@@ -290,7 +290,7 @@ def test_gnn_methods_agree_on_scenes():
 
 def _brute_events(g, pd, lam, p_g=None):
     """Weight of every feasible joint event, keyed by each track's detection (-1 = miss)."""
-    p_g = chi2.cdf(g.threshold, g.residual.shape[1]) if p_g is None else p_g
+    p_g = chi2.cdf(g.threshold, g.nu.shape[1]) if p_g is None else p_g
     options = [[-1] + [int(j) for j in g.det[g.track == i]] for i in range(g.n_tracks)]
     ll = {(int(t), int(d)): v for t, d, v in zip(g.track, g.det, g.loglik, strict=True)}
     w = {}
@@ -436,12 +436,12 @@ def test_jpda_update_is_the_moment_matched_mixture(seed):
     g = gate(mp.zhat, mp.S, sc.z)
     res = jpda(g, sc.pd, sc.clutter_density)
     P_upd = sc.predicted.cov - mp.K @ mp.S @ mp.K.mT
-    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.residual, res.beta, res.beta0,
+    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.nu, res.beta, res.beta0,
                        P_upd=P_upd)
     for i in range(6):
         sel = g.track == i
         means = [sc.predicted.mean[i]] + [sc.predicted.mean[i] + mp.K[i] @ nu
-                                          for nu in g.residual[sel]]
+                                          for nu in g.nu[sel]]
         covs = [sc.predicted.cov[i]] + [P_upd[i]] * int(sel.sum())
         w = np.concatenate([[res.beta0[i]], res.beta[sel]])
         m = sum(wk * mk for wk, mk in zip(w, means, strict=True))

@@ -563,7 +563,7 @@ def test_runner_feeds_the_detector_real_innovations_only():
 
     class Spy(StandInDetector):
         def step(self, s, innov):
-            seen.append(innov.residual.copy())
+            seen.append(innov.nu.copy())
             return super().step(s, innov)
 
     run = run_with_gaps(tk.filters.KF(), prior, z, mask, PolynomialFit(1, 30, short_window=5),

@@ -125,7 +125,7 @@ def test_star_removes_coalescence():
     sep = {}
     for star in (False, True):
         r = jpda(g, 0.99, 1e-4, star=star)
-        post = jpda_update(prior, mp.K, mp.S, g.track, g.residual, r.beta, r.beta0)
+        post = jpda_update(prior, mp.K, mp.S, g.track, g.nu, r.beta, r.beta0)
         sep[star] = post.mean[1, 1] - post.mean[0, 1]
     # with certain association each mean moves 0.8 of the way to its detection: 2.6 apart
     assert sep[False] < 1.5

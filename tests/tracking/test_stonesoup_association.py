@@ -192,7 +192,7 @@ def test_jpda_pda_updater(seed, T):
     g = gate(mp.zhat, mp.S, sc.z, P_G)
     res = jpda(g, sc.pd, sc.clutter_density, P_G)
     assert not res.approximated.any()
-    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.residual, res.beta, res.beta0)
+    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.nu, res.beta, res.beta0)
 
     tracks, dets, pred, upd, t1 = _stonesoup(sc, PDAUpdater)
     hyp = PDAHypothesiser(pred, upd, clutter_spatial_density=sc.clutter_density,
@@ -259,7 +259,7 @@ def test_range_bearing_across_the_cut(seed):
     np.testing.assert_array_equal(ours, _assignment_ss(GNNWith2DAssignment(hyp), tracks, dets, t1))
 
     res = jpda(g, sc.pd, sc.clutter_density, P_G)
-    post = jpda_update(sc.predicted, K, S, g.track, g.residual, res.beta, res.beta0)
+    post = jpda_update(sc.predicted, K, S, g.track, g.nu, res.beta, res.beta0)
     cl = res.clusters
     assoc = JPDA(hyp)
     for k in range(cl.count):

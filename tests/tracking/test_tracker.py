@@ -108,7 +108,7 @@ def test_measurement_prediction_of_a_sigma_point_filter_is_its_own(f):
     z = plots_near(some_tracks(trk), RADAR, seed=5, extra=0)
     _, innov = trk.filter.update(b, z, RADAR)
     np.testing.assert_allclose(innov.cov, S, rtol=1e-12)
-    np.testing.assert_allclose(tk.angles.wrap(z - innov.residual - zhat), 0.0, atol=1e-9)
+    np.testing.assert_allclose(tk.angles.wrap(z - innov.nu - zhat), 0.0, atol=1e-9)
     # and it differs from the first-order prediction (the test would not see a mix-up)
     assert np.abs(S - predict_measurement(b, RADAR).S).max() > 1e-9 * np.abs(S).max()
 
@@ -148,7 +148,7 @@ def test_jpda_scan_is_the_pdaf_update_of_the_kernel():
     g = gate(mp.zhat, mp.S, z, trk.p_gate)
     r = jpda(g, trk.pd, trk.clutter_density, trk.p_gate)
     assert np.any((r.beta > 0.05) & (r.beta < 0.95)), "the scene must have real ambiguity"
-    want = jpda_update(b, mp.K, mp.S, g.track, g.residual, r.beta, r.beta0)
+    want = jpda_update(b, mp.K, mp.S, g.track, g.nu, r.beta, r.beta0)
     n = len(tracks)
     np.testing.assert_allclose(out.belief.mean[:n], want.mean, rtol=1e-10)
     np.testing.assert_allclose(out.belief.cov[:n], want.cov, rtol=1e-9)

@@ -184,7 +184,7 @@ class _StepWindow:
             self.flush()
         if not self.used:
             self.k0 = k
-        parts = (g.mean, g.cov) if innov is None else (g.mean, g.cov, innov.residual,
+        parts = (g.mean, g.cov) if innov is None else (g.mean, g.cov, innov.nu,
                                                        innov.cov)
         bufs = self.buffers
         try:

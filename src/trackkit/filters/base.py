@@ -176,7 +176,7 @@ def keep_prior_where_missing(
     miss = np.broadcast_to(miss, shape)
     x = np.where(miss[..., None], x0, post.mean)
     P = np.where(miss[..., None, None], P0, post.cov)
-    r = np.where(miss[..., None], np.nan, innov.residual)
+    r = np.where(miss[..., None], np.nan, innov.nu)
     return Gaussian._make((x, register(P))), Innovation(r, innov.cov)
 
 

@@ -325,7 +325,7 @@ class RPEKF(Filter):
         # components lead while the sensor sees them: its pose broadcasts over the batch axes
         g = Gaussian._make((np.moveaxis(X, -2, 0), register(np.moveaxis(PX, -3, 0))))
         post, innov = _EKF.update(g, z, sensor)
-        nu, S = np.moveaxis(innov.residual, 0, -2), np.moveaxis(innov.cov, 0, -3)
+        nu, S = np.moveaxis(innov.nu, 0, -2), np.moveaxis(innov.cov, 0, -3)
         c = np.exp(logw)
         if miss is None:
             loglik = gaussian_loglik(nu, S)

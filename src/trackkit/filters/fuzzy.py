@@ -299,7 +299,7 @@ class FuzzyAdaptive(Filter):
         miss = missing_rows(np.asarray(z, dtype=float))
         keep = np.ones(batch, bool) if miss is None else ~np.broadcast_to(miss, batch)
 
-        buf, count = push_innovation(b.residuals, b.count, innov.residual, keep, self.window,
+        buf, count = push_innovation(b.residuals, b.count, innov.nu, keep, self.window,
                                      batch, f"{self.name}.update")
         S = np.broadcast_to(innov.cov, batch + (m, m))
         C = matching_covariance(buf, count)

@@ -165,7 +165,7 @@ class Costs(NamedTuple):
 
 def _p_gate(g: Gate, p_gate: float | None) -> float:
     """P_G given, or the one that produced the gate: chi2.cdf(gamma, m)."""
-    return float(chi2.cdf(g.threshold, g.residual.shape[1])) if p_gate is None else p_gate
+    return float(chi2.cdf(g.threshold, g.nu.shape[1])) if p_gate is None else p_gate
 
 
 def _log_ratio(g: Gate, pd: float, clutter_density: float, p_gate: float | None) -> Array:
@@ -238,7 +238,7 @@ def seed004_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | 
     if distance == "mahalanobis":
         gamma2 = g.d2
     elif distance == "residual":
-        gamma2 = np.einsum("pi,pi->p", g.residual, g.residual)
+        gamma2 = np.einsum("pi,pi->p", g.nu, g.nu)
     else:
         raise ValueError(f"distance = {distance!r}; expected 'mahalanobis' or 'residual'")
     pair = k1 * -np.expm1(-k2 * gamma2)
@@ -289,7 +289,7 @@ def gnn(g: Gate, costs: Costs,
         det = _gnn_dense(t, d, c, miss, T, D)
     elif method == "clusters":
         sub = g._replace(track=t, det=d, d2=g.d2[ok], loglik=g.loglik[ok],
-                         residual=g.residual[ok])
+                         nu=g.nu[ok])
         det = _gnn_clusters(sub, c, miss)
     else:
         raise ValueError(f"method = {method!r}; expected 'auto', 'dense', 'sparse' or "

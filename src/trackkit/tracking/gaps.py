@@ -760,7 +760,7 @@ def run_with_gaps(f, prior: Any, z: ArrayLike, mask: ArrayLike, handler: GapHand
         real = np.where(miss[..., None], np.nan, zk)
         memory = handler.observe(memory, t, real)
         if dstate is not None:
-            r = np.where(miss[..., None], np.nan, innov.residual)
+            r = np.where(miss[..., None], np.nan, innov.nu)
             dstate = detector.step(dstate, Innovation(r, innov.cov))
             maneuver[k] = np.broadcast_to(dstate.on, batch)
         g = estimate(b)
@@ -869,13 +869,13 @@ class WithGaps:
         inner, innov = self.f.update(belief.inner, fed, sensor)
         real = np.where(miss[..., None], np.nan, zk)
         memory = self.handler.observe(memory, t, real)
-        r = np.where(miss[..., None], np.nan, innov.residual)
+        r = np.where(miss[..., None], np.nan, innov.nu)
         dstate = belief.detector
         if dstate is not None:
             dstate = self.detector.step(dstate, Innovation(r, innov.cov))
         pseudo = miss & ~np.isnan(zp).any(-1)
         out = GapBelief(inner, memory, dstate, belief.t, pseudo, zp)
-        return out, innov._replace(residual=r)
+        return out, innov._replace(nu=r)
 
     def estimate(self, belief: GapBelief) -> Gaussian:
         return self._estimate(belief.inner)

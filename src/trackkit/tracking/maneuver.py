@@ -9,7 +9,7 @@ kernels over any batch of tracks or runs:
     det = FadingMemoryDetector(alpha=0.8, pfa=1e-2, dim_z=2)  # rho = alpha rho + eps (3-20)
     det = WindowDetector(L=5, pfa=1e-2, dim_z=2)  # D_L = sum of the last L residuals (3-21)
     s = det.init(batch_shape)                  # a NamedTuple of arrays of batch_shape
-    s = det.step(s, innov)                     # innov: Innovation (residual (..., m), cov)
+    s = det.step(s, innov)                     # innov: Innovation (nu (..., m), cov)
     s.on, s.fired, s.statistic, s.onset, det.threshold, det.memory
 
 **Thresholds.** ``pfa`` is the per-step probability, under the no-manoeuvre hypothesis (a
@@ -368,7 +368,7 @@ class WindowState(NamedTuple):
 
 def _innovation(innov: Any, m: int, batch: tuple[int, ...], owner: str) -> tuple[Array, Array]:
     """(residual, S) checked: residual ``batch + (m,)``, S broadcast to ``batch + (m, m)``."""
-    r = np.asarray(innov.residual, dtype=float)
+    r = np.asarray(innov.nu, dtype=float)
     if r.shape != batch + (m,):
         raise ValueError(f"{owner}.step: innovation residual has shape {r.shape}; the detector "
                          f"state has batch shape {batch} and dim_z = {m}, so expected "
@@ -783,7 +783,7 @@ def run_with_detector(
         b = f.predict(b, m_k, step)
         b, innov = f.update(b, z, sensor)
         if s is None:
-            s = detector.init(np.shape(innov.residual)[:-1])
+            s = detector.init(np.shape(innov.nu)[:-1])
         s = detector.step(s, innov)
         if response is not None:
             b = response.belief(b, s)
@@ -925,7 +925,7 @@ def run_variable_order(
     for k in range(K):
         b_cv = kf.predict(b_cv, cv, steps[k])
         b_cv, inn = kf.update(b_cv, zf[k], sensor)
-        r = np.broadcast_to(inn.residual, (N, m))
+        r = np.broadcast_to(inn.nu, (N, m))
         S = np.broadcast_to(inn.cov, (N, m, m))
         rows = np.flatnonzero(mode)
         if rows.size:
@@ -934,7 +934,7 @@ def run_variable_order(
             g, inn_ca = kf.update(g, zf[k, rows], sensor)
             ca_mean[rows], ca_cov[rows] = g.mean, g.cov
             r, S = r.copy(), S.copy()
-            r[rows], S[rows] = inn_ca.residual, inn_ca.cov
+            r[rows], S[rows] = inn_ca.nu, inn_ca.cov
             delta_a[rows] = np.concatenate(
                 [delta_a[rows, 1:], accel_test(g.mean, g.cov)[:, None]], -1)
         ds = detector.step(ds, Innovation(r, S))

@@ -274,7 +274,7 @@ class Tracker:
             return mp.zhat, mp.S
         z0 = np.asarray(sensor.h(self.estimate(belief).mean), dtype=float)
         _, innov = self.filter.update(belief, z0, sensor)
-        zhat = z0 - innov.residual
+        zhat = z0 - innov.nu
         ang = np.asarray(getattr(sensor, "angular", (False,) * z0.shape[-1]))
         if ang.any():
             zhat[:, ang] = wrap(zhat[:, ang])
