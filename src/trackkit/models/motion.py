@@ -110,6 +110,11 @@ class MotionModel:
     def noise(self, x: Array, dt: ArrayLike) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def noise_cov(self, x: Array, dt: ArrayLike) -> Array:
+        """Q, the covariance of the process noise over the step ``dt`` from ``x``
+        (broadcastable to ``(..., n, n)``): read as ``sensor.noise_cov(x)`` reads R."""
+        return self.noise(x, dt)
+
 
 @dataclass(frozen=True, eq=False)
 class LinearMotion(MotionModel):

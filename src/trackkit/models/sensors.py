@@ -154,6 +154,11 @@ class SensorModel:
     def _noise(self) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def noise_cov(self, x: Array | None = None) -> Array:
+        """R, the covariance of the measurement noise at ``x`` (``(..., m, m)``): read as
+        ``motion.noise_cov(x, dt)`` reads Q. A bundled sensor's R does not depend on x."""
+        return self.noise
+
     def _angle_mask(self):
         """None (no angle components), True (all) or the boolean mask; cached per sensor."""
         try:
