@@ -37,7 +37,7 @@ from trackkit.models import (
     MultipathDelay,
     Position,
     RangeBearing,
-    SensorModel,
+    SensorBase,
     Sine,
     Stack,
 )
@@ -559,7 +559,7 @@ SENSOR_CASES = _sensor_cases()
 
 def test_every_sensor_model_is_covered():
     models = {name for name, obj in vars(tk.models).items()
-              if inspect.isclass(obj) and issubclass(obj, SensorModel) and obj is not SensorModel}
+              if inspect.isclass(obj) and issubclass(obj, SensorBase) and obj is not SensorBase}
     covered = {type(s).__name__ for _, s, _ in SENSOR_CASES}
     assert models == covered
 

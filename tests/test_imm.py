@@ -20,7 +20,7 @@ from trackkit.filters.imm import (
     mixture_innovation,
     mode_probabilities,
 )
-from trackkit.models.sensors import SensorModel
+from trackkit.models.sensors import SensorBase
 
 CV = tk.models.ConstantVelocity(dim=2, q=0.01)
 CT = tk.models.CoordinatedTurn(q=0.0, q_omega=0.15)
@@ -706,7 +706,7 @@ def test_s7_others_fill_beats_zero_fill():
 
 
 @dataclass(frozen=True, eq=False)
-class Skewed(SensorModel):
+class Skewed(SensorBase):
     """A linear sensor that is no selection of state components: z = H x + v."""
 
     linear: bool = field(default=True, init=False)

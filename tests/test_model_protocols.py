@@ -1,5 +1,6 @@
-"""Every bundled motion and sensor model reads its noise the same way (``noise_cov``), and
-satisfies the typed interface the filters rely on."""
+"""Every bundled motion and sensor model reads its noise the same way (``noise_cov``) and
+satisfies the Protocol the filters rely on (MotionModel, SensorModel); every filter is a
+Filter."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 import trackkit as tk
+from trackkit.filters.base import Filter
 from trackkit.identify.augmented import SampledVessel
 from trackkit.models import motion as motion_module
 from trackkit.models import sensors as sensor_module
@@ -58,8 +60,8 @@ def _classes(module, base):
 
 def test_every_bundled_model_is_listed():
     """A new model must join the lists above, so the checks below cover it."""
-    assert _classes(motion_module, motion_module.MotionModel) <= {type(m) for m in MOTIONS}
-    assert _classes(sensor_module, sensor_module.SensorModel) <= {type(s) for s in SENSORS}
+    assert _classes(motion_module, M.MotionBase) <= {type(m) for m in MOTIONS}
+    assert _classes(sensor_module, M.SensorBase) <= {type(s) for s in SENSORS}
 
 
 @pytest.mark.parametrize("motion", MOTIONS, ids=lambda m: type(m).__name__)
@@ -82,3 +84,66 @@ def test_noise_cov_sees_a_replaced_noise():
                                   2.0 * np.eye(4))
     np.testing.assert_array_equal(M.with_noise(M.Position(dim=2), np.diag([4.0, 9.0]))
                                   .noise_cov(), np.diag([4.0, 9.0]))
+
+
+@pytest.mark.parametrize("motion", MOTIONS, ids=lambda m: type(m).__name__)
+def test_motion_models_satisfy_the_protocol(motion):
+    assert isinstance(motion, M.MotionModel)
+    assert not isinstance(motion, M.SensorModel)
+    x = _state(motion)
+    assert np.shape(motion.f(x, 0.5)) == x.shape
+    n = motion.dim_x
+    assert np.broadcast_shapes(np.shape(motion.jacobian(x, 0.5)), (3, n, n)) == (3, n, n)
+    assert np.broadcast_shapes(np.shape(motion.noise(x, 0.5)), (3, n, n)) == (3, n, n)
+
+
+@pytest.mark.parametrize("sensor", SENSORS, ids=lambda s: type(s).__name__)
+def test_sensor_models_satisfy_the_protocol(sensor):
+    assert isinstance(sensor, M.SensorModel)
+    assert not isinstance(sensor, M.MotionModel)
+    m = sensor.dim_z
+    assert len(sensor.angular) == m and np.shape(sensor.noise)[-2:] == (m, m)
+
+
+def test_a_duck_typed_model_satisfies_the_protocol_and_a_partial_one_does_not():
+    class Duck:
+        dim_x = 1
+
+        def f(self, x, dt):
+            return x
+
+        def jacobian(self, x, dt):
+            return np.eye(1)
+
+        def noise(self, x, dt):
+            return np.zeros((1, 1))
+
+    class Lame:
+        dim_x = 1
+
+        def f(self, x, dt):
+            return x
+
+    assert isinstance(Duck(), M.MotionModel)
+    assert not isinstance(Lame(), M.MotionModel)
+
+
+def _filters():
+    cv = M.ConstantVelocity(dim=2, q=1.0)
+    F = tk.filters
+    out = [F.KF(), F.EKF(), F.IEKF(), F.UKF(), F.CKF(), F.SRCKF(), F.PF(100),
+           F.AlphaBeta(*tk.filters.alphabeta.kohn()), F.AlphaBetaGamma(0.5, 0.4, 0.1),
+           F.IMM([cv, cv], F.KF(), np.array([[0.9, 0.1], [0.1, 0.9]])),
+           F.MCEKF(), F.AMCEKF(), F.AEKF(), F.FuzzyAdaptive(),
+           F.RPEKF(), F.MPEKF(), F.RangePF(), F.JTC(), F.MultiFilterJTC()]
+    return out
+
+
+def test_every_filter_satisfies_filter():
+    filters = _filters()
+    exported = {getattr(tk.filters, n) for n in tk.filters.__all__}
+    classes = {c for c in exported if inspect.isclass(c) and hasattr(c, "predict")
+               and hasattr(c, "update")}
+    assert classes <= {type(f) for f in filters}
+    for f in filters:
+        assert isinstance(f, Filter), type(f).__name__

@@ -51,6 +51,7 @@ from trackkit.filters.base import (
     register,
 )
 from trackkit.linalg import symmetrize
+from trackkit.models.protocols import MotionModel, SensorModel
 from trackkit.models.sensors import Position
 from trackkit.renamed import renamed_keywords
 
@@ -672,7 +673,7 @@ def _phi_full(c: list, m: int, d: int) -> Array:
 _checked: dict[tuple[int, float], weakref.ref] = {}
 
 
-def _check_motion(motion, x: Array, dt, c: list, m: int, d: int, where: str) -> None:
+def _check_motion(motion: MotionModel, x: Array, dt, c: list, m: int, d: int, where: str) -> None:
     """A motion model must share the tracker's transition (Q alone is taken from it)."""
     n = m * d
     if getattr(motion, "dim_x", None) != n:
@@ -889,7 +890,7 @@ class _ConstantGain(Filter):
                              f"broadcasting to the batch shape {batch}")
         return b._replace(k=k.astype(np.int64))
 
-    def predict(self, belief: Gaussian | AlphaBetaBelief, motion,
+    def predict(self, belief: Gaussian | AlphaBetaBelief, motion: MotionModel | None,
                 dt: ArrayLike) -> AlphaBetaBelief:
         """``x- = Phi x`` (2-6, 2-36, per coordinate), ``P- = Phi P Phi^T + Q`` and
         ``tau += dt``.
@@ -922,7 +923,7 @@ class _ConstantGain(Filter):
                                tau if tau.shape == batch else np.broadcast_to(tau, batch))
 
     def update(self, belief: Gaussian | AlphaBetaBelief, z: ArrayLike,
-               sensor) -> tuple[AlphaBetaBelief, Innovation]:
+               sensor: SensorModel) -> tuple[AlphaBetaBelief, Innovation]:
         """``r = z - H x-``, ``x+ = x- + K r``, ``P+ = (I - K H) P- (I - K H)^T + K R K^T``
         with ``K = [alpha, beta/tau, 2 gamma/tau^2]^T (x) I_d`` at the row's scan count
         (:meth:`scheduled_gains`); the innovation covariance is ``S = H P- H^T + R``.

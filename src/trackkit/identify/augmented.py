@@ -74,7 +74,7 @@ from trackkit.belief import Gaussian
 from trackkit.filters.base import Filter
 from trackkit.identify import fused
 from trackkit.identify.programme import DEFAULT_NOISE, run_seed
-from trackkit.models.motion import MotionModel
+from trackkit.models.motion import MotionBase
 from trackkit.models.vessel import (
     N_THETA,
     AugmentedVessel,
@@ -138,7 +138,7 @@ class Identification(NamedTuple):
 
 
 @dataclass(frozen=True, eq=False)
-class SampledVessel(MotionModel):
+class SampledVessel(MotionBase):
     """The augmented model over one sample period ``dt`` in ``substeps = m`` forward-Euler
     steps of ``h = dt / m``, the input interpolated linearly between the samples
     ``s_prev`` and ``s_next`` (each ``(..., 2)``): sub-step j uses the mean of the

@@ -17,9 +17,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.models.discretize import discretize
+from trackkit.models.protocols import MotionModel
 
 __all__ = [
     "MotionModel",
+    "MotionBase",
     "LinearMotion",
     "ContinuousLinear",
     "ConstantVelocity",
@@ -93,8 +95,9 @@ def _memo(model: object, kind: str, dt: ArrayLike, build) -> Array:
     return value
 
 
-class MotionModel:
-    """Interface of every motion model (documentation only; models are duck-typed)."""
+class MotionBase:
+    """Shared base of the bundled motion models: the optional members' defaults and
+    ``noise_cov``. A model need only satisfy :class:`MotionModel`."""
 
     dim_x: int
     linear: bool = False
@@ -117,7 +120,7 @@ class MotionModel:
 
 
 @dataclass(frozen=True, eq=False)
-class LinearMotion(MotionModel):
+class LinearMotion(MotionBase):
     """``x' = F x + w``, ``w ~ N(0, Q)`` with constant F and Q (``dt`` is ignored)."""
 
     F: Array
@@ -149,7 +152,7 @@ class LinearMotion(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class ContinuousLinear(MotionModel):
+class ContinuousLinear(MotionBase):
     """``dx/dt = A x + L w`` with white ``w`` of spectral density ``Qc``, discretised exactly
     (Van Loan) for each ``dt``."""
 
@@ -176,7 +179,7 @@ class ContinuousLinear(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class _NearlyConstant(MotionModel):
+class _NearlyConstant(MotionBase):
     """The white-noise derivative family: the k-th derivative of position is white noise of
     spectral density q, state [p..., v..., (a...)] with k blocks per axis.
 
@@ -251,7 +254,7 @@ class ConstantAcceleration(_NearlyConstant):
 
 
 @dataclass(frozen=True, eq=False)
-class Singer(MotionModel):
+class Singer(MotionBase):
     """Singer manoeuvre model: acceleration is a first-order Gauss-Markov process.
 
     Per axis ``da/dt = -a / tau + w`` with ``E[w w] = 2 sigma^2 / tau`` so that the stationary
@@ -353,7 +356,7 @@ def _turn_F(w: Array, dt: Array) -> Array:
 
 
 @dataclass(frozen=True, eq=False)
-class KnownTurnRate(MotionModel):
+class KnownTurnRate(MotionBase):
     """Constant turn at a known rate ``omega`` (rad/s, positive counter-clockwise), state
     [x, y, vx, vy]; Q is the constant-velocity Q with density q."""
 
@@ -378,7 +381,7 @@ class KnownTurnRate(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class CoordinatedTurn(MotionModel):
+class CoordinatedTurn(MotionBase):
     """Coordinated turn with the turn rate in the state, [x, y, vx, vy, omega].
 
     x' = x + s vx - c vy,  y' = y + c vx + s vy,  [vx', vy'] = Rot(omega dt) [vx, vy],
@@ -428,7 +431,7 @@ class CoordinatedTurn(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class RandomSine(MotionModel):
+class RandomSine(MotionBase):
     """The random-sine example of the missing-measurements thesis (sections 2-5-5-2 and 2-5-6-4):
     state [theta, omega, a], phase, angular velocity and amplitude; omega and a are random walks.
 
@@ -475,7 +478,7 @@ class RandomSine(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class Augmented(MotionModel):
+class Augmented(MotionBase):
     """A kinematic model with ``extras`` nearly constant components appended to the state,
     e.g. the radiated frequency f0 of Doppler-bearing tracking: ``[kinematics, f0]``.
 

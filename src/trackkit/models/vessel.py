@@ -51,7 +51,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.models.motion import MotionModel
+from trackkit.models.motion import MotionBase
 from trackkit.renamed import renamed_keywords
 
 __all__ = [
@@ -324,7 +324,7 @@ def augmented_jacobian(xa: ArrayLike, s_m: ArrayLike, dt: ArrayLike,
 
 
 @dataclass(frozen=True, eq=False)
-class AugmentedVessel(MotionModel):
+class AugmentedVessel(MotionBase):
     """Motion model of the augmented state ``[u, v, r, theta]`` (19) for the filters.
 
     ``f(x, dt) = augmented_step(x, s_m, dt, norm)``, ``jacobian`` its 19 x 19 Jacobian and
