@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 
 import trackkit as tk
+import trackkit.tracking as tt
 from trackkit.tracking import (
     HistoryLogic,
     IdCounter,
     ScoreLogic,
     gate,
-    gnn,
-    jpda,
+    gnn_assign,
+    jpda_probabilities,
     jpda_update,
     loglik_costs,
     predict_measurement,
@@ -121,7 +122,7 @@ def test_gnn_scan_equals_the_kernels_by_hand():
     b = trk.filter.predict(tracks.belief, CV, 2.0)
     mp = predict_measurement(b, RADAR)
     g = gate(mp.zhat, mp.S, z, trk.p_gate, angular=RADAR.angular)
-    a = gnn(g, loglik_costs(g, trk.pd, trk.clutter_density, trk.p_gate))
+    a = gnn_assign(g, loglik_costs(g, trk.pd, trk.clutter_density, trk.p_gate))
     za = np.full((len(tracks), 2), np.nan)
     za[a.det >= 0] = z[a.det[a.det >= 0]]
     want, _ = trk.filter.update(b, za, RADAR)
@@ -146,7 +147,7 @@ def test_jpda_scan_is_the_pdaf_update_of_the_kernel():
     b = trk.filter.predict(tracks.belief, CV, 2.0)
     mp = predict_measurement(b, POS)
     g = gate(mp.zhat, mp.S, z, trk.p_gate)
-    r = jpda(g, trk.pd, trk.clutter_density, trk.p_gate)
+    r = jpda_probabilities(g, trk.pd, trk.clutter_density, trk.p_gate)
     assert np.any((r.beta > 0.05) & (r.beta < 0.95)), "the scene must have real ambiguity"
     want = jpda_update(b, mp.K, mp.S, g.track, g.nu, r.beta, r.beta0)
     n = len(tracks)
@@ -263,6 +264,13 @@ def test_bad_input_is_named():
             Tracker(tk.filters.EKF(), CV, RADAR, **kw)
     with pytest.raises(ValueError, match="cost"):
         GNN(cost="nearest")
+    with pytest.raises(ValueError, match="GNN cost = 'seed004' is now spelled 'saturating'"):
+        GNN(cost="seed004")
+    assert GNN(cost="saturating").cost == "saturating"
+    for old, new in [("gnn", "gnn_assign"), ("jpda", "jpda_probabilities"),
+                     ("seed004_costs", "saturating_costs")]:
+        with pytest.raises(AttributeError, match=f"tracking.{old} is now spelled {new}"):
+            getattr(tt, old)
     for md in (0.0, -1.0, float("inf"), float("nan"), "10", True):
         with pytest.raises(ValueError, match=r"GNN missed_distance = .*expected a finite"):
             GNN(cost="distance", missed_distance=md)

@@ -6,7 +6,7 @@ Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of ga
 
 * :func:`clusters`: connected components of the bipartite graph of gated pairs; tracks in
   different clusters share no detection, so association splits into independent problems.
-* :func:`gnn`: the global nearest neighbour, the one assignment (each track at most one
+* :func:`gnn_assign`: the global nearest neighbour, the one assignment (each track at most one
   detection, each detection at most one track) of least total cost, where a track may also
   take its miss alternative. Costs come from a cost function:
 
@@ -17,11 +17,11 @@ Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of ga
   - :func:`pda_costs`: ``c_ij = -beta_ij`` with beta the single-track PDA probabilities
     (Stone Soup's ``GNNWith2DAssignment`` over a ``PDAHypothesiser``, which maximises
     their sum);
-  - :func:`seed004_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of Jalalipoor and
+  - :func:`saturating_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of Jalalipoor and
   Kardehi Moghaddam (2021).
 
-* :func:`jpda`: marginal association probabilities from the feasible joint events of each
-  cluster, and :func:`jpda_update`, the combined-innovation state update.
+* :func:`jpda_probabilities`: marginal association probabilities from the feasible joint events
+  of each cluster, and :func:`jpda_update`, the combined-innovation state update.
 """
 
 from __future__ import annotations
@@ -48,20 +48,20 @@ __all__ = [
     "JPDAResult",
     "clusters",
     "distance_costs",
-    "gnn",
-    "jpda",
+    "gnn_assign",
+    "jpda_probabilities",
     "jpda_update",
     "loglik_costs",
     "pda_costs",
-    "seed004_costs",
+    "saturating_costs",
 ]
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
 
 #: a scan whose whole problem has at most this many cells, tracks x (detections + tracks), is
-#: solved by ``gnn`` as one dense ``linear_sum_assignment`` instead of cluster by cluster: the
-#: cluster search (a sparse graph and its components) costs about 0.27 ms a scan even for one
+#: solved by ``gnn_assign`` as one dense ``linear_sum_assignment`` instead of cluster by cluster:
+#: the cluster search (a sparse graph and its components) costs about 0.27 ms a scan even for one
 #: track, the dense solve 26 us for 3 tracks and 0.18 ms for 150 (43 800 cells); at 300
 #: tracks (178 500 cells) the clusters win, 0.46 against 0.62 ms (spread-out tracks, ~20
 #: clutter plots; benchmarks/bench_association.py, "GNN: dense against per cluster")
@@ -189,7 +189,7 @@ def loglik_costs(g: Gate, pd: float, clutter_density: float,
     ``c_i0 = -log(1 - P_D P_G)`` (``P_G`` defaults to the gate's, chi2.cdf(gamma, m)).
 
     Summed over an assignment this is minus the log of the joint event's weight (see
-    :func:`jpda`), so the GNN picks the most probable joint event.
+    :func:`jpda_probabilities`), so the GNN picks the most probable joint event.
     """
     _check_pd(pd, clutter_density)
     pg = _p_gate(g, p_gate)
@@ -221,7 +221,7 @@ def pda_costs(g: Gate, pd: float, clutter_density: float,
     return Costs(-beta, -beta0)
 
 
-def seed004_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | None = None,
+def saturating_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | None = None,
                   distance: Literal["mahalanobis", "residual"] = "mahalanobis") -> Costs:
     """The cost of Jalalipoor and Kardehi Moghaddam (2021), ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``.
 
@@ -257,7 +257,7 @@ class Assignment(NamedTuple):
     cost: float
 
 
-def gnn(g: Gate, costs: Costs,
+def gnn_assign(g: Gate, costs: Costs,
         method: Literal["auto", "clusters", "sparse", "dense"] = "auto") -> Assignment:
     """Least-cost assignment of gated pairs, each track taking one detection or its miss.
 
@@ -394,7 +394,7 @@ class JPDAResult(NamedTuple):
 
 
 @renamed_keywords(p_d="pd")
-def jpda(g: Gate, pd: float, clutter_density: float, p_gate: float | None = None, *,
+def jpda_probabilities(g: Gate, pd: float, clutter_density: float, p_gate: float | None = None, *,
          max_events: int = JPDA_MAX_EVENTS, cl: Clusters | None = None,
          star: bool = False) -> JPDAResult:
     """Parametric JPDA marginals (Bar-Shalom): a feasible joint event theta (each detection
@@ -468,8 +468,8 @@ def _enumerate(lt: Index, ld: Index, lr: Array, nt: int, nd: int, max_events: in
 
     Events are built track by track; each step extends every event so far by the track's
     miss and by each of its detections that the event has not used (vectorised over events
-    and options). ``star``: JPDA* pruning (see :func:`jpda`), vectorised over events and
-    track pairs.
+    and options). ``star``: JPDA* pruning (see :func:`jpda_probabilities`), vectorised over
+    events and track pairs.
     """
     ev = np.full((1, nt), -1, dtype=np.intp)  # each track's detection, -1 = miss (so far)
     used = np.zeros((1, nd), dtype=bool)
