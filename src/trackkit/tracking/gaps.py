@@ -36,6 +36,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation
+from trackkit.filters.base import Filter
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = [
     "measurement_times",
@@ -687,9 +689,9 @@ class GapRun(NamedTuple):
     belief: Any
 
 
-def run_with_gaps(f, prior: Any, z: ArrayLike, mask: ArrayLike, handler: GapHandler | str,
-                  motion, sensor, dt: ArrayLike, detector=None, *, t0: float = 0.0,
-                  keep_cov: bool = True) -> GapRun:
+def run_with_gaps(f: Filter, prior: Any, motion: MotionModel | None, sensor: SensorModel,
+                  z: ArrayLike, dt: ArrayLike, mask: ArrayLike, handler: GapHandler | str,
+                  detector=None, *, t0: float = 0.0, keep_cov: bool = True) -> GapRun:
     """Run filter ``f`` over ``z (K, ..., m)`` (step k measured at ``t0 + (k + 1) dt``, see
     ``measurement_times``), with the measurements that ``mask`` (``(K,)`` or ``(K, ...)``,
     True = missing) hides, and rows of z that are nan, replaced by ``handler``'s
@@ -701,8 +703,13 @@ def run_with_gaps(f, prior: Any, z: ArrayLike, mask: ArrayLike, handler: GapHand
     innovations of real measurements only (nan residuals at missing steps hold its
     statistic): pseudo-measurements agree with the fit by construction and say nothing of a
     manoeuvre. P' reads its on flags at the gap's start. ``prior`` is a Gaussian (passed
-    through ``f.init``) or the filter's own belief.
+    through ``f.init``) or the filter's own belief. The arguments come in
+    :func:`~trackkit.filters.run_filter`'s order.
     """
+    if isinstance(motion, np.ndarray | list) or not hasattr(sensor, "dim_z"):
+        raise TypeError("run_with_gaps: expected (f, prior, motion, sensor, z, dt, mask, "
+                        f"handler); got a {type(motion).__name__} for motion and a "
+                        f"{type(sensor).__name__} for sensor")
     if isinstance(handler, str):
         handler = make_handler(handler)
     if not isinstance(handler, GapHandler):

@@ -67,6 +67,7 @@ from trackkit.filters.base import register
 from trackkit.filters.kalman import KF
 from trackkit.linalg import quadratic_form
 from trackkit.models.motion import ConstantAcceleration, ConstantVelocity
+from trackkit.models.protocols import SensorModel
 
 __all__ = [
     "DetectorState",
@@ -830,10 +831,10 @@ def _embed(mean: Array, cov: Array, d: int, accel_var: float | None) -> tuple[Ar
 
 
 def run_variable_order(
+    prior: Gaussian,
+    sensor: SensorModel,
     z: ArrayLike,
     dt: Any,
-    prior: Gaussian,
-    sensor: Any,
     detector: NISDetector | FadingMemoryDetector | WindowDetector,
     q_cv: ArrayLike,
     q_ca: ArrayLike,
@@ -868,7 +869,14 @@ def run_variable_order(
     switch are, bitwise, the CV Kalman filter on its own (when some row has
     switched back from CA with a prior covariance shared by all rows, the covariances become
     one per row and the others agree to rounding instead).
+
+    The arguments come in :func:`~trackkit.filters.run_filter`'s order (without a filter and a
+    motion model: the KFs and their CV and CA models are its own).
     """
+    if not (hasattr(prior, "mean") and hasattr(sensor, "dim_z")):
+        raise TypeError("run_variable_order: expected (prior, sensor, z, dt, detector, ...); "
+                        f"got a {type(prior).__name__} for prior and a "
+                        f"{type(sensor).__name__} for sensor")
     z = np.asarray(z, dtype=float)
     if z.ndim < 2:
         raise ValueError(f"run_variable_order: z has shape {z.shape}; expected (K, ..., m)")
