@@ -194,6 +194,11 @@ class Filter(Protocol):
 
     name: str = "Filter"
 
+    def __init__(self) -> None:
+        # a filter without options keeps an empty signature (a Protocol's default would
+        # show ``*args, **kwargs`` to the option tables that read it)
+        pass
+
     def init(self, prior: Gaussian) -> Any:
         return prior
 
