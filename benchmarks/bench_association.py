@@ -31,7 +31,7 @@ import numpy as np
 
 import trackkit as tk
 from trackkit.filters.base import register
-from trackkit.tracking.association import gnn, jpda, loglik_costs, pda_costs
+from trackkit.tracking.association import gnn_assign, jpda_probabilities, loglik_costs, pda_costs
 from trackkit.tracking.gating import _lambda_max, gate, gate_threshold, predict_measurement
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
@@ -73,21 +73,21 @@ def scan(sc, method_gate="auto", method_gnn="clusters"):
     pred = tk.filters.KF().predict(sc.prior, sc.motion, 1.0)
     mp = predict_measurement(pred, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, P_G, method=method_gate)
-    return gnn(g, loglik_costs(g, sc.p_d, sc.clutter_density, P_G), method=method_gnn)
+    return gnn_assign(g, loglik_costs(g, sc.pd, sc.clutter_density, P_G), method=method_gnn)
 
 
 def scan_jpda(sc):
     pred = tk.filters.KF().predict(sc.prior, sc.motion, 1.0)
     mp = predict_measurement(pred, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, P_G)
-    r = jpda(g, sc.p_d, sc.clutter_density, P_G)
-    return jpda_update(pred, mp.K, mp.S, g.track, g.residual, r.beta, r.beta0)
+    r = jpda_probabilities(g, sc.pd, sc.clutter_density, P_G)
+    return jpda_update(pred, mp.K, mp.S, g.track, g.nu, r.beta, r.beta0)
 
 
 def gate_gnn(mp, sc):
     """Gate + costs + GNN from the measurement prediction (the association front end)."""
     g = gate(mp.zhat, mp.S, sc.z, P_G)
-    return gnn(g, loglik_costs(g, sc.p_d, sc.clutter_density, P_G))
+    return gnn_assign(g, loglik_costs(g, sc.pd, sc.clutter_density, P_G))
 
 
 def table_sizes(sizes, repeat):
@@ -108,14 +108,14 @@ def row_sizes(T, repeat):
     mp = predict_measurement(pred, sc.sensor)
     D = sc.z.shape[0]
     g = gate(mp.zhat, mp.S, sc.z, P_G)
-    c = loglik_costs(g, sc.p_d, sc.clutter_density, P_G)
-    a, b = gnn(g, c, "sparse"), gnn(g, c, "clusters")
+    c = loglik_costs(g, sc.pd, sc.clutter_density, P_G)
+    a, b = gnn_assign(g, c, "sparse"), gnn_assign(g, c, "clusters")
     assert np.array_equal(a.det, b.det)
     brute = (best_of(lambda: gate(mp.zhat, mp.S, sc.z, P_G, method="brute"), repeat)
              if T * D <= 2e7 else np.nan)
     kd = best_of(lambda: gate(mp.zhat, mp.S, sc.z, P_G, method="kdtree"), repeat)
-    gc = best_of(lambda: gnn(g, c, "clusters"), repeat)
-    gs = best_of(lambda: gnn(g, c, "sparse"), repeat)
+    gc = best_of(lambda: gnn_assign(g, c, "clusters"), repeat)
+    gs = best_of(lambda: gnn_assign(g, c, "sparse"), repeat)
     front = best_of(lambda: gate_gnn(mp, sc), repeat)
     total = best_of(lambda: scan(sc), repeat)
     tj = best_of(lambda: scan_jpda(sc), repeat)
@@ -133,10 +133,10 @@ def table_dense(repeat):
         sc = make(T)
         mp = predict_measurement(tk.filters.KF().predict(sc.prior, sc.motion, 1.0), sc.sensor)
         g = gate(mp.zhat, mp.S, sc.z, P_G)
-        c = loglik_costs(g, sc.p_d, sc.clutter_density, P_G)
-        assert np.array_equal(gnn(g, c, "dense").det, gnn(g, c, "clusters").det)
-        d = best_of(lambda g=g, c=c: gnn(g, c, "dense"), repeat)
-        k = best_of(lambda g=g, c=c: gnn(g, c, "clusters"), repeat)
+        c = loglik_costs(g, sc.pd, sc.clutter_density, P_G)
+        assert np.array_equal(gnn_assign(g, c, "dense").det, gnn_assign(g, c, "clusters").det)
+        d = best_of(lambda g=g, c=c: gnn_assign(g, c, "dense"), repeat)
+        k = best_of(lambda g=g, c=c: gnn_assign(g, c, "clusters"), repeat)
         D = sc.z.shape[0]
         print(f"| {T} | {D} | {T * (D + T)} | {1e3 * d:.3f} | {1e3 * k:.3f} | {d / k:.2f} |")
 
@@ -151,7 +151,7 @@ def table_crossover(repeat):
 
 def row_crossover(T, repeat):
     sc = scene(np.random.default_rng(1), T, side=SPACING * np.sqrt(T), clutter=0.0,
-               p_d=1.0, pos_std=(5.0, 25.0))
+               pd=1.0, pos_std=(5.0, 25.0))
     mp = predict_measurement(sc.predicted, sc.sensor)
     z = np.resize(sc.z, (T, 2))
     b = best_of(lambda: gate(mp.zhat, mp.S, z, P_G, method="brute"), repeat)
@@ -192,7 +192,7 @@ def table_stonesoup(sizes, repeat):
         dets = [Detection(StateVector(z), timestamp=t1, measurement_model=mm) for z in sc.z]
         pred, upd = KalmanPredictor(tm), ExtendedKalmanUpdater(mm)
         hyp = PDAHypothesiser(pred, upd, clutter_spatial_density=sc.clutter_density,
-                              prob_detect=sc.p_d, prob_gate=P_G)
+                              prob_detect=sc.pd, prob_gate=P_G)
         mp = predict_measurement(sc.predicted, sc.sensor)
         radius = float(np.sqrt(gate_threshold(P_G, 2) * _lambda_max(mp.S).max()) * 1.001)
         index = {id(d): j for j, d in enumerate(dets)}
@@ -204,7 +204,7 @@ def table_stonesoup(sizes, repeat):
         # Stone Soup's GNN maximises summed PDA probabilities: trackkit's pda_costs
         pm = predict_measurement(tk.filters.KF().predict(sc.prior, sc.motion, 1.0), sc.sensor)
         g = gate(pm.zhat, pm.S, sc.z, P_G)
-        ours = gnn(g, pda_costs(g, sc.p_d, sc.clutter_density, P_G)).det
+        ours = gnn_assign(g, pda_costs(g, sc.pd, sc.clutter_density, P_G)).det
         ours_t = best_of(lambda sc=sc: scan(sc), repeat)
         cols = []
         for assoc in (GNNWith2DAssignment(hyp),

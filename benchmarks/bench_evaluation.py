@@ -120,7 +120,7 @@ def record(plan, block: int, names: list[str]):
             g = f.estimate(b)
             est += time.perf_counter() - t1
             pu += t1 - t0
-            steps.append((np.array(g.mean), np.array(g.cov), np.array(innov.residual),
+            steps.append((np.array(g.mean), np.array(g.cov), np.array(innov.nu),
                           np.array(innov.cov)))
         recs[name] = steps
         secs[name] = (pu, est)

@@ -46,8 +46,8 @@ import scipy
 
 import trackkit as tk
 from trackkit.io.scans import Scan
-from trackkit.tracking import HistoryLogic, IdCounter, gate, gnn
-from trackkit.tracking.association import clusters, distance_costs, jpda, loglik_costs
+from trackkit.tracking import HistoryLogic, IdCounter, gate, gnn_assign
+from trackkit.tracking.association import clusters, distance_costs, jpda_probabilities, loglik_costs
 from trackkit.tracking.gating import gate_threshold
 from trackkit.tracking.logic import TrackStatus
 from trackkit.tracking.tracker import GNN, JPDA, SinglePoint, Tracker, Tracks, _take
@@ -216,8 +216,8 @@ def compare(sc: Scene, trk: Tracker, ss: StoneSoup) -> tuple[int, int, int, floa
     b = trk.filter.predict(sc.tracks.belief, sc.motion, DT)
     zhat, S = trk.measurement_prediction(b, sc.sensor)
     g = gate(zhat, S, sc.z, trk.p_gate)
-    tracker_pairs = gnn(g, distance_costs(g)).det
-    ss_costs_pairs = gnn(g, distance_costs(g)).det
+    tracker_pairs = gnn_assign(g, distance_costs(g)).det
+    ss_costs_pairs = gnn_assign(g, distance_costs(g)).det
     assert np.array_equal(out.info.hit, tracker_pairs >= 0), "hits differ from the kernels"
     track_list = ss.fresh_tracks()
     t0 = time.perf_counter()
@@ -307,8 +307,9 @@ def stages(n: int, repeat: int) -> None:
     print(f"\n### Where the time goes: one scan at {n} targets\n")
     print("Each stage timed alone on its own input (best of rounds), with the default `GNN()` "
           "and with `JPDA()`. `association + update` is the tracker's own `_gnn` / `_jpda`; "
-          "the indented rows are parts of it: one `clusters()` call, the costs + `gnn()` (which "
-          "finds the clusters again) or the `jpda()` marginals, and the filter update (GNN: "
+          "the indented rows are parts of it: one `clusters()` call, the costs + `gnn_assign()` "
+          "(which finds the clusters again) or the `jpda_probabilities()` marginals, and the "
+          "filter update (GNN: "
           "one update of every track; JPDA: one update per gated pair, then the mixture). "
           "`rest` (logic, deletion, initiation, packing) = whole step - the four stages; "
           "timing noise can make it negative.\n")
@@ -325,13 +326,13 @@ def stages(n: int, repeat: int) -> None:
         if isinstance(assoc, JPDA):
             run = trk._jpda
             hb, hz = _take(b, g.track), sc.z[g.det]
-            assign = partial(jpda, g, pd, cd, pg)
+            assign = partial(jpda_probabilities, g, pd, cd, pg)
         else:
             run = trk._gnn
-            det = gnn(g, loglik_costs(g, pd, cd, pg)).det
+            det = gnn_assign(g, loglik_costs(g, pd, cd, pg)).det
             hb, hz = b, np.full((n, 2), np.nan)
             hz[det >= 0] = sc.z[det[det >= 0]]
-            assign = partial(lambda g, *a: gnn(g, loglik_costs(g, *a)), g, pd, cd, pg)
+            assign = partial(lambda g, *a: gnn_assign(g, loglik_costs(g, *a)), g, pd, cd, pg)
         t = {
             "predict": best_of(lambda trk=trk, b0=b0: trk.filter.predict(b0, sc.motion, DT),
                                repeat),
@@ -342,7 +343,7 @@ def stages(n: int, repeat: int) -> None:
             "association + update": best_of(
                 lambda run=run, b=b, g=g: run(b, g, sc.z, sc.sensor, {}), repeat),
             "&nbsp;&nbsp;clusters()": best_of(lambda g=g: clusters(g), repeat),
-            "&nbsp;&nbsp;costs + gnn() / jpda()": best_of(assign, repeat),
+            "&nbsp;&nbsp;costs + gnn_assign() / jpda_probabilities()": best_of(assign, repeat),
             "&nbsp;&nbsp;filter update": best_of(
                 lambda trk=trk, hb=hb, hz=hz: trk.filter.update(hb, hz, sc.sensor), repeat),
         }

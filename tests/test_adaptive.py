@@ -134,7 +134,7 @@ def test_mcekf_covariance_is_joseph_at_the_updated_state():
     _close(post.mean, ekf.mean, 1e-12)  # the state update is the EKF's
     _close(post.cov, P_plus, 1e-9)
     _close(post.cov, P - Kp @ Hp @ P, 1e-7)  # the paper's form, equal for the optimal K+
-    _close(innov.residual, r, 1e-12, scale=1.0)
+    _close(innov.nu, r, 1e-12, scale=1.0)
     _close(innov.cov, S, 1e-12)
     _close(innov.cov, ekf_innov.cov, 1e-12)
     # the re-linearisation matters here (x+ moves hundreds of metres), so it is tested
@@ -168,7 +168,7 @@ def test_mcekf_equals_ekf_on_a_linear_sensor():
         b_ekf, i_ekf = EKF().update(EKF().predict(b_ekf, motion, 1.0), z, sensor)
         _close(b_mc.mean, b_ekf.mean)
         _close(b_mc.cov, b_ekf.cov)
-        _close(i_mc.residual, i_ekf.residual)
+        _close(i_mc.nu, i_ekf.nu)
         _close(i_mc.cov, i_ekf.cov)
 
 
@@ -270,7 +270,7 @@ def test_r_adaptation_window_alpha_and_ring_buffer_by_hand():
     r_scale = np.ones(2)
     for k in range(6):
         pred, b, innov = _feed(f, motion, sensor, b, seq[k])
-        r = innov.residual
+        r = innov.nu
         _close(r, seq[k], 1e-12, scale=10.0)
         seen.append(r)
         for i in range(2):
@@ -549,7 +549,7 @@ def test_batch_equals_separate_runs(name):
                     # carry rounding of eps |z| (|z| ~ 500 Hz for r ~ 0.3 Hz) and compound
                     # over the steps; equal to rounding at that scale
                     _close(a[i], s_, 1e-10)
-            _close(ib.residual[i], is_.residual, 1e-12, scale=600.0)
+            _close(ib.nu[i], is_.nu, 1e-12, scale=600.0)
             _close(ib.cov[i], is_.cov, 1e-12)
 
 
@@ -566,7 +566,7 @@ def test_batch_shape_2x3(name):
     for a, g in zip(bf, bg, strict=True):
         assert g.shape[:2] == (2, 3)
         _close(g.reshape(a.shape), a, 1e-12)
-    assert grid[-1][1].residual.shape == (2, 3, 2)
+    assert grid[-1][1].nu.shape == (2, 3, 2)
 
 
 @pytest.mark.parametrize("name", ["AMCEKF", "AMCEKF-ms", "AEKF", "AEKF-q", "MCEKF2"])
@@ -585,7 +585,7 @@ def test_missing_rows_return_prediction_and_keep_memory(name):
         if i in (1, 3):
             for a, p in zip(post, pred, strict=True):
                 np.testing.assert_array_equal(a[i], p[i])
-            assert np.all(np.isnan(innov.residual[i]))
+            assert np.all(np.isnan(innov.nu[i]))
         else:
             assert not np.array_equal(post.mean[i], pred.mean[i])
             if isinstance(post, AdaptiveBelief | SageHusaBelief):
@@ -606,7 +606,7 @@ def test_other_models_and_unbatched(name):
         x = motion.f(x, 1.0)
         z = sensor.h(x) + rng.standard_normal(2) * [5.0, 0.01]
         b, innov = f.update(f.predict(b, motion, 1.0), z, sensor)
-    assert b.mean.shape == (5,) and innov.residual.shape == (2,)
+    assert b.mean.shape == (5,) and innov.nu.shape == (2,)
     assert np.all(np.isfinite(b.mean)) and np.linalg.norm(b.mean[:2] - x[:2]) < 100.0
     np.testing.assert_array_equal(b.cov, b.cov.T)
 
@@ -662,7 +662,7 @@ def test_dbt_monte_carlo_sanity():
             se[k] = ((b.mean[:, :2] - truth[k, :2]) ** 2).sum(-1).mean()
         g = f.estimate(b)
         assert np.all(np.isfinite(g.mean)) and np.all(np.isfinite(g.cov)), name
-        assert np.all(np.isfinite(innov.residual)) and np.all(np.isfinite(innov.cov)), name
+        assert np.all(np.isfinite(innov.nu)) and np.all(np.isfinite(innov.cov)), name
         np.testing.assert_array_equal(g.cov, np.swapaxes(g.cov, -1, -2))
         assert np.all(np.linalg.eigvalsh(g.cov)[..., 0] > 0), name
         if isinstance(b, AdaptiveBelief):

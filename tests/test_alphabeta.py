@@ -52,23 +52,23 @@ from trackkit.filters.alphabeta import (
 # Independent references
 
 
-def closed_loop(alpha, beta, gamma=None, T=1.0, accel_gain=2.0):
+def closed_loop(alpha, beta, gamma=None, dt=1.0, accel_gain=2.0):
     """``(A, K)`` of one coordinate: ``Phi`` the polynomial transition, ``G = [1 0 (0)]``,
-    ``K = [alpha, beta/T(, accel_gain gamma/T^2)]``, ``A = (I - K G) Phi``."""
+    ``K = [alpha, beta/dt(, accel_gain gamma/dt^2)]``, ``A = (I - K G) Phi``."""
     if gamma is None:
-        Phi = np.array([[1.0, T], [0.0, 1.0]])
-        K = np.array([[alpha], [beta / T]])
+        Phi = np.array([[1.0, dt], [0.0, 1.0]])
+        K = np.array([[alpha], [beta / dt]])
     else:
-        Phi = np.array([[1.0, T, T * T / 2], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
-        K = np.array([[alpha], [beta / T], [accel_gain * gamma / T**2]])
+        Phi = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+        K = np.array([[alpha], [beta / dt], [accel_gain * gamma / dt**2]])
     G = np.zeros((1, Phi.shape[0]))
     G[0, 0] = 1.0
     return (np.eye(Phi.shape[0]) - K @ G) @ Phi, K
 
 
-def lyapunov_cov(alpha, beta, gamma=None, T=1.0, sigma2=1.0, accel_gain=2.0):
+def lyapunov_cov(alpha, beta, gamma=None, dt=1.0, sigma2=1.0, accel_gain=2.0):
     """Steady state of ``C = A C A^T + K sigma^2 K^T`` (noise-only input)."""
-    A, K = closed_loop(alpha, beta, gamma, T, accel_gain)
+    A, K = closed_loop(alpha, beta, gamma, dt, accel_gain)
     return solve_discrete_lyapunov(A, sigma2 * K @ K.T)
 
 
@@ -158,15 +158,15 @@ def test_fading_memory_puts_every_root_at_xi():
     A = (I - K G) Phi. Coefficients to 1e-12; the roots of a triple root are only determined
     to about eps^(1/3) ~ 6e-6 by any root finder, so they are checked to 1e-4."""
     for xi in (0.0, 0.3, 0.5, 0.9):
-        A, _ = closed_loop(*fading_memory(xi), T=0.8)
+        A, _ = closed_loop(*fading_memory(xi), dt=0.8)
         assert np.allclose(np.poly(A), np.poly([xi, xi]), rtol=0, atol=1e-12)
         assert np.allclose(characteristic_polynomial(*fading_memory(xi)),
                            np.poly([xi, xi]), rtol=0, atol=1e-12)
         assert np.allclose(roots(*fading_memory(xi)), xi, atol=1e-7)
-        A, _ = closed_loop(*fading_memory_abg(xi), T=0.8)
+        A, _ = closed_loop(*fading_memory_abg(xi), dt=0.8)
         assert np.allclose(np.poly(A), np.poly([xi] * 3), rtol=0, atol=1e-12)
         assert np.allclose(roots(*fading_memory_abg(xi)), xi, atol=1e-4)
-    # gamma' = 2 gamma (the gamma/T^2 convention) is FilterPy's / Brookner's (1 - xi)^3
+    # gamma' = 2 gamma (the gamma/dt^2 convention) is FilterPy's / Brookner's (1 - xi)^3
     assert fading_memory_abg(0.4)[2] == pytest.approx(0.6**3 / 2, rel=1e-15, abs=0)
 
 
@@ -175,7 +175,7 @@ def test_fading_memory_puts_every_root_at_xi():
 
 
 def _vrr_exact(a: Fraction, b: Fraction):
-    """Eqs. 2-17..2-19 in exact rational arithmetic (T = 1)."""
+    """Eqs. 2-17..2-19 in exact rational arithmetic (dt = 1)."""
     den = a * (4 - 2 * a - b)
     return (2 * a * a - 3 * a * b + 2 * b) / den, b * (2 * a - b) / den, 2 * b * b / den
 
@@ -183,10 +183,10 @@ def _vrr_exact(a: Fraction, b: Fraction):
 @pytest.mark.parametrize(
     "name, gains, exact, printed",
     [
-        # Kohn: VRR(x) = 0.411931, C_xv T / s^2 = 0.098208, VRR(v) T^2 = 0.039377
+        # Kohn: VRR(x) = 0.411931, C_xv dt / s^2 = 0.098208, VRR(v) dt^2 = 0.039377
         ("kohn", kohn(), (Fraction(1, 2), Fraction(167, 1000)),
          (0.411931, 0.098208, 0.039377)),
-        # Benedict-Bordner alpha = 0.5: VRR(x) = 0.411765, VRR(v) T^2 = 0.039216
+        # Benedict-Bordner alpha = 0.5: VRR(x) = 0.411765, VRR(v) dt^2 = 0.039216
         ("benedict-bordner", (0.5, benedict_bordner(0.5)), (Fraction(1, 2), Fraction(1, 6)),
          (0.411765, None, 0.039216)),
         # fading memory xi = 0.5: 0.629630, 0.185185 (corrected 2-30), 0.074074
@@ -196,8 +196,8 @@ def _vrr_exact(a: Fraction, b: Fraction):
 )
 def test_section5_table(name, gains, exact, printed):
     """Every number of the table, to its printed digits; the formulas to exact rational
-    arithmetic; and both against the Lyapunov solve of A = (I - K G) Phi, to 1e-9, at T = 1
-    and at T = 0.37 (velocity terms scale as 1/T and 1/T^2)."""
+    arithmetic; and both against the Lyapunov solve of A = (I - K G) Phi, to 1e-9, at dt = 1
+    and at dt = 0.37 (velocity terms scale as 1/dt and 1/dt^2)."""
     r = vrr(*gains)
     ours = (r.x, r.xv, r.v)
     for got, want in zip(ours, printed, strict=True):
@@ -205,27 +205,27 @@ def test_section5_table(name, gains, exact, printed):
             assert abs(got - want) <= 5e-7, (name, got, want)
     for got, want in zip(ours, _vrr_exact(*exact), strict=True):
         assert got == pytest.approx(float(want), rel=1e-12, abs=0), name
-    for T in (1.0, 0.37):
-        C = lyapunov_cov(*gains, T=T)
-        r = vrr(*gains, T=T)
+    for dt in (1.0, 0.37):
+        C = lyapunov_cov(*gains, dt=dt)
+        r = vrr(*gains, dt=dt)
         for got, want in ((r.x, C[0, 0]), (r.xv, C[0, 1]), (r.v, C[1, 1])):
-            assert got == pytest.approx(want, rel=1e-9, abs=0), (name, T)
-        assert_cov_close(steady_state_cov(*gains, T=T, sigma=3.0), 9.0 * C, 1e-9, name)
+            assert got == pytest.approx(want, rel=1e-9, abs=0), (name, dt)
+        assert_cov_close(steady_state_cov(*gains, dt=dt, sigma=3.0), 9.0 * C, 1e-9, name)
 
 
 def test_closed_forms_of_benedict_bordner_and_fading_memory():
     """2-25, 2-26 (and the derived cross term) equal 2-17 on the Benedict-Bordner curve;
     2-29, the corrected 2-30 and 2-31 equal 2-17 at the fading-memory gains; the thesis's
-    printed 2-30, (1-xi)^2 (1 + 2 xi + 3 xi^2) / (T (1+xi)^3), does not."""
+    printed 2-30, (1-xi)^2 (1 + 2 xi + 3 xi^2) / (dt (1+xi)^3), does not."""
     a = np.linspace(0.05, 1.15, 39)
-    bb, gen = benedict_bordner_vrr(a, T=0.6), vrr(a, benedict_bordner(a), T=0.6)
+    bb, gen = benedict_bordner_vrr(a, dt=0.6), vrr(a, benedict_bordner(a), dt=0.6)
     for f in ("x", "v", "xv"):
         np.testing.assert_allclose(getattr(bb, f), getattr(gen, f), rtol=1e-12, err_msg=f)
     # beyond alpha = 4 - 2 sqrt(2) the Benedict-Bordner pair is unstable: no steady state
     assert np.isnan(benedict_bordner_vrr(1.2).x) and not is_stable(1.2, benedict_bordner(1.2))
     assert is_stable(1.17, benedict_bordner(1.17))
     xi = np.linspace(0.0, 0.98, 50)
-    fm, gen = fading_memory_vrr(xi, T=0.6), vrr(*fading_memory(xi), T=0.6)
+    fm, gen = fading_memory_vrr(xi, dt=0.6), vrr(*fading_memory(xi), dt=0.6)
     for f in ("x", "v", "xv"):
         np.testing.assert_allclose(getattr(fm, f), getattr(gen, f), rtol=1e-12, err_msg=f)
     printed_230 = (1 - 0.5) ** 2 * (1 + 2 * 0.5 + 3 * 0.25) / 1.5**3
@@ -238,23 +238,23 @@ def test_vrr_matches_lyapunov_on_random_gains():
     b = rng.uniform(0.0, 1.0, 300) * (4 - 2 * a)
     keep = (b > 1e-3) & (b < 4 - 2 * a - 1e-3)
     a, b = a[keep], b[keep]
-    T = rng.uniform(0.1, 5.0, a.size)
-    C = steady_state_cov(a, b, T=T)  # batched over gains and T
+    dt = rng.uniform(0.1, 5.0, a.size)
+    C = steady_state_cov(a, b, dt=dt)  # batched over gains and dt
     for i in range(a.size):
-        assert_cov_close(C[i], lyapunov_cov(a[i], b[i], T=T[i]), 1e-9, f"row {i}")
+        assert_cov_close(C[i], lyapunov_cov(a[i], b[i], dt=dt[i]), 1e-9, f"row {i}")
 
 
 def test_alpha_beta_gamma_characteristic_polynomial_and_vrr():
-    """np.poly of (I - K G) Phi with K3 = 2 gamma / T^2 is eq. 2-49; the VRR formulas
+    """np.poly of (I - K G) Phi with K3 = 2 gamma / dt^2 is eq. 2-49; the VRR formulas
     2-45..2-47 at gamma' = 2 gamma (and our cross terms) equal the Lyapunov solve; and the
-    thesis's formulas at gamma itself are the filter with K3 = gamma / T^2 (the warning of
+    thesis's formulas at gamma itself are the filter with K3 = gamma / dt^2 (the warning of
     001.md 2.4)."""
     rng = np.random.default_rng(3)
     n_ok = 0
     for _ in range(400):
         a, b, g = rng.uniform(0, 2), rng.uniform(0, 4), rng.uniform(0, 1)
-        T = rng.uniform(0.05, 3.0)
-        A, _ = closed_loop(a, b, g, T)
+        dt = rng.uniform(0.05, 3.0)
+        A, _ = closed_loop(a, b, g, dt)
         np.testing.assert_allclose(characteristic_polynomial(a, b, g), np.poly(A),
                                    rtol=0, atol=1e-12 * max(1.0, abs(a + b + g)))
         assert np.allclose(characteristic_polynomial(a, b, g),
@@ -262,13 +262,13 @@ def test_alpha_beta_gamma_characteristic_polynomial_and_vrr():
         if np.max(np.abs(np.linalg.eigvals(A))) > 0.999:
             continue
         n_ok += 1
-        r = vrr_abg(a, b, g, T)
+        r = vrr_abg(a, b, g, dt)
         C = np.array([[r.x, r.xv, r.xa], [r.xv, r.v, r.va], [r.xa, r.va, r.a]])
-        assert_cov_close(C, lyapunov_cov(a, b, g, T), 1e-9, f"{(a, b, g, T)}")
-        assert_cov_close(steady_state_cov(a, b, g, T=T), C, 1e-15)
-        # the thesis's formula as printed (gamma') is the gamma/T^2 filter
-        r1 = vrr_abg(a, b, g / 2, T)
-        C1 = lyapunov_cov(a, b, g, T, accel_gain=1.0)
+        assert_cov_close(C, lyapunov_cov(a, b, g, dt), 1e-9, f"{(a, b, g, dt)}")
+        assert_cov_close(steady_state_cov(a, b, g, dt=dt), C, 1e-15)
+        # the thesis's formula as printed (gamma') is the gamma/dt^2 filter
+        r1 = vrr_abg(a, b, g / 2, dt)
+        C1 = lyapunov_cov(a, b, g, dt, accel_gain=1.0)
         assert r1.x == pytest.approx(C1[0, 0], rel=1e-9, abs=0)
         assert r1.v == pytest.approx(C1[1, 1], rel=1e-9, abs=0)
         assert r1.a == pytest.approx(C1[2, 2], rel=1e-9, abs=0)
@@ -331,19 +331,19 @@ def test_simpson_gains_give_the_least_squares_fit(order):
     far, position, velocity (and acceleration), at every scan from k = 2 (3), to 1e-9; 30
     runs of 15 scans of random data."""
     rng = np.random.default_rng(7 + order)
-    K, runs, T = 15, 30, 0.4
+    K, runs, dt = 15, 30, 0.4
     z = rng.normal(50.0, 20.0, (K, runs))
-    times = T * np.arange(K)
+    times = dt * np.arange(K)
     ref = ls_fit(z, times, order - 1)
     f = AlphaBeta(startup="simpson") if order == 2 else AlphaBetaGamma(startup="simpson")
     sensor = tk.models.Position(dim=1, sigma=1.0)
-    means, _, _, _ = run(f, prior(order, (runs,)), z[..., None], T, sensor)
+    means, _, _, _ = run(f, prior(order, (runs,)), z[..., None], dt, sensor)
     assert np.allclose(means[0, :, 0], z[0], rtol=1e-15, atol=0)
     for j in range(order):
         assert_scaled(means[order - 1:, :, j], ref[order - 1:, j], 1e-9, f"component {j}")
     if order == 2:
         a, b = simpson(np.arange(1, K + 1))
-        tr = alpha_beta_track(z, T, a[:, None], b[:, None])
+        tr = alpha_beta_track(z, dt, a[:, None], b[:, None])
         assert_scaled(tr.x_s[1:], ref[1:, 0], 1e-9, "plain x_s")
         assert_scaled(tr.v_s[1:], ref[1:, 1], 1e-9, "plain v_s")
 
@@ -352,7 +352,7 @@ def test_reset_restarts_the_growing_memory():
     """Rows reset before scan 7 equal the least-squares line of the data from scan 7 on;
     the others still fit all the data."""
     rng = np.random.default_rng(8)
-    K, runs, T = 14, 6, 1.0
+    K, runs, dt = 14, 6, 1.0
     z = rng.normal(0.0, 5.0, (K, runs)) + 2.0 * np.arange(K)[:, None]
     f = AlphaBeta(startup="simpson")
     sensor = tk.models.Position(dim=1, sigma=1.0)
@@ -362,9 +362,9 @@ def test_reset_restarts_the_growing_memory():
         if n == 6:
             b = f.reset(b, rows)
             assert np.array_equal(b.k, np.where(rows, 0, 6))
-        b = f.predict(b, None, T)
+        b = f.predict(b, None, dt)
         b, _ = f.update(b, z[n, :, None], sensor)
-    times = T * np.arange(K)
+    times = dt * np.arange(K)
     full = ls_fit(z, times, 1)[-1]
     late = ls_fit(z[6:], times[6:], 1)[-1]
     want = np.where(rows, late, full)
@@ -395,22 +395,22 @@ def test_filter_equals_the_plain_recursion(order):
     """d = 2, 20 runs, thesis start-up, prior velocity (acceleration) zero as in the thesis:
     the class's smoothed and predicted means equal alpha_beta(_gamma)_track to 1e-12."""
     rng = np.random.default_rng(order)
-    K, runs, d, T = 40, 20, 2, 0.3
-    t = T * np.arange(K)
+    K, runs, d, dt = 40, 20, 2, 0.3
+    t = dt * np.arange(K)
     truth = 100.0 + 30.0 * t + (5.0 * t**2 if order == 3 else 0.0)
     z = truth[:, None, None] + rng.normal(0, 2.0, (K, runs, d))
     if order == 2:
         gains = kohn()
-        f, tr = AlphaBeta(*gains), alpha_beta_track(z, T, *gains)
+        f, tr = AlphaBeta(*gains), alpha_beta_track(z, dt, *gains)
         parts = [(tr.x_s, tr.x_p), (tr.v_s, tr.v_p)]
     else:
         gains = fading_memory_abg(0.7)
-        f, tr = AlphaBetaGamma(*gains), alpha_beta_gamma_track(z, T, *gains)
+        f, tr = AlphaBetaGamma(*gains), alpha_beta_gamma_track(z, dt, *gains)
         parts = [(tr.x_s, tr.x_p), (tr.v_s, tr.v_p), (tr.a_s, tr.a_p)]
     sensor = tk.models.Position(dim=2, sigma=[2.0, 3.0])
     means, _, preds, b = run(f, prior(order * d, (runs,), mean=np.r_[5.0, 7.0, [0.0] *
                                                                      (order * d - 2)]),
-                             z, T, sensor)
+                             z, dt, sensor)
     for j, (smoothed, predicted) in enumerate(parts):
         assert_scaled(means[..., j * d:(j + 1) * d], smoothed, 1e-12, f"smoothed {j}")
         assert_scaled(preds[1:, ..., j * d:(j + 1) * d], predicted[1:], 1e-12, f"pred {j}")
@@ -423,15 +423,15 @@ def test_thesis_startup_forgets_the_prior(order):
     thesis); from scan 2 (alpha-beta) or 3 (alpha-beta-gamma)
     the estimate no longer depends on the prior's velocity or acceleration."""
     rng = np.random.default_rng(11)
-    K, T = 8, 0.5
+    K, dt = 8, 0.5
     z = rng.normal(0, 3.0, (K, 1))
     f = AlphaBeta(*kohn()) if order == 2 else AlphaBetaGamma(*fading_memory_abg(0.5))
     sensor = tk.models.Position(dim=1, sigma=1.0)
-    m0, _, _, _ = run(f, prior(order), z, T, sensor)
-    m1, _, _, _ = run(f, prior(order, mean=[40.0, -9.0, 3.0][:order]), z, T, sensor)
+    m0, _, _, _ = run(f, prior(order), z, dt, sensor)
+    m1, _, _, _ = run(f, prior(order, mean=[40.0, -9.0, 3.0][:order]), z, dt, sensor)
     # x_p + 1 (z - x_p) = z up to the rounding of the residual (x_p ~ 40)
     assert abs(m1[0, 0] - z[0, 0]) <= 1e-14 * 40
-    assert m1[0, 1] == (-9.0 if order == 2 else -9.0 + 3.0 * T)  # the predicted velocity
+    assert m1[0, 1] == (-9.0 if order == 2 else -9.0 + 3.0 * dt)  # the predicted velocity
     assert_scaled(m1[order - 1:], m0[order - 1:], 1e-12)
 
 
@@ -440,7 +440,7 @@ def test_batched_rows_equal_rows_alone_bitwise():
     process noise and per-axis sigma equals each row run alone, bit for bit (means,
     covariances, residuals, innovation covariances, k, tau)."""
     rng = np.random.default_rng(21)
-    batch, d, K, T = (3, 4), 2, 12, 0.7
+    batch, d, K, dt = (3, 4), 2, 12, 0.7
     alpha = rng.uniform(0.2, 0.9, batch)
     beta = benedict_bordner(alpha)
     z = rng.normal(0, 10.0, (K,) + batch + (d,))
@@ -457,9 +457,9 @@ def test_batched_rows_equal_rows_alone_bitwise():
         for n, zn in enumerate(z_seq):
             if n == 7:
                 b = f.reset(b, rows)
-            b = f.predict(b, motion, T)
+            b = f.predict(b, motion, dt)
             b, inn = f.update(b, zn, sensor)
-            out.append((b.mean, b.cov, inn.residual, inn.cov, b.k, b.tau))
+            out.append((b.mean, b.cov, inn.nu, inn.cov, b.k, b.tau))
         return out
 
     mean0 = rng.normal(0, 5.0, batch + (4,))
@@ -500,7 +500,7 @@ def test_nan_coasts_and_the_gap_is_spanned():
     pred = b
     b, inn = f.update(b, [np.nan], sensor)
     assert np.array_equal(b.mean, pred.mean) and np.array_equal(b.cov, pred.cov)
-    assert np.isnan(inn.residual).all() and b.k == 1 and b.tau == 1.0
+    assert np.isnan(inn.nu).all() and b.k == 1 and b.tau == 1.0
     b = f.predict(b, None, 1.5)
     assert b.tau == 2.5
     b, _ = f.update(b, [15.0], sensor)
@@ -517,15 +517,15 @@ def test_nan_coasts_and_the_gap_is_spanned():
 def test_covariance_converges_to_the_analytic_steady_state(order):
     """Q = 0, 200 scans: each axis's block of P equals steady_state_cov(sigma_axis) and the
     cross-axis blocks vanish, to 1e-9."""
-    T, sig = 0.25, np.array([2.0, 5.0])
+    dt, sig = 0.25, np.array([2.0, 5.0])
     gains = kohn() if order == 2 else fading_memory_abg(0.6)
     f = AlphaBeta(*gains) if order == 2 else AlphaBetaGamma(*gains)
     sensor = tk.models.Position(dim=2, sigma=sig)
     z = np.zeros((200, 2))
-    _, covs, _, _ = run(f, prior(2 * order, std=30.0), z, T, sensor)
+    _, covs, _, _ = run(f, prior(2 * order, std=30.0), z, dt, sensor)
     P = covs[-1].reshape(order, 2, order, 2)
     for ax in range(2):
-        want = steady_state_cov(*gains, T=T, sigma=sig[ax])
+        want = steady_state_cov(*gains, dt=dt, sigma=sig[ax])
         assert_cov_close(P[:, ax, :, ax], want, 1e-9, f"axis {ax}")
     assert np.all(np.abs(P[:, 0, :, 1]) <= 1e-12 * sig.prod())
 
@@ -533,14 +533,14 @@ def test_covariance_converges_to_the_analytic_steady_state(order):
 def test_covariance_with_process_noise_is_the_lyapunov_fixed_point():
     """With Q from ConstantVelocity(q) the recursion P+ = A P+ A^T + (I - K G) Q (I - K G)^T
     + K R K^T is what the filter propagates: its limit equals the Lyapunov solve, 1e-9."""
-    T, q, sigma = 0.5, 0.8, 3.0
+    dt, q, sigma = 0.5, 0.8, 3.0
     gains = (0.6, benedict_bordner(0.6))
-    A, K = closed_loop(*gains, T=T)
-    Q = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+    A, K = closed_loop(*gains, dt=dt)
+    Q = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
     IKG = np.eye(2) - K @ np.array([[1.0, 0.0]])
     want = solve_discrete_lyapunov(A, IKG @ Q @ IKG.T + sigma**2 * K @ K.T)
     f = AlphaBeta(*gains)
-    _, covs, _, _ = run(f, prior(2), np.zeros((150, 1)), T, tk.models.Position(1, sigma),
+    _, covs, _, _ = run(f, prior(2), np.zeros((150, 1)), dt, tk.models.Position(1, sigma),
                         motion=tk.models.ConstantVelocity(dim=1, q=q))
     assert_cov_close(covs[-1], want, 1e-9)
 
@@ -554,9 +554,9 @@ def test_monte_carlo_variance_matches_the_vrr_and_nees_is_consistent(order):
     propagated P is chi-square with 4000 n. Each is held to its two-sided 99.9% interval
     (three statistics; with the fixed seed the test is deterministic)."""
     rng = np.random.default_rng(2024 + order)
-    runs, K, T, d = 4000, 100, 0.5, 2
+    runs, K, dt, d = 4000, 100, 0.5, 2
     sig = np.array([2.0, 5.0])
-    t = T * np.arange(1, K + 1)
+    t = dt * np.arange(1, K + 1)
     acc = np.array([0.3, -0.2]) if order == 3 else np.zeros(2)
     pos = np.array([100.0, -50.0]) + np.array([12.0, 4.0]) * t[:, None] + acc * t[:, None] ** 2 / 2
     z = pos[:, None, :] + rng.standard_normal((K, runs, d)) * sig
@@ -565,11 +565,11 @@ def test_monte_carlo_variance_matches_the_vrr_and_nees_is_consistent(order):
     b = f.init(prior(order * d, (runs,), std=100.0))
     sensor = tk.models.Position(dim=d, sigma=sig)
     for n in range(K):
-        b = f.predict(b, None, T)
+        b = f.predict(b, None, dt)
         b, _ = f.update(b, z[n], sensor)
     vel = np.array([12.0, 4.0]) + acc * t[-1]
     err = b.mean - np.concatenate([pos[-1], vel] + ([acc] if order == 3 else []))
-    r = vrr(*gains, T=T) if order == 2 else vrr_abg(*gains, T=T)
+    r = vrr(*gains, dt=dt) if order == 2 else vrr_abg(*gains, dt=dt)
     lo, hi = chi2.ppf([0.0005, 0.9995], runs * d)
     stat_x = np.sum(err[:, :d] ** 2 / (sig**2 * r.x))
     stat_v = np.sum(err[:, d:2 * d] ** 2 / (sig**2 * r.v))
@@ -585,17 +585,17 @@ def test_monte_carlo_nees_with_process_noise():
     the same motion model for Q: the summed NEES at scan 60 is inside its two-sided 99.9%
     chi-square interval (4000 x 4 degrees of freedom)."""
     rng = np.random.default_rng(99)
-    runs, K, T, q, sigma = 4000, 60, 1.0, 2.0, 4.0
+    runs, K, dt, q, sigma = 4000, 60, 1.0, 2.0, 4.0
     motion = tk.models.ConstantVelocity(dim=2, q=q)
-    L = np.linalg.cholesky(motion.noise(None, T))
-    F = motion.jacobian(None, T)
+    L = np.linalg.cholesky(motion.noise(None, dt))
+    F = motion.jacobian(None, dt)
     x = np.tile([0.0, 0.0, 10.0, 5.0], (runs, 1))
     f = AlphaBeta(0.5, benedict_bordner(0.5))
     b = f.init(prior(4, (runs,), std=100.0))
     sensor = tk.models.Position(dim=2, sigma=sigma)
     for _ in range(K):
         x = x @ F.T + rng.standard_normal((runs, 4)) @ L.T
-        b = f.predict(b, motion, T)
+        b = f.predict(b, motion, dt)
         b, _ = f.update(b, x[:, :2] + sigma * rng.standard_normal((runs, 2)), sensor)
     err = b.mean - x
     nees = np.einsum("ri,rij,rj->r", err, np.linalg.inv(b.cov), err)
@@ -624,11 +624,11 @@ def test_monte_carlo_nees_with_process_noise():
         (lambda: fading_memory_vrr(1.0), "xi = 1.0"),
         (lambda: simpson(0), "k = 0"),
         (lambda: simpson_abg(1.5), "k = 1.5"),
-        (lambda: vrr(0.5, 0.1, T=0.0), "T = 0.0"),
+        (lambda: vrr(0.5, 0.1, dt=0.0), "dt = 0.0"),
         (lambda: benedict_bordner(2.0), "alpha = 2.0"),
         (lambda: characteristic_polynomial(np.inf, 0.1), "alpha = inf"),
         (lambda: alpha_beta_track([1.0, np.nan, 3.0], 1.0, 0.5, 0.1), r"z\[1\] = nan"),
-        (lambda: alpha_beta_track([1.0, 2.0], -1.0, 0.5, 0.1), "T = -1.0"),
+        (lambda: alpha_beta_track([1.0, 2.0], -1.0, 0.5, 0.1), "dt = -1.0"),
         (lambda: alpha_beta_gamma_track(np.zeros((4, 2)), 1.0, np.zeros(3), 0.1, 0.01),
          "alpha has shape"),
     ],
@@ -636,6 +636,17 @@ def test_monte_carlo_nees_with_process_noise():
 def test_bad_parameters_raise(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+@pytest.mark.parametrize("call", [
+    lambda: vrr(0.5, 0.1, T=1.0),
+    lambda: vrr_abg(0.5, 0.1, 0.01, T=1.0),
+    lambda: steady_state_cov(0.5, 0.1, T=1.0),
+    lambda: alpha_beta_track([1.0, 2.0], T=1.0, alpha=0.5, beta=0.1),
+])
+def test_old_time_step_keyword_is_refused_naming_dt(call):
+    with pytest.raises(TypeError, match="'T' is now spelled 'dt'"):
+        call()
 
 
 def test_bad_filter_inputs_raise():

@@ -174,7 +174,7 @@ def test_mpekf_update_is_linear_in_the_bearing_and_estimate_is_the_jacobian_tran
     np.testing.assert_allclose(post.mean, y + (K * 0.01)[:, 0], rtol=1e-12)
     Pj = (np.eye(4) - K @ H) @ P @ (np.eye(4) - K @ H).T + K @ K.T * SIGMA**2
     np.testing.assert_allclose(post.cov, Pj, rtol=1e-9, atol=1e-12 * np.abs(Pj).max())
-    np.testing.assert_allclose(innov.residual, [0.01], rtol=1e-12)
+    np.testing.assert_allclose(innov.nu, [0.01], rtol=1e-12)
     np.testing.assert_allclose(innov.cov, S, rtol=1e-12)
     g = MPEKF().estimate(post)
     x, J = mpc_to_cartesian(post.mean, o, vo)
@@ -186,7 +186,7 @@ def test_mpekf_update_is_linear_in_the_bearing_and_estimate_is_the_jacobian_tran
     mpost, minnov = MPEKF().update(b, zm, tk.models.Bearing(o, SIGMA, convention="math",
                                                             velocity=vo))
     np.testing.assert_allclose(mpost.mean, post.mean, rtol=1e-12)
-    np.testing.assert_allclose(minnov.residual, -innov.residual, rtol=1e-12)
+    np.testing.assert_allclose(minnov.nu, -innov.nu, rtol=1e-12)
 
 
 def test_mpekf_first_update_carries_the_prior_into_polar_coordinates():
@@ -199,7 +199,7 @@ def test_mpekf_first_update_carries_the_prior_into_polar_coordinates():
     assert not b.polar
     z = np.array([np.nan])
     same, innov = MPEKF().update(b, z, tk.models.Bearing(o, SIGMA, velocity=vo))
-    assert not same.polar and np.array_equal(same.mean, x) and np.isnan(innov.residual).all()
+    assert not same.polar and np.array_equal(same.mean, x) and np.isnan(innov.nu).all()
     z = _bearings(x, o)
     post, _ = MPEKF().update(b, z, tk.models.Bearing(o, SIGMA, velocity=vo))
     assert post.polar
@@ -261,7 +261,7 @@ def test_mpekf_first_update_reports_the_cartesian_priors_innovation():
     z = _bearings(x, o) + 0.02
     post, innov = MPEKF().update(MPEKF().init(tk.Gaussian(x, P)), z, sensor)
     _, ekf = tk.filters.EKF().update(tk.Gaussian(x, P), z, sensor)
-    np.testing.assert_allclose(innov.residual, ekf.residual, rtol=1e-12)
+    np.testing.assert_allclose(innov.nu, ekf.nu, rtol=1e-12)
     np.testing.assert_allclose(innov.cov, ekf.cov, rtol=1e-12)
     y, Py = mpc_from_bearing(x, P, z[0], SIGMA**2, o, vo)
     np.testing.assert_array_equal(post.mean, y)
@@ -293,8 +293,8 @@ def test_mpekf_batched_rows_equal_single_rows_with_missing_and_per_run_observers
             np.testing.assert_allclose(b.mean[i], singles[i].mean, rtol=1e-12, atol=1e-300)
             np.testing.assert_allclose(b.cov[i], singles[i].cov, rtol=1e-9,
                                        atol=1e-12 * np.abs(singles[i].cov).max())
-            np.testing.assert_array_equal(np.isnan(innov.residual[i]),
-                                          np.isnan(inn_i.residual))
+            np.testing.assert_array_equal(np.isnan(innov.nu[i]),
+                                          np.isnan(inn_i.nu))
         if k == 0:
             assert b.polar.tolist() == [True, False, True]
     g = f.estimate(b)
@@ -373,7 +373,7 @@ def test_one_component_rpekf_is_the_ekf():
         e = rp.estimate(b)
         np.testing.assert_allclose(e.mean, g.mean, rtol=1e-12)
         np.testing.assert_allclose(e.cov, g.cov, rtol=1e-9, atol=1e-12 * np.abs(g.cov).max())
-        np.testing.assert_allclose(ib.residual, ig.residual, rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(ib.nu, ig.nu, rtol=1e-9, atol=1e-15)
         np.testing.assert_allclose(ib.cov, ig.cov, rtol=1e-12)
 
 
@@ -395,7 +395,7 @@ def test_rpekf_update_is_a_bank_of_ekf_updates_reweighted_by_their_likelihoods()
         gi, ii = ekf.update(tk.Gaussian(b.mean[i], b.cov[i]), z, s2)
         np.testing.assert_allclose(post.mean[i], gi.mean, rtol=1e-12)
         np.testing.assert_allclose(post.cov[i], gi.cov, rtol=1e-12)
-        r, Si = ii.residual[0], ii.cov[0, 0]
+        r, Si = ii.nu[0], ii.cov[0, 0]
         logw[i] += -0.5 * (r * r / Si + np.log(2 * np.pi * Si))
         nu.append(r), S.append(Si)
     w = np.exp(logw - logw.max())
@@ -403,7 +403,7 @@ def test_rpekf_update_is_a_bank_of_ekf_updates_reweighted_by_their_likelihoods()
     np.testing.assert_allclose(np.exp(post.log_weights), w, rtol=1e-9, atol=1e-300)
     c = np.exp(b.log_weights)
     nbar = c @ np.array(nu)
-    np.testing.assert_allclose(innov.residual, [nbar], rtol=1e-12)
+    np.testing.assert_allclose(innov.nu, [nbar], rtol=1e-12)
     Sbar = c @ (np.array(S) + (np.array(nu) - nbar) ** 2)
     np.testing.assert_allclose(innov.cov, [[Sbar]], rtol=1e-12)
     m, C = _mixture_moments(post.mean, post.cov, post.log_weights)
@@ -447,8 +447,8 @@ def test_rpekf_batched_rows_equal_single_rows_with_missing_and_per_run_observers
             np.testing.assert_allclose(b.mean[i], singles[i].mean, rtol=1e-12)
             np.testing.assert_allclose(b.log_weights[i], singles[i].log_weights, rtol=1e-9,
                                        atol=1e-12)
-            np.testing.assert_array_equal(np.isnan(innov.residual[i]),
-                                          np.isnan(inn_i.residual))
+            np.testing.assert_array_equal(np.isnan(innov.nu[i]),
+                                          np.isnan(inn_i.nu))
         if k == 0:
             assert b.split.tolist() == [True, True, False]
     assert isinstance(b, RangeBankBelief) and b.split.all()
@@ -544,7 +544,7 @@ def test_range_pf_spreads_its_particles_along_the_first_bearing():
     b = f.predict(b, CV, 5.0)
     o = np.array([100.0, -200.0])
     wait, innov = f.update(b, np.full((2, 1), np.nan), tk.models.Bearing(o, SIGMA))
-    assert isinstance(wait, PendingParticles) and np.isnan(innov.residual).all()
+    assert isinstance(wait, PendingParticles) and np.isnan(innov.nu).all()
     z = np.array([[0.3], [np.nan]])
     p, innov = f.update(b, z, tk.models.Bearing(o, SIGMA))
     X = p.states
@@ -622,7 +622,7 @@ def test_range_pf_conditioned_on_the_first_bearing():
     b = f.predict(b, CV, 5.0)
     sensor = tk.models.Bearing([100.0, -200.0], SIGMA)
     p, innov = f.update(b, np.array([[0.05], [np.nan]]), sensor)
-    assert isinstance(p, tk.Particles) and np.isnan(innov.residual[1]).all()
+    assert isinstance(p, tk.Particles) and np.isnan(innov.nu[1]).all()
     np.testing.assert_allclose(np.exp(p.log_weights).sum(-1), 1.0, rtol=1e-12)
     d = p.states[0, :, :2] - [100.0, -200.0]
     assert np.abs(tk.angles.wrap(np.arctan2(d[:, 0], d[:, 1]) - 0.05)).max() < 8 * SIGMA

@@ -37,7 +37,7 @@ from trackkit.models import (
     MultipathDelay,
     Position,
     RangeBearing,
-    SensorModel,
+    SensorBase,
     Sine,
     Stack,
 )
@@ -290,7 +290,7 @@ def test_sigma_update_batch_equals_rows_alone(fname, sname, monkeypatch):
     for i in missing:
         np.testing.assert_array_equal(post.mean[i], xp[i])
         np.testing.assert_array_equal(post.cov[i], Pp[i])
-        assert np.isnan(innov.residual[i]).all()
+        assert np.isnan(innov.nu[i]).all()
     spy.calls = 0
     for i in range(B_SIGMA):
         one, inn1 = filt.update(tk.Gaussian(xp[i:i + 1], Pp[i:i + 1]), z[i:i + 1], sensor)
@@ -300,9 +300,9 @@ def test_sigma_update_batch_equals_rows_alone(fname, sname, monkeypatch):
         _close(one.cov[0], post.cov[i], _cov_scale(Pp[i]), what=f"row {i} cov")
         _close(inn1.cov[0], innov.cov[i], _cov_scale(innov.cov[i]), what=f"row {i} S")
         if i in missing:
-            assert np.isnan(inn1.residual[0]).all()
+            assert np.isnan(inn1.nu[0]).all()
         else:
-            _close(inn1.residual[0], innov.residual[i], np.sqrt(np.diag(innov.cov[i])),
+            _close(inn1.nu[0], innov.nu[i], np.sqrt(np.diag(innov.cov[i])),
                    what=f"row {i} residual")
     assert spy.calls == 0
 
@@ -551,7 +551,7 @@ def test_joseph_update_unbatched_and_batched_equal_textbook(name):
         # an unbatched step equals the batched step's row
         _close(one.mean, post.mean[i], _mean_scale(x[i], P[i])[0], what=f"row {i} mean")
         _close(one.cov, post.cov[i], _cov_scale(P[i]), what=f"row {i} cov")
-        _close(inn1.residual, innov.residual[i], np.sqrt(np.diag(Sr)), what=f"row {i} r")
+        _close(inn1.nu, innov.nu[i], np.sqrt(np.diag(Sr)), what=f"row {i} r")
 
 
 @pytest.mark.parametrize("name", ["KF-Position1", "KF-Position2", "EKF-Bearing",
@@ -567,7 +567,7 @@ def test_joseph_update_shared_covariance_and_missing_rows(name):
     _assert_symmetric(post.cov)
     np.testing.assert_array_equal(post.mean[4], x[4])
     np.testing.assert_array_equal(post.cov[4], P0)
-    assert np.isnan(innov.residual[4]).all()
+    assert np.isnan(innov.nu[4]).all()
     for i in range(B):
         if i == 4:
             continue
@@ -700,7 +700,7 @@ SENSOR_CASES = _sensor_cases()
 
 def test_every_sensor_model_is_covered():
     models = {name for name, obj in vars(tk.models).items()
-              if inspect.isclass(obj) and issubclass(obj, SensorModel) and obj is not SensorModel}
+              if inspect.isclass(obj) and issubclass(obj, SensorBase) and obj is not SensorBase}
     covered = {type(s).__name__ for _, s, _ in SENSOR_CASES}
     assert models == covered
 
@@ -822,7 +822,7 @@ def test_ekf_and_kf_updates_use_the_overridden_h(batch):
     biased, plain = BiasedBearing(origin=(3.0, 4.0)), Bearing(origin=(3.0, 4.0))
     z = plain.h(x) + 0.03
     _, inn = EKF().update(tk.Gaussian(x, P), z, biased)
-    np.testing.assert_allclose(inn.residual, wrap(z - plain.h(x) - BIAS), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(inn.nu, wrap(z - plain.h(x) - BIAS), rtol=0, atol=1e-15)
     # the biased sensor with z is the plain sensor with z - bias
     post_b, _ = EKF().update(tk.Gaussian(x, P), z, biased)
     post_p, _ = EKF().update(tk.Gaussian(x, P), z - BIAS, plain)
@@ -831,7 +831,7 @@ def test_ekf_and_kf_updates_use_the_overridden_h(batch):
     off, pos = OffsetPosition(dim=2), Position(dim=2)
     zp = x[..., :2] + 1.0
     _, inn = KF().update(tk.Gaussian(x, P), zp, off)
-    np.testing.assert_array_equal(inn.residual, zp - x[..., :2] - 5.0)
+    np.testing.assert_array_equal(inn.nu, zp - x[..., :2] - 5.0)
     post_o, _ = KF().update(tk.Gaussian(x, P), zp, off)
     post_q, _ = KF().update(tk.Gaussian(x, P), zp - 5.0, pos)
     _close(post_o.mean, post_q.mean, _mean_scale(x, P))
@@ -869,7 +869,7 @@ def test_ekf_update_without_linearize_equals_fused(batch):
     post_p, inn_p = EKF().update(tk.Gaussian(x, P), z, plain)
     np.testing.assert_array_equal(post_d.mean, post_p.mean)
     np.testing.assert_array_equal(post_d.cov, post_p.cov)
-    np.testing.assert_array_equal(inn_d.residual, inn_p.residual)
+    np.testing.assert_array_equal(inn_d.nu, inn_p.nu)
 
 
 # differences: inside (-3, 3) (the cheap path: no wrap needed), the edges and beyond

@@ -136,7 +136,7 @@ def test_batch_equals_separate_unbatched_calls(name, per_row_dt):
             _close(bb.cov[i], bs.cov)
             # a residual z - zhat is a small difference of large numbers (a range of ~2 km):
             # compare it at the measurement's scale
-            _close(ib.residual[i], is_.residual, scale=np.abs(zs).max())
+            _close(ib.nu[i], is_.nu, scale=np.abs(zs).max())
             _close(ib.cov[i], is_.cov)
 
 
@@ -150,10 +150,10 @@ def test_batch_shape_2x3(name):
                 zs.reshape(len(dts), 2, 3, m))
     for (bf, inf), (bg, ing) in zip(flat, grid, strict=True):
         assert bg.mean.shape == (2, 3, n) and bg.cov.shape == (2, 3, n, n)
-        assert ing.residual.shape == (2, 3, m) and ing.cov.shape == (2, 3, m, m)
+        assert ing.nu.shape == (2, 3, m) and ing.cov.shape == (2, 3, m, m)
         _close(bg.mean.reshape(6, n), bf.mean)
         _close(bg.cov.reshape(6, n, n), bf.cov)
-        _close(ing.residual.reshape(6, m), inf.residual, scale=np.abs(zs).max())
+        _close(ing.nu.reshape(6, m), inf.nu, scale=np.abs(zs).max())
         # and a single (2, 3) element equals the unbatched call
     single = _run(f, motion, sensor, m0[4], P0[4], dts, zs[:, 4])
     _close(grid[-1][0].mean[1, 1], single[-1][0].mean)
@@ -177,7 +177,7 @@ def test_moving_observer_origin_with_batch_axes(name):
         b, inn = f.update(p, z[i], si)
         _close(bb.mean[i], b.mean)
         _close(bb.cov[i], b.cov)
-        _close(ib.residual[i], inn.residual, scale=np.abs(z).max())
+        _close(ib.nu[i], inn.nu, scale=np.abs(z).max())
 
 
 # --------------------------------------------------------------------------------------------
@@ -197,14 +197,14 @@ def test_missing_measurement_rows_return_prediction(name):
     for i in (2, 5):
         np.testing.assert_array_equal(post.mean[i], pred.mean[i])
         np.testing.assert_array_equal(post.cov[i], pred.cov[i])
-        assert np.all(np.isnan(innov.residual[i]))
+        assert np.all(np.isnan(innov.nu[i]))
     assert np.all(np.isfinite(post.mean)) and np.all(np.isfinite(post.cov))
     # the other rows are updated as if no row were missing
     full, innov_full = f.update(pred, zs[0], sensor)
     keep = [0, 1, 3, 4, 6]
     _close(post.mean[keep], full.mean[keep])
     _close(post.cov[keep], full.cov[keep])
-    _close(innov.residual[keep], innov_full.residual[keep], scale=np.abs(zs).max())
+    _close(innov.nu[keep], innov_full.nu[keep], scale=np.abs(zs).max())
     assert not np.allclose(full.mean[keep], pred.mean[keep])  # an update happened
     assert_symmetric(post.cov)
     # NIS is nan exactly where the measurement is missing
@@ -220,7 +220,7 @@ def test_missing_measurement_unbatched(name):
     post, innov = f.update(pred, np.full(sensor.dim_z, np.nan), sensor)
     np.testing.assert_array_equal(post.mean, pred.mean)
     np.testing.assert_array_equal(post.cov, pred.cov)
-    assert np.isnan(innov.residual).all()
+    assert np.isnan(innov.nu).all()
 
 
 # --------------------------------------------------------------------------------------------
@@ -238,7 +238,7 @@ def test_linear_gaussian_all_filters_equal_kf():
             try:
                 _close(b.mean, br.mean, 1e-9)
                 _close(b.cov, br.cov, 1e-9)
-                _close(i.residual, ir.residual, 1e-9)
+                _close(i.nu, ir.nu, 1e-9)
                 _close(i.cov, ir.cov, 1e-9)
             except AssertionError as e:
                 raise AssertionError(f"{name} differs from KF at step {k}: {e}") from None
@@ -251,7 +251,7 @@ def test_iekf_one_iteration_equals_ekf():
     for (ba, ia), (bb, ib) in zip(a, b, strict=True):
         _close(ba.mean, bb.mean)
         _close(ba.cov, bb.cov)
-        _close(ia.residual, ib.residual)
+        _close(ia.nu, ib.nu)
         _close(ia.cov, ib.cov)
 
 
@@ -287,7 +287,7 @@ def test_second_order_ekf_uses_hessian_terms():
     H = sensor.jacobian(x)
     zhat = sensor.h(x)[0] + 0.5 * np.trace(Hs @ P)
     S = (H @ P @ H.T)[0, 0] + 1.0 + 0.5 * np.trace(Hs @ P @ Hs @ P)
-    assert inn.residual[0] == pytest.approx(z[0] - zhat, rel=1e-12)
+    assert inn.nu[0] == pytest.approx(z[0] - zhat, rel=1e-12)
     assert inn.cov[0, 0] == pytest.approx(S, rel=1e-12)
 
 
@@ -454,7 +454,7 @@ def test_run_filter_matches_manual_loop_and_calls_on_step():
     f = UKF()
     seen = []
     b, hist = run_filter(f, tk.Gaussian(m0, P0), motion, sensor, list(zs), 1.0, history=True,
-                         on_step=lambda k, bel, inn: seen.append((k, inn.residual.shape)))
+                         on_step=lambda k, bel, inn: seen.append((k, inn.nu.shape)))
     manual = _run(f, motion, sensor, m0, P0, dts, zs)
     _close(b.mean, manual[-1][0].mean)
     _close(hist.mean, np.stack([m[0].mean for m in manual]))

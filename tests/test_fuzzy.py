@@ -357,7 +357,7 @@ def test_warmup_wait_keeps_r_and_c_zero_until_the_window_is_full():
     # the N-th update has a full window: C is the mean of the N outer products and R moves
     k = N - 1
     for i in range(B):
-        C = sum(np.outer(innovs[j].residual[i], innovs[j].residual[i]) for j in range(N)) / N
+        C = sum(np.outer(innovs[j].nu[i], innovs[j].nu[i]) for j in range(N)) / N
         np.testing.assert_allclose(beliefs[k].C[i], C, rtol=1e-12)
         S = innovs[k].cov[i]
         np.testing.assert_allclose(beliefs[k].S[i], S, rtol=1e-15)
@@ -509,7 +509,7 @@ def test_missing_measurement_row_keeps_the_prediction_and_the_adaptation_memory(
             np.testing.assert_array_equal(b.R[1], pred.R[1])
             np.testing.assert_array_equal(b.residuals[1], pred.residuals[1])
             assert b.count[1] == pred.count[1] == k
-            assert np.all(np.isnan(innov.residual[1]))
+            assert np.all(np.isnan(innov.nu[1]))
             # R of row 1 would have moved with the measurement: the test can fail
             assert not np.array_equal(ref[k].R[1], pred.R[1])
         if k <= k_miss:  # the other rows are unaffected
@@ -649,7 +649,7 @@ def test_around_ekf_and_ukf_zero_outputs_are_the_base_and_r_grows_from_too_small
     for k in (0, 30, T - 1):
         np.testing.assert_allclose(fb[k].mean, bb[k].mean, rtol=1e-12)
         np.testing.assert_allclose(fb[k].cov, bb[k].cov, rtol=1e-10, atol=1e-14)
-        np.testing.assert_allclose(fi[k].residual, bi[k].residual, rtol=1e-10, atol=1e-15)
+        np.testing.assert_allclose(fi[k].nu, bi[k].nu, rtol=1e-10, atol=1e-15)
     beliefs, _ = run(FuzzyAdaptive(base), z, small, motion, b0)
     R = np.array([diag(b.R) for b in beliefs])  # (T, B, 2)
     np.testing.assert_array_equal(R[:24], np.broadcast_to(np.diag(small.noise), (24, B, 2)))

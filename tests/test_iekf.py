@@ -31,7 +31,7 @@ def test_iekf_converges_to_the_map_of_a_bearing_update(line_search):
     np.testing.assert_allclose(one.mean, e.mean, rtol=1e-12)
     assert cost(e.mean) > cost(b.mean) + 0.1
     # the innovation is the one at the prediction
-    np.testing.assert_allclose(innov.residual, z - sensor.h(x0), rtol=1e-12)
+    np.testing.assert_allclose(innov.nu, z - sensor.h(x0), rtol=1e-12)
 
 
 def test_iekf_line_search_never_increases_the_cost_batched():

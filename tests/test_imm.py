@@ -21,7 +21,7 @@ from trackkit.filters.imm import (
     mixture_innovation,
     mode_probabilities,
 )
-from trackkit.models.sensors import SensorModel
+from trackkit.models.sensors import SensorBase
 
 CV = tk.models.ConstantVelocity(dim=2, q=0.01)
 CT = tk.models.CoordinatedTurn(q=0.0, q_omega=0.15)
@@ -106,7 +106,7 @@ def test_one_model_is_its_filter_bitwise():
         g = f.estimate(b)
         np.testing.assert_array_equal(g.mean, b1.mean)
         np.testing.assert_array_equal(g.cov, b1.cov)
-        np.testing.assert_array_equal(inn.residual, inn1.residual)
+        np.testing.assert_array_equal(inn.nu, inn1.nu)
         np.testing.assert_array_equal(inn.cov, inn1.cov)
         np.testing.assert_array_equal(b.mu, 1.0)
 
@@ -477,7 +477,7 @@ def test_innovation_and_likelihood_are_the_predicted_measurement_mixtures():
         Sj = [H @ b.cov[row, j, :4, :4] @ H.T + R for j in range(2)]
         zhat = c[0] * zh[0] + c[1] * zh[1]
         S = sum(c[j] * (Sj[j] + np.outer(zh[j] - zhat, zh[j] - zhat)) for j in range(2))
-        close(innov.residual[row], z[row] - zhat, what="residual")
+        close(innov.nu[row], z[row] - zhat, what="residual")
         close(innov.cov[row], S, what="S")
         lik = [multivariate_normal(zh[j], Sj[j]).pdf(z[row]) for j in range(2)]
         close(f.log_likelihood(b, z, POS)[row], np.log(c[0] * lik[0] + c[1] * lik[1]),
@@ -516,7 +516,7 @@ def test_missing_measurements_keep_the_prediction_and_leave_mu_at_c():
         np.testing.assert_array_equal(post.mu[row], b.mu[row])
         np.testing.assert_array_equal(post.mean[row], b.mean[row])
         np.testing.assert_array_equal(post.cov[row], b.cov[row])
-        assert np.isnan(innov.residual[row]).all()
+        assert np.isnan(innov.nu[row]).all()
     # S is the mixture's all the same (it does not depend on z): as with a plot there
     _, innov_any = f.update(b, np.where(np.isnan(z), 0.3, z), POS)
     close(innov.cov, innov_any.cov, what="S of the missing rows")
@@ -707,7 +707,7 @@ def test_s7_others_fill_beats_zero_fill():
 
 
 @dataclass(frozen=True, eq=False)
-class Skewed(SensorModel):
+class Skewed(SensorBase):
     """A linear sensor that is no selection of state components: z = H x + v."""
 
     linear: bool = field(default=True, init=False)
@@ -769,8 +769,8 @@ def test_fast_path_equals_the_general_path(case):
         (bf, inf_), (bs, ins) = fast.update(bf, z, sensor), slow.update(bs, z, sensor)
         for a, b in zip(bf, bs, strict=True):
             close(a, b, what="updated")
-        np.testing.assert_array_equal(np.isnan(inf_.residual), np.isnan(ins.residual))
-        close(np.nan_to_num(inf_.residual), np.nan_to_num(ins.residual), what="residual")
+        np.testing.assert_array_equal(np.isnan(inf_.nu), np.isnan(ins.nu))
+        close(np.nan_to_num(inf_.nu), np.nan_to_num(ins.nu), what="residual")
         close(inf_.cov, ins.cov, what="S")
         mu_moved = max(mu_moved, float(np.ptp(bs.mu)))
         pred = fast.predict(bf, None, 0.7)

@@ -240,7 +240,7 @@ def _close_moments(post, innov, want):
                                atol=1e-12 * np.abs(want["cov"]).max())
     np.testing.assert_allclose(innov.cov, want["S"], rtol=1e-12)
     spread = np.sqrt(np.diagonal(want["S"], axis1=-2, axis2=-1))
-    assert np.all(np.abs(innov.residual - want["nu"]) <= 1e-12 * spread)
+    assert np.all(np.abs(innov.nu - want["nu"]) <= 1e-12 * spread)
 
 
 @pytest.mark.parametrize("recursion", ["bayes", "paper"])
@@ -385,7 +385,7 @@ def test_a_missing_plot_keeps_the_prediction_of_its_row_only():
     np.testing.assert_array_equal(post.x[1], b.x[1])
     np.testing.assert_array_equal(post.counts[1], b.counts[1])
     np.testing.assert_array_equal(post.log_class_prob[1], b.log_class_prob[1])
-    assert np.isnan(innov.residual[1]).all() and np.isfinite(innov.residual[[0, 2]]).all()
+    assert np.isnan(innov.nu[1]).all() and np.isfinite(innov.nu[[0, 2]]).all()
     assert not np.array_equal(post.x[0], b.x[0])
     np.testing.assert_allclose(post.mean[1], f.estimate(b).mean[1], rtol=1e-12)
 
@@ -414,7 +414,7 @@ def test_batch_axes_lead_and_any_batch_shape_works():
     z = _z(np.tile([2.03e4, 2.504e4, 300.0, 40.0], (2, 3, 1)), np.random.default_rng(1))
     post, innov = f.update(b, z, RADAR)
     assert post.class_prob.shape == (2, 3, 2) and f.estimate(post).cov.shape == (2, 3, 4, 4)
-    assert innov.residual.shape == (2, 3, 2) and innov.cov.shape == (2, 3, 2, 2)
+    assert innov.nu.shape == (2, 3, 2) and innov.cov.shape == (2, 3, 2, 2)
 
 
 def test_a_generic_sensor_gives_the_range_bearing_fast_paths_numbers():

@@ -9,12 +9,12 @@ and still catches a wrong weight, index or sign, which is wrong at the 1e-3 .. 1
 from __future__ import annotations
 
 import numpy as np
-from trackkit.io.scans import Scan
 
 import trackkit as tk
 from trackkit import belief
 from trackkit.filters import imm as imm_module
 from trackkit.filters.imm import IMM
+from trackkit.io.scans import Scan
 from trackkit.tracking import tracker as tracker_module
 from trackkit.tracking.tracker import JPDA, Tracker
 

@@ -131,6 +131,11 @@ def test_bad_fields_are_named_with_their_values(change, field, value):
     assert f"  {field} = {value}: " in msg, msg
 
 
+def test_the_old_cost_name_is_refused_naming_the_new_one():
+    msg = _bad(lambda d: d["trackers"][0].update(cost="seed004"))
+    assert "  trackers.0.cost = 'seed004': cost 'seed004' is now spelled 'saturating'" in msg, msg
+
+
 def test_no_clutter_needs_the_trackers_clutter_density():
     msg = _bad(lambda d: d["scene"].update(clutter_per_scan=0.0))
     assert "trackers.0.clutter_density = (missing)" in msg and "no clutter" in msg

@@ -108,7 +108,7 @@ def test_update_with_replaced_r_equals_a_sensor_built_with_that_r_nonlinear(filt
     pw, iw = filt.update(b, z, wrapped)
     np.testing.assert_allclose(pw.mean, pb.mean, rtol=1e-13)
     np.testing.assert_allclose(pw.cov, pb.cov, rtol=1e-11, atol=1e-12)
-    np.testing.assert_allclose(iw.residual, ib.residual, rtol=1e-13, atol=1e-16)
+    np.testing.assert_allclose(iw.nu, ib.nu, rtol=1e-13, atol=1e-16)
     np.testing.assert_allclose(iw.cov, ib.cov, rtol=1e-13)
 
 

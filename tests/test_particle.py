@@ -177,7 +177,7 @@ def test_update_weights_are_the_normalised_gaussian_likelihoods():
         want = a - np.log(np.exp(a - a.max()).sum()) - a.max()
         np.testing.assert_allclose(post.log_weights[r], want, rtol=1e-12, atol=1e-12)
         zbar = w[r] @ b.states[r, :, :2]
-        np.testing.assert_allclose(innov.residual[r], z[r] - zbar, rtol=1e-12)
+        np.testing.assert_allclose(innov.nu[r], z[r] - zbar, rtol=1e-12)
         d = b.states[r, :, :2] - zbar
         np.testing.assert_allclose(innov.cov[r], (w[r, :, None] * d).T @ d + R, rtol=1e-12)
     assert np.array_equal(post.states, b.states)
@@ -226,7 +226,7 @@ def test_missing_rows_keep_the_prediction_and_get_a_nan_residual():
     post, innov = PF(ess_threshold=1.0).update(b, z, POS)
     assert np.array_equal(post.states[1], b.states[1])
     assert np.array_equal(post.log_weights[1], b.log_weights[1])
-    assert np.isnan(innov.residual[1]).all() and not np.isnan(innov.residual[[0, 2]]).any()
+    assert np.isnan(innov.nu[1]).all() and not np.isnan(innov.nu[[0, 2]]).any()
     assert np.isfinite(innov.cov).all()
     w = b.weights[1]
     d = b.states[1, :, :2] - w @ b.states[1, :, :2]
@@ -359,10 +359,10 @@ def test_bearing_innovation_is_circular_across_the_cut():
     w = b.weights
     unwrapped = np.where(bearings < 0, bearings + 2 * np.pi, bearings)
     mean = (w * unwrapped).sum(-1)
-    np.testing.assert_allclose(innov.residual[:, 0], wrap(z[:, 0] - mean), rtol=1e-10)
+    np.testing.assert_allclose(innov.nu[:, 0], wrap(z[:, 0] - mean), rtol=1e-10)
     var = (w * (unwrapped - mean[:, None]) ** 2).sum(-1)
     np.testing.assert_allclose(innov.cov[:, 0, 0], var + 0.02**2, rtol=1e-10)
-    assert np.all(np.abs(innov.residual) < 0.1)
+    assert np.all(np.abs(innov.nu) < 0.1)
 
 
 def test_equal_weights_after_init_and_resampling_give_the_same_numbers():
@@ -378,7 +378,7 @@ def test_equal_weights_after_init_and_resampling_give_the_same_numbers():
     z = np.array([[5.0, 0.3], [6.0, -0.2]])
     _, i1 = PF(ess_threshold=0.0).update(b, z, sensor)
     _, i2 = PF(ess_threshold=0.0).update(general, z, sensor)
-    np.testing.assert_allclose(i1.residual, i2.residual, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(i1.nu, i2.nu, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(i1.cov, i2.cov, rtol=1e-12, atol=1e-14)
 
 
@@ -417,7 +417,7 @@ def test_sensor_with_a_pose_per_batch_row():
         np.testing.assert_allclose(ll[r], log_likelihood(X[r], z[r], one), rtol=1e-12)
     b = Particles(X, np.full((B, N), -math.log(N)), np.random.default_rng(0))
     post, innov = PF(ess_threshold=0.0).update(b, z, sensor)
-    assert innov.residual.shape == (B, 2) and post.states.shape == (B, N, 4)
+    assert innov.nu.shape == (B, 2) and post.states.shape == (B, N, 4)
 
 
 def test_filter_runs_with_several_batch_axes_and_run_filter_passes_the_generator():

@@ -168,19 +168,19 @@ def test_model_is_port_starboard_symmetric():
 @pytest.mark.parametrize("norm", [IDENTITY, REF.norm])
 def test_jacobians_match_central_differences(norm):
     x, s, theta = _random_points(np.random.default_rng(4), 8)
-    T = 0.7
+    dt = 0.7
     # the step is quadratic in each state and linear in each coefficient, so central
     # differences have no truncation error: large steps keep the rounding error small
     for k in range(8):
         hx = 1e-2 * np.maximum(1.0, np.abs(x[k]))
-        Jx = step_jacobian_state(x[k], s[k], theta[k], T, norm)
-        Jfd = _central(lambda z, k=k: step(z, s[k], theta[k], T, norm), x[k], hx)
+        Jx = step_jacobian_state(x[k], s[k], theta[k], dt, norm)
+        Jfd = _central(lambda z, k=k: step(z, s[k], theta[k], dt, norm), x[k], hx)
         np.testing.assert_allclose(Jx, Jfd, rtol=1e-6, atol=1e-9 * np.abs(Jx).max())
         Jc = rhs_jacobian(x[k], s[k], theta[k], norm)
-        np.testing.assert_allclose(Jx, np.eye(3) + T * Jc, rtol=1e-15)
+        np.testing.assert_allclose(Jx, np.eye(3) + dt * Jc, rtol=1e-15)
         ht = 1e-2 * np.maximum(1.0, np.abs(theta[k]))
-        Jt = step_jacobian_theta(x[k], s[k], T, norm)
-        Jtfd = _central(lambda th, k=k: step(x[k], s[k], th, T, norm), theta[k], ht)
+        Jt = step_jacobian_theta(x[k], s[k], dt, norm)
+        Jtfd = _central(lambda th, k=k: step(x[k], s[k], th, dt, norm), theta[k], ht)
         np.testing.assert_allclose(Jt, Jtfd, rtol=1e-6, atol=1e-9 * np.abs(Jt).max())
 
 
@@ -189,10 +189,10 @@ def test_jacobians_match_central_differences(norm):
 def test_augmented_jacobian_matches_central_differences(seed):
     x, s, theta = _random_points(np.random.default_rng(seed), 1)
     xa = np.concatenate([x[0], theta[0]])
-    T = 1.0
-    F = augmented_jacobian(xa, s[0], T, REF.norm)
+    dt = 1.0
+    F = augmented_jacobian(xa, s[0], dt, REF.norm)
     h = 1e-2 * np.maximum(1.0, np.abs(xa))
-    Ffd = _central(lambda z: augmented_step(z, s[0], T, REF.norm), xa, h)
+    Ffd = _central(lambda z: augmented_step(z, s[0], dt, REF.norm), xa, h)
     np.testing.assert_allclose(F, Ffd, rtol=1e-6, atol=1e-9 * np.abs(F).max())
     np.testing.assert_array_equal(F[3:, 3:], np.eye(16))
     np.testing.assert_array_equal(F[3:, :3], 0.0)
@@ -300,7 +300,7 @@ def test_augmented_vessel_runs_in_the_filters(make):
                                atol=1e-6)
     post, innov = f.update(pred, np.array([[9.2, 0.1, 0.01], [9.3, -0.1, 0.0]]), sensor)
     assert post.mean.shape == (2, 19) and post.cov.shape == (2, 19, 19)
-    assert np.all(np.isfinite(post.cov)) and innov.residual.shape == (2, 3)
+    assert np.all(np.isfinite(post.cov)) and innov.nu.shape == (2, 3)
     assert np.all(np.diagonal(post.cov, axis1=-2, axis2=-1) <= np.diagonal(pred.cov, 0, -2, -1)
                   + 1e-15)
 
@@ -320,9 +320,9 @@ def test_augmented_vessel_noise_is_the_random_walk():
     (lambda: rhs([1.0, 2.0, 3.0], [0, 0, 0], REF.theta), "s"),
     (lambda: rhs([1.0, 2.0, 3.0], [0, 0], REF.theta[:15]), "theta"),
     (lambda: rhs([np.nan, 2.0, 3.0], [0, 0], REF.theta), "x"),
-    (lambda: step([1.0, 2.0, 3.0], [0, 0], REF.theta, np.nan), "T"),
-    (lambda: step([1.0, 2.0, 3.0], [0, 0], REF.theta, np.inf), "T"),
-    (lambda: step([1.0, 2.0, 3.0], [0, 0], REF.theta, -1.0), "T"),
+    (lambda: step([1.0, 2.0, 3.0], [0, 0], REF.theta, np.nan), "dt"),
+    (lambda: step([1.0, 2.0, 3.0], [0, 0], REF.theta, np.inf), "dt"),
+    (lambda: step([1.0, 2.0, 3.0], [0, 0], REF.theta, -1.0), "dt"),
     (lambda: augmented_step(np.zeros(18), [0, 0], 1.0), "xa"),
     (lambda: Normalisation(length=-1.0), "length"),
     (lambda: Normalisation(speed=np.inf), "speed"),
@@ -334,4 +334,14 @@ def test_augmented_vessel_noise_is_the_random_walk():
 ])
 def test_bad_input_names_the_field(call, field):
     with pytest.raises(ValueError, match=field):
+        call()
+
+
+@pytest.mark.parametrize("call", [
+    lambda: step([1.0, 2.0, 3.0], [0, 0], REF.theta, T=1.0),
+    lambda: augmented_step(np.zeros(19), [0, 0], T=1.0),
+    lambda: augmented_jacobian(np.zeros(19), [0, 0], T=1.0),
+])
+def test_old_time_step_keyword_is_refused_naming_dt(call):
+    with pytest.raises(TypeError, match="'T' is now spelled 'dt'"):
         call()

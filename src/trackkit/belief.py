@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.linalg import check_covariance, symmetrize
+from trackkit.renamed import renamed_attribute
 
 __all__ = ["Gaussian", "Particles", "Innovation", "check_gaussian", "moment_match"]
 
@@ -177,20 +178,22 @@ class Particles(_ParticlesFields):
 
 
 class Innovation(NamedTuple):
-    """Measurement innovation ``residual = z - zhat`` (angles wrapped) and its covariance S.
+    """Measurement innovation ``nu = z - zhat`` (angles wrapped) and its covariance S.
 
-    Rows with a missing measurement (``nan`` in z) have a ``nan`` residual.
+    Rows with a missing measurement (``nan`` in z) have a ``nan`` innovation.
     """
 
-    residual: NDArray[np.float64]
+    nu: NDArray[np.float64]
     cov: NDArray[np.float64]
+
+    residual = renamed_attribute("Innovation", "residual", "nu")
 
     @property
     def nis(self) -> NDArray[np.float64]:
-        """Normalised innovation squared ``r^T S^{-1} r`` per batch row (nan where missing)."""
+        """Normalised innovation squared ``nu^T S^{-1} nu`` per batch row (nan where missing)."""
         from trackkit.linalg import quadratic_form
 
-        return quadratic_form(self.cov, self.residual)
+        return quadratic_form(self.cov, self.nu)
 
 
 def check_gaussian(mean: ArrayLike, cov: ArrayLike, name: str = "belief") -> Gaussian:

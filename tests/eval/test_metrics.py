@@ -59,7 +59,7 @@ def run_kf(runs: int, steps: int, seed: int, q_filter_factor: float = 1.0,
 def accumulate(truths, ests, innovs, rows=slice(None), **kwargs) -> MonteCarloMetrics:
     acc = MonteCarloMetrics(groups=kwargs.pop("groups", GROUPS), **kwargs)
     for k, (x, b, i) in enumerate(zip(truths, ests, innovs, strict=True)):
-        acc.add(k, x[rows], b.at(rows), tk.Innovation(i.residual[rows], i.cov[rows]))
+        acc.add(k, x[rows], b.at(rows), tk.Innovation(i.nu[rows], i.cov[rows]))
     return acc
 
 
@@ -87,7 +87,7 @@ def _position_independent(truths, ests, innovs):
         out_e.append(tk.Gaussian(np.concatenate([b.mean, np.zeros((R, 1))], axis=1), cov))
         S = np.zeros_like(i.cov)
         S[:, [0, 1], [0, 1]] = np.diagonal(i.cov, axis1=1, axis2=2)
-        out_i.append(tk.Innovation(i.residual, S))
+        out_i.append(tk.Innovation(i.nu, S))
     return out_t, out_e, out_i
 
 
@@ -271,10 +271,10 @@ def test_nis_skips_missing_measurements():
     acc = accumulate(truths, ests, innovs)
     counts = acc.count("nis")
     for k, i in enumerate(innovs):
-        present = ~np.isnan(i.residual).any(-1)
+        present = ~np.isnan(i.nu).any(-1)
         assert 0 < present.sum() < 400  # the scenario really has missing rows
         assert counts[k] == present.sum()
-        r, S = i.residual[present], i.cov[present]
+        r, S = i.nu[present], i.cov[present]
         nis = np.einsum("ri,rij,rj->r", r, np.linalg.inv(S), r)
         np.testing.assert_allclose(acc.nis()[k], nis.mean(), rtol=1e-12)
         lo, hi = acc.bounds("nis")

@@ -9,7 +9,7 @@ FilterPy's ``GHFilter(x, dx, dt, g, h)`` and ``GHKFilter(x, dx, ddx, dt, g, h, k
     x       = x_pred + g y
 
 which is the thesis's recursion (eqs. 2-4..2-6, 2-33..2-36) with (g, h, k) = (alpha, beta,
-gamma): FilterPy's acceleration gain 2 k / dt^2 is trackkit's convention 2 gamma / T^2, so no
+gamma): FilterPy's acceleration gain 2 k / dt^2 is trackkit's convention 2 gamma / dt^2, so no
 mapping is needed. Where the definitions differ:
 
 - Start-up: FilterPy starts from the x, dx (ddx) it is given and applies the constant gains
@@ -154,5 +154,5 @@ def test_gain_designers_and_gh_vrf_agree():
         assert least_squares_parameters(n) == pytest.approx(simpson(n + 1), rel=1e-15, abs=0)
     for g, h, dt in [(0.5, 0.167, 1.0), (0.75, 0.25, 0.3), (0.2, 0.02, 2.0)]:
         vx, vdx = GHFilter(0.0, 0.0, dt, g, h).VRF()
-        r = vrr(g, h, T=dt)
+        r = vrr(g, h, dt=dt)
         assert (r.x, r.v) == pytest.approx((vx, vdx), rel=1e-12, abs=0)

@@ -94,7 +94,7 @@ def s5():
     window = gap_and_after(mask, 10)
     out = {}
     for name, h in (("B0", Coast()), ("B2", MeanOfLast(5)), ("P", PolynomialFit(2, 20))):
-        run = run_with_gaps(tk.filters.KF(), prior, z, mask, h, motion, sensor, S5_DT,
+        run = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, S5_DT, mask, h,
                             keep_cov=False)
         out[name] = per_run_rmse(run.estimate.mean[..., 0] - x[1:, :, 0], window)
     return out
@@ -155,7 +155,7 @@ def s6():
     window = gap_and_after(mask, 10)
     out = {}
     for name, h in (("B0", Coast()), ("B1", HoldLast()), ("P", SineFit(window=49))):
-        run = run_with_gaps(tk.filters.EKF(), prior, z, mask, h, motion, sensor, S6_DT,
+        run = run_with_gaps(tk.filters.EKF(), prior, motion, sensor, z, S6_DT, mask, h,
                             keep_cov=False)
         out[name] = per_run_rmse(wrap(run.estimate.mean[..., 0] - x[1:, :, 0]), window)
     return out
@@ -201,7 +201,7 @@ def s4():
     t = measurement_times(S4_STEPS, S4_DT)
 
     def run(mask, h):
-        r = run_with_gaps(tk.filters.KF(), prior, z, mask, h, motion, sensor, S4_DT)
+        r = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, S4_DT, mask, h)
         return r, r.estimate.mean[..., 0] - x[1:, :, 0]
 
     _, e_ref = run(np.zeros(S4_STEPS, bool), Coast())

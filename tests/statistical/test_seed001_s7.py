@@ -121,7 +121,7 @@ def gap_at(first: int) -> dict:
     window = gap_and_after(mask, AFTER)
     out = {}
     for name, handler in HANDLERS.items():
-        r = run_with_gaps(f, b, z, mask, handler, None, POS, DT, DETECTOR)
+        r = run_with_gaps(f, b, None, POS, z, DT, mask, handler, DETECTOR)
         e = r.estimate.mean[..., :2] - X[1:K + 1, None, :2]
         nees = quadratic_form(r.estimate.cov[..., :2, :2], e, "position covariance")
         out[name] = {"rmse": np.sqrt(np.mean(np.sum(e[window] ** 2, -1), 0)),

@@ -21,11 +21,11 @@ class Scene(NamedTuple):
     sensor: object
     z: np.ndarray  # (D, 2)
     clutter_density: float
-    p_d: float
+    pd: float
 
 
 def scene(rng: np.random.Generator, T: int, side: float = 2000.0, clutter: float = 20.0,
-          p_d: float = 0.9, sigma: float = 10.0, pos_std: tuple[float, float] = (5.0, 40.0),
+          pd: float = 0.9, sigma: float = 10.0, pos_std: tuple[float, float] = (5.0, 40.0),
           q: float = 0.5) -> Scene:
     """A random scene: ``T`` tracks in a ``side`` x ``side`` square, ``clutter`` false
     plots on average."""
@@ -45,18 +45,18 @@ def scene(rng: np.random.Generator, T: int, side: float = 2000.0, clutter: float
     pred = tk.filters.KF().predict(prior, motion, 1.0)
     S = pred.cov[:, :2, :2] + sigma**2 * np.eye(2)
     L = np.linalg.cholesky(S)
-    detected = rng.uniform(size=T) < p_d
+    detected = rng.uniform(size=T) < pd
     n = int(detected.sum())
     zt = pred.mean[detected, :2] + (L[detected] @ rng.standard_normal((n, 2, 1)))[..., 0]
     n_clutter = rng.poisson(clutter)
     zc = rng.uniform(0, side, (n_clutter, 2))
     z = np.concatenate([zt, zc])
     z = z[rng.permutation(z.shape[0])]
-    return Scene(prior, motion, pred, sensor, z, clutter / side**2, p_d)
+    return Scene(prior, motion, pred, sensor, z, clutter / side**2, pd)
 
 
 def scene_range_bearing(rng: np.random.Generator, T: int, clutter: float = 20.0,
-                        p_d: float = 0.9, sigma_range: float = 10.0,
+                        pd: float = 0.9, sigma_range: float = 10.0,
                         sigma_bearing: float = 0.01, span: float = 0.3,
                         r_lim: tuple[float, float] = (1000.0, 3000.0)) -> Scene:
     """A radar at the origin (``RangeBearing``, mathematical bearings) looking west, so that
@@ -80,7 +80,7 @@ def scene_range_bearing(rng: np.random.Generator, T: int, clutter: float = 20.0,
     zhat, H = sensor.linearize(pred.mean)
     S = H @ pred.cov @ H.mT + sensor.noise
     L = np.linalg.cholesky(S)
-    detected = rng.uniform(size=T) < p_d
+    detected = rng.uniform(size=T) < pd
     n = int(detected.sum())
     zt = zhat[detected] + (L[detected] @ rng.standard_normal((n, 2, 1)))[..., 0]
     n_clutter = rng.poisson(clutter)
@@ -90,4 +90,4 @@ def scene_range_bearing(rng: np.random.Generator, T: int, clutter: float = 20.0,
     z[:, 1] = tk.angles.wrap(z[:, 1])
     z = z[rng.permutation(z.shape[0])]
     density = clutter / ((r_lim[1] - r_lim[0]) * 2 * span)
-    return Scene(prior, motion, pred, sensor, z, density, p_d)
+    return Scene(prior, motion, pred, sensor, z, density, pd)

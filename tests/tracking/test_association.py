@@ -17,11 +17,11 @@ from trackkit.tracking.association import (
     Costs,
     clusters,
     distance_costs,
-    gnn,
-    jpda,
+    gnn_assign,
+    jpda_probabilities,
     loglik_costs,
     pda_costs,
-    seed004_costs,
+    saturating_costs,
 )
 from trackkit.tracking.gating import Gate, gate, predict_measurement
 
@@ -113,14 +113,14 @@ def test_gnn_global_beats_greedy():
     g = make_gate([(0, 0), (0, 1), (1, 0), (1, 1)], T=2, D=3)
     costs = Costs(np.array([1.0, 2.0, 2.0, 10.0]), np.array([20.0, 20.0]))
     for method in ("sparse", "clusters", "dense", "auto"):
-        a = gnn(g, costs, method=method)
+        a = gnn_assign(g, costs, method=method)
         np.testing.assert_array_equal(a.det, [1, 0])
         np.testing.assert_array_equal(a.unassigned, [2])
         assert a.cost == 4.0
     # a cheap miss for track 1: t0 -> d0, t1 misses (1 + 2.5 < 4)
     costs = Costs(np.array([1.0, 2.0, 2.0, 10.0]), np.array([20.0, 2.5]))
     for method in ("sparse", "clusters", "dense", "auto"):
-        a = gnn(g, costs, method=method)
+        a = gnn_assign(g, costs, method=method)
         np.testing.assert_array_equal(a.det, [0, -1])
         np.testing.assert_array_equal(a.unassigned, [1, 2])
         assert a.cost == 3.5
@@ -129,13 +129,13 @@ def test_gnn_global_beats_greedy():
 def test_gnn_negative_and_forbidden_costs():
     g = make_gate([(0, 0), (1, 0), (2, 1)], T=3, D=2)
     costs = Costs(np.array([-5.0, np.inf, -1.0]), np.array([0.0, -3.0, -2.0]))
-    a = gnn(g, costs)
+    a = gnn_assign(g, costs)
     np.testing.assert_array_equal(a.det, [0, -1, -1])
     assert a.cost == -10.0
     with pytest.raises(ValueError, match="miss"):
-        gnn(g, Costs(np.zeros(3), np.array([0.0, np.inf, 0.0])))
+        gnn_assign(g, Costs(np.zeros(3), np.array([0.0, np.inf, 0.0])))
     with pytest.raises(ValueError, match="shapes"):
-        gnn(g, Costs(np.zeros(2), np.zeros(3)))
+        gnn_assign(g, Costs(np.zeros(2), np.zeros(3)))
 
 
 def _brute_gnn(g, costs):
@@ -157,9 +157,9 @@ def _brute_gnn(g, costs):
 def test_gnn_is_optimal(g, miss):
     rng = np.random.default_rng(g.size)
     costs = Costs(g.d2 - 3.0, np.full(g.n_tracks, miss) + rng.uniform(0, 1, g.n_tracks))
-    a = gnn(g, costs, method="sparse")
-    b = gnn(g, costs, method="clusters")
-    c = gnn(g, costs, method="dense")
+    a = gnn_assign(g, costs, method="sparse")
+    b = gnn_assign(g, costs, method="clusters")
+    c = gnn_assign(g, costs, method="dense")
     best = _brute_gnn(g, costs)
     assert a.cost == pytest.approx(best, abs=1e-9)
     assert b.cost == pytest.approx(best, abs=1e-9)
@@ -184,9 +184,9 @@ def test_gnn_auto_takes_dense_below_the_threshold_and_clusters_above(T, monkeypa
     z = np.concatenate([pos + rng.normal(0, 1.0, (T, 2)), rng.uniform(0, 50.0 * T, (T, 2))])
     g = gate(pos, np.broadcast_to(np.eye(2) * 4.0, (T, 2, 2)), z, 0.99)
     costs = Costs(g.d2 - 3.0, np.full(T, 2.0))
-    ref = gnn(g, costs, method="sparse")
+    ref = gnn_assign(g, costs, method="sparse")
     for method in ("clusters", "dense"):
-        a = gnn(g, costs, method=method)
+        a = gnn_assign(g, costs, method=method)
         np.testing.assert_array_equal(a.det, ref.det)
         assert a.cost == pytest.approx(ref.cost, rel=1e-12)
     taken = []
@@ -194,19 +194,19 @@ def test_gnn_auto_takes_dense_below_the_threshold_and_clusters_above(T, monkeypa
         real = getattr(association, name)
         monkeypatch.setattr(association, name,
                             lambda *a, _r=real, _n=name: taken.append(_n) or _r(*a))
-    np.testing.assert_array_equal(gnn(g, costs).det, ref.det)
+    np.testing.assert_array_equal(gnn_assign(g, costs).det, ref.det)
     dense = T * (g.n_dets + T) <= association.GNN_DENSE_MAX_CELLS
     assert taken == ["_gnn_dense" if dense else "_gnn_clusters"]
     assert (T == 400) != dense
 
 
 @settings(max_examples=60, deadline=None)
-@given(g=random_gates(max_t=5, max_d=5), p_d=st.floats(0.3, 0.99),
+@given(g=random_gates(max_t=5, max_d=5), pd=st.floats(0.3, 0.99),
        lam=st.floats(1e-4, 1.0))
-def test_gnn_loglik_is_the_most_probable_event(g, p_d, lam):
+def test_gnn_loglik_is_the_most_probable_event(g, pd, lam):
     """With loglik costs the GNN picks the joint event of largest JPDA weight."""
-    a = gnn(g, loglik_costs(g, p_d, lam))
-    w = _brute_events(g, p_d, lam)
+    a = gnn_assign(g, loglik_costs(g, pd, lam))
+    w = _brute_events(g, pd, lam)
     best = max(w, key=w.get)
     assert w[tuple(a.det.tolist())] == pytest.approx(w[best], rel=1e-9)
 
@@ -221,10 +221,10 @@ def test_cost_functions_hand_computed():
     np.testing.assert_array_equal(c.pair, [1.0, 2.0, np.inf])  # d = 4 >= 3 is forbidden
     np.testing.assert_array_equal(c.miss, [3.0, 3.0])
     assert distance_costs(g).miss[0] == np.sqrt(g.threshold)
-    c = seed004_costs(g, k1=2.0, k2=0.25)
+    c = saturating_costs(g, k1=2.0, k2=0.25)
     np.testing.assert_allclose(c.pair, 2.0 * (1 - np.exp(-0.25 * g.d2)), rtol=1e-15)
     np.testing.assert_array_equal(c.miss, [2.0, 2.0])
-    assert seed004_costs(g, miss_cost=0.5).miss.tolist() == [0.5, 0.5]
+    assert saturating_costs(g, miss_cost=0.5).miss.tolist() == [0.5, 0.5]
     # PDA probabilities: per track, beta_ij = L_ij / (1 - P_D P_G + sum_j L_ij)
     c = pda_costs(g, 0.9, 1e-3, 0.99)
     L = 0.9 * np.exp(g.loglik) / 1e-3
@@ -232,28 +232,32 @@ def test_cost_functions_hand_computed():
     np.testing.assert_allclose(-c.pair, [L[0] / (b + L[0] + L[1]), L[1] / (b + L[0] + L[1]),
                                          L[2] / (b + L[2])], rtol=1e-12)
     np.testing.assert_allclose(-c.miss, [b / (b + L[0] + L[1]), b / (b + L[2])], rtol=1e-12)
-    with pytest.raises(ValueError, match="p_d"):
+    with pytest.raises(ValueError, match="pd"):
         loglik_costs(g, 0.0, 1.0)
+    for costs in (loglik_costs, pda_costs, jpda_probabilities):
+        with pytest.raises(TypeError, match="'p_d' is now spelled 'pd'"):
+            costs(g, p_d=0.9, clutter_density=1.0)
     with pytest.raises(ValueError, match="clutter_density"):
         pda_costs(g, 0.5, 0.0)
     with pytest.raises(ValueError, match="distance"):
-        seed004_costs(g, distance="euclid")
+        saturating_costs(g, distance="euclid")
 
 
-def test_seed004_residual_distance_wraps_bearings():
-    """Seed 004 costs the bearing difference gamma = alpha_hat - alpha_z, wrapped."""
+def test_saturating_residual_distance_wraps_bearings():
+    """The saturating cost (Jalalipoor and Kardehi Moghaddam 2021) of the bearing difference
+    gamma = alpha_hat - alpha_z is wrapped."""
     zhat = np.array([[np.pi - 0.01]])
     z = np.array([[-np.pi + 0.01], [np.pi - 0.05]])
     g = gate(zhat, np.full((1, 1, 1), 0.02**2), z, threshold=100.0, angular=[True])
-    c = seed004_costs(g, k1=1.0, k2=100.0, distance="residual")
+    c = saturating_costs(g, k1=1.0, k2=100.0, distance="residual")
     np.testing.assert_allclose(c.pair, 1 - np.exp(-100.0 * np.array([0.02, 0.04]) ** 2),
                                rtol=1e-9)
-    assert gnn(g, c).det.tolist() == [0]
+    assert gnn_assign(g, c).det.tolist() == [0]
 
 
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 10_000), T=st.integers(1, 8), D=st.integers(1, 8))
-def test_seed004_without_gate_is_rectangular_munkres(seed, T, D):
+def test_saturating_without_gate_is_rectangular_munkres(seed, T, D):
     """With every pair gated and a miss costing K1, the GNN makes min(T, D) assignments, the
     same as Munkres on the T x D matrix of K1 (1 - exp(-K2 d2)) (the paper's method)."""
     rng = np.random.default_rng(seed)
@@ -262,8 +266,8 @@ def test_seed004_without_gate_is_rectangular_munkres(seed, T, D):
     S = np.tile(np.eye(2) * 4.0, (T, 1, 1))
     g = gate(zhat, S, z, threshold=1e9)
     assert g.size == T * D
-    c = seed004_costs(g, k1=3.0, k2=0.2)
-    a = gnn(g, c)
+    c = saturating_costs(g, k1=3.0, k2=0.2)
+    a = gnn_assign(g, c)
     r, col = linear_sum_assignment(c.pair.reshape(T, D))
     assert (a.det >= 0).sum() == min(T, D)
     assert a.cost == pytest.approx(c.pair.reshape(T, D)[r, col].sum() + 3.0 * (T - len(r)),
@@ -275,8 +279,8 @@ def test_gnn_methods_agree_on_scenes():
         sc = scene(np.random.default_rng(seed), 300, side=3000.0, clutter=40.0)
         mp = predict_measurement(sc.predicted, sc.sensor)
         g = gate(mp.zhat, mp.S, sc.z)
-        c = loglik_costs(g, sc.p_d, sc.clutter_density)
-        a, b = gnn(g, c, "sparse"), gnn(g, c, "clusters")
+        c = loglik_costs(g, sc.pd, sc.clutter_density)
+        a, b = gnn_assign(g, c, "sparse"), gnn_assign(g, c, "clusters")
         np.testing.assert_array_equal(a.det, b.det)
         np.testing.assert_array_equal(a.unassigned, b.unassigned)
         assert a.cost == pytest.approx(b.cost, rel=1e-12)
@@ -285,9 +289,9 @@ def test_gnn_methods_agree_on_scenes():
 # -- JPDA -------------------------------------------------------------------------------------
 
 
-def _brute_events(g, p_d, lam, p_g=None):
+def _brute_events(g, pd, lam, p_g=None):
     """Weight of every feasible joint event, keyed by each track's detection (-1 = miss)."""
-    p_g = chi2.cdf(g.threshold, g.residual.shape[1]) if p_g is None else p_g
+    p_g = chi2.cdf(g.threshold, g.nu.shape[1]) if p_g is None else p_g
     options = [[-1] + [int(j) for j in g.det[g.track == i]] for i in range(g.n_tracks)]
     ll = {(int(t), int(d)): v for t, d, v in zip(g.track, g.det, g.loglik, strict=True)}
     w = {}
@@ -295,13 +299,13 @@ def _brute_events(g, p_d, lam, p_g=None):
         dets = [j for j in ev if j >= 0]
         if len(dets) != len(set(dets)):
             continue
-        w[ev] = np.prod([1 - p_d * p_g if j < 0 else p_d * np.exp(ll[(i, j)]) / lam
+        w[ev] = np.prod([1 - pd * p_g if j < 0 else pd * np.exp(ll[(i, j)]) / lam
                          for i, j in enumerate(ev)])
     return w
 
 
-def _brute_marginals(g, p_d, lam):
-    w = _brute_events(g, p_d, lam)
+def _brute_marginals(g, pd, lam):
+    w = _brute_events(g, pd, lam)
     total = sum(w.values())
     beta = np.array([sum(v for ev, v in w.items() if ev[t] == d)
                      for t, d in zip(g.track, g.det, strict=True)]) / total
@@ -313,28 +317,28 @@ def _brute_marginals(g, p_d, lam):
 def test_jpda_hand_computed():
     """Two tracks sharing one detection: events {-, -}, {d, -}, {-, d}, weights b^2, r0 b,
     r1 b, with r_i = P_D N_i / lambda and b = 1 - P_D P_G."""
-    p_d, lam, p_g = 0.8, 0.01, 0.99
+    pd, lam, p_g = 0.8, 0.01, 0.99
     g = make_gate([(0, 0), (1, 0)], T=2, D=1, loglik=[np.log(0.05), np.log(0.02)])
-    r0, r1, b = p_d * 0.05 / lam, p_d * 0.02 / lam, 1 - p_d * p_g
+    r0, r1, b = pd * 0.05 / lam, pd * 0.02 / lam, 1 - pd * p_g
     Z = b * b + r0 * b + r1 * b
-    res = jpda(g, p_d, lam, p_g)
+    res = jpda_probabilities(g, pd, lam, p_g)
     np.testing.assert_allclose(res.beta, [r0 * b / Z, r1 * b / Z], rtol=1e-14)
     np.testing.assert_allclose(res.beta0, [(b * b + r1 * b) / Z, (b * b + r0 * b) / Z],
                                rtol=1e-14)
     assert not res.approximated.any()
     # a single track: the PDA, beta_j = r_j / (b + sum r)
     g = make_gate([(0, 0), (0, 1)], T=2, D=3, loglik=[np.log(0.05), np.log(0.02)])
-    res = jpda(g, p_d, lam, p_g)
+    res = jpda_probabilities(g, pd, lam, p_g)
     np.testing.assert_allclose(res.beta, np.array([r0, r1]) / (b + r0 + r1), rtol=1e-14)
     np.testing.assert_allclose(res.beta0, [b / (b + r0 + r1), 1.0], rtol=1e-14)
 
 
 @settings(max_examples=150, deadline=None)
-@given(g=random_gates(), p_d=st.floats(0.2, 1.0), lam=st.floats(1e-4, 10.0))
-def test_jpda_exact_equals_brute_force(g, p_d, lam):
-    res = jpda(g, p_d, lam)
+@given(g=random_gates(), pd=st.floats(0.2, 1.0), lam=st.floats(1e-4, 10.0))
+def test_jpda_exact_equals_brute_force(g, pd, lam):
+    res = jpda_probabilities(g, pd, lam)
     assert not res.approximated.any()
-    beta, beta0 = _brute_marginals(g, p_d, lam)
+    beta, beta0 = _brute_marginals(g, pd, lam)
     np.testing.assert_allclose(res.beta, beta, rtol=1e-10, atol=1e-300)
     np.testing.assert_allclose(res.beta0, beta0, rtol=1e-10, atol=1e-300)
     # per track the marginals sum to one; per detection at most one
@@ -344,13 +348,13 @@ def test_jpda_exact_equals_brute_force(g, p_d, lam):
 
 
 @settings(max_examples=80, deadline=None)
-@given(g=random_gates(max_t=7, max_d=7), p_d=st.floats(0.2, 1.0), lam=st.floats(1e-3, 10.0))
-def test_jpda_approximation_is_flagged_and_consistent(g, p_d, lam):
+@given(g=random_gates(max_t=7, max_d=7), pd=st.floats(0.2, 1.0), lam=st.floats(1e-3, 10.0))
+def test_jpda_approximation_is_flagged_and_consistent(g, pd, lam):
     """With max_events = 1 every multi-track cluster is approximated (LBP); its marginals still
     sum to one per track and at most one per detection. (How close they are to the exact
     ones depends on the cluster: loopy belief propagation has no error bound on a loopy
     graph; tests/tracking/test_stonesoup_association.py checks it against Stone Soup's.)"""
-    res = jpda(g, p_d, lam, max_events=1)
+    res = jpda_probabilities(g, pd, lam, max_events=1)
     ntr = np.bincount(res.clusters.track, minlength=res.clusters.count)
     has_pairs = np.bincount(res.clusters.track[g.track], minlength=res.clusters.count) > 0
     np.testing.assert_array_equal(res.approximated, (ntr > 1) & has_pairs)
@@ -364,8 +368,8 @@ def test_lbp_is_exact_on_a_cluster_without_cycles():
     marginals (up to its tolerance)."""
     g = make_gate([(0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (0, 3)], T=3, D=4,
                   loglik=[-1.0, -2.0, -0.5, -3.0, -1.5, -2.5])
-    exact = jpda(g, 0.9, 0.05)
-    approx = jpda(g, 0.9, 0.05, max_events=2)
+    exact = jpda_probabilities(g, 0.9, 0.05)
+    approx = jpda_probabilities(g, 0.9, 0.05, max_events=2)
     assert approx.approximated.tolist() == [True] and not exact.approximated.any()
     np.testing.assert_allclose(approx.beta, exact.beta, rtol=1e-10)
     np.testing.assert_allclose(approx.beta0, exact.beta0, rtol=1e-10)
@@ -375,8 +379,8 @@ def test_lbp_with_dominant_weights():
     """A pair 1e26 times likelier than the miss: the messages must not divide by a sum that
     rounded to zero (1 + total - r_ij), and the marginals stay finite and exact-like."""
     g = make_gate([(0, 0), (0, 1), (1, 0), (1, 1)], T=2, D=2, loglik=[60.0, 0.0, 0.0, 60.0])
-    res = jpda(g, 0.9, 1e-3, max_events=1)
-    exact = jpda(g, 0.9, 1e-3)
+    res = jpda_probabilities(g, 0.9, 1e-3, max_events=1)
+    exact = jpda_probabilities(g, 0.9, 1e-3)
     assert res.approximated.all() and np.all(np.isfinite(res.beta))
     np.testing.assert_allclose(res.beta, exact.beta, rtol=1e-12, atol=1e-20)
     np.testing.assert_allclose(res.beta0, exact.beta0, rtol=1e-6, atol=1e-30)
@@ -385,7 +389,7 @@ def test_lbp_with_dominant_weights():
 def test_gnn_rejects_unknown_method():
     g = make_gate([(0, 0)], T=1, D=1)
     with pytest.raises(ValueError, match="method"):
-        gnn(g, Costs(np.zeros(1), np.zeros(1)), method="hungarian")
+        gnn_assign(g, Costs(np.zeros(1), np.zeros(1)), method="hungarian")
 
 
 def test_jpda_large_cluster_falls_back():
@@ -394,12 +398,12 @@ def test_jpda_large_cluster_falls_back():
     sc = scene(np.random.default_rng(7), 60, side=500.0, clutter=30.0)
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z)
-    res = jpda(g, sc.p_d, sc.clutter_density, max_events=2000)
+    res = jpda_probabilities(g, sc.pd, sc.clutter_density, max_events=2000)
     assert res.approximated.any()
     np.testing.assert_allclose(np.bincount(g.track, res.beta, g.n_tracks) + res.beta0, 1.0,
                                rtol=1e-12)
     exact_clusters = ~res.approximated[res.clusters.track[g.track]]
-    ref = jpda(g, sc.p_d, sc.clutter_density)
+    ref = jpda_probabilities(g, sc.pd, sc.clutter_density)
     np.testing.assert_allclose(res.beta[exact_clusters], ref.beta[exact_clusters], rtol=1e-12)
 
 
@@ -431,14 +435,14 @@ def test_jpda_update_is_the_moment_matched_mixture(seed):
     sc = scene(rng, 6, side=300.0, clutter=15.0)
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z)
-    res = jpda(g, sc.p_d, sc.clutter_density)
+    res = jpda_probabilities(g, sc.pd, sc.clutter_density)
     P_upd = sc.predicted.cov - mp.K @ mp.S @ mp.K.mT
-    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.residual, res.beta, res.beta0,
+    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.nu, res.beta, res.beta0,
                        P_upd=P_upd)
     for i in range(6):
         sel = g.track == i
         means = [sc.predicted.mean[i]] + [sc.predicted.mean[i] + mp.K[i] @ nu
-                                          for nu in g.residual[sel]]
+                                          for nu in g.nu[sel]]
         covs = [sc.predicted.cov[i]] + [P_upd[i]] * int(sel.sum())
         w = np.concatenate([[res.beta0[i]], res.beta[sel]])
         m = sum(wk * mk for wk, mk in zip(w, means, strict=True))

@@ -442,7 +442,7 @@ def test_runner_marks_the_pseudo_steps(handler):
     motion, sensor, prior, z = _ca_problem()
     K = z.shape[0]
     mask = mask_by_time(measurement_times(K, 0.1), 2.0, 3.0)
-    run = run_with_gaps(tk.filters.KF(), prior, z, mask, handler, motion, sensor, 0.1)
+    run = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, 0.1, mask, handler)
     np.testing.assert_array_equal(run.missing, np.broadcast_to(mask[:, None], (K, 5)))
     if handler == "B0":
         assert not run.is_pseudo.any() and np.isnan(run.pseudo).all()
@@ -457,10 +457,10 @@ def test_runner_feeds_the_handlers_values_and_coasting_is_prediction():
     """B1's pseudo-measurements are the last real z; with B0 the gap is pure prediction."""
     motion, sensor, prior, z = _ca_problem()
     mask = mask_by_samples(z.shape[0], 20, 29)
-    run = run_with_gaps(tk.filters.KF(), prior, z, mask, HoldLast(), motion, sensor, 0.1)
+    run = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, 0.1, mask, HoldLast())
     np.testing.assert_array_equal(run.pseudo[20:30], np.broadcast_to(z[19], (10, 5, 1)))
     f = tk.filters.KF()
-    run0 = run_with_gaps(f, prior, z, mask, Coast(), motion, sensor, 0.1)
+    run0 = run_with_gaps(f, prior, motion, sensor, z, 0.1, mask, Coast())
     b = Gaussian(run0.estimate.mean[19], run0.estimate.cov[19])
     for k in range(20, 30):
         b = f.predict(b, motion, 0.1)
@@ -472,8 +472,8 @@ def test_runner_treats_nan_rows_as_missing_and_fills_them():
     motion, sensor, prior, z = _ca_problem()
     z = z.copy()
     z[10, 2] = np.nan  # a missed detection outside the mask
-    run = run_with_gaps(tk.filters.KF(), prior, z, np.zeros(z.shape[0], bool), "B1", motion,
-                        sensor, 0.1)
+    run = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, 0.1,
+                        np.zeros(z.shape[0], bool), "B1")
     assert run.missing.sum() == 1 and run.is_pseudo[10, 2]
     assert run.pseudo[10, 2, 0] == z[9, 2, 0]
 
@@ -485,8 +485,8 @@ def test_runner_fits_real_measurements_only():
     t = measurement_times(50, 0.1)
     truth = (1.0 + 2.0 * t - 0.4 * t**2)[:, None, None]
     mask = union(mask_by_samples(50, 20, 24), mask_by_samples(50, 28, 35))
-    run = run_with_gaps(tk.filters.KF(), prior, truth, mask, PolynomialFit(2, 10), motion,
-                        sensor, 0.1)
+    run = run_with_gaps(tk.filters.KF(), prior, motion, sensor, truth, 0.1,
+                        mask, PolynomialFit(2, 10))
     np.testing.assert_allclose(run.pseudo[mask], truth[mask], rtol=REL)
 
 
@@ -496,8 +496,8 @@ def test_runner_with_any_filter_on_a_linear_problem_equals_the_kf(make):
     filters reach the same numbers by another route)."""
     motion, sensor, prior, z = _ca_problem()
     mask = mask_by_samples(z.shape[0], 20, 34)
-    ref = run_with_gaps(tk.filters.KF(), prior, z, mask, "P", motion, sensor, 0.1)
-    run = run_with_gaps(make(), prior, z, mask, "P", motion, sensor, 0.1)
+    ref = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, 0.1, mask, "P")
+    run = run_with_gaps(make(), prior, motion, sensor, z, 0.1, mask, "P")
     np.testing.assert_allclose(run.estimate.mean, ref.estimate.mean, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(run.pseudo, ref.pseudo, rtol=1e-9)
 
@@ -507,7 +507,7 @@ def test_runner_with_a_filter_that_keeps_its_own_belief():
     motion, sensor, prior, z = _ca_problem()
     mask = mask_by_samples(z.shape[0], 20, 34)
     f = tk.filters.AMCEKF()
-    run = run_with_gaps(f, prior, z, mask, "B2", motion, sensor, 0.1)
+    run = run_with_gaps(f, prior, motion, sensor, z, 0.1, mask, "B2")
     assert isinstance(run.belief, tk.filters.AdaptiveBelief)
     np.testing.assert_array_equal(run.estimate.mean[-1], f.estimate(run.belief).mean)
     assert np.isfinite(run.estimate.mean).all() and run.is_pseudo[20:35].all()
@@ -522,7 +522,7 @@ def test_runner_sine_fit_with_the_ekf():
     z = np.sin(0.2 + 1.3 * t)[:, None, None]
     prior = Gaussian(np.array([[0.2, 1.3]]), np.array([np.diag([0.01, 0.01])]))
     mask = mask_by_samples(80, 49, 69)
-    run = run_with_gaps(tk.filters.EKF(), prior, z, mask, SineFit(40), motion, sensor, 0.1)
+    run = run_with_gaps(tk.filters.EKF(), prior, motion, sensor, z, 0.1, mask, SineFit(40))
     assert run.is_pseudo.sum() == 21
     np.testing.assert_allclose(run.pseudo[mask], z[mask], atol=1e-9)
 
@@ -535,10 +535,10 @@ def test_runner_rows_equal_single_rows():
     starts = np.array([10, 15, 20, 25, 12, 30])
     mask = union(mask_by_count(60, starts, 12), mask_by_count(60, 45, 3))
     for h in (HoldLast(), MeanOfLast(4), PolynomialFit(2, 15)):
-        full = run_with_gaps(tk.filters.KF(), prior, z, mask, h, motion, sensor, 0.1)
+        full = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, 0.1, mask, h)
         for r in range(6):
-            one = run_with_gaps(tk.filters.KF(), prior.at(slice(r, r + 1)), z[:, r:r + 1],
-                                mask[:, r:r + 1], h, motion, sensor, 0.1)
+            one = run_with_gaps(tk.filters.KF(), prior.at(slice(r, r + 1)), motion,
+                                sensor, z[:, r:r + 1], 0.1, mask[:, r:r + 1], h)
             np.testing.assert_array_equal(one.pseudo[:, 0], full.pseudo[:, r])
             np.testing.assert_array_equal(one.is_pseudo[:, 0], full.is_pseudo[:, r])
             np.testing.assert_allclose(one.estimate.mean[:, 0], full.estimate.mean[:, r],
@@ -563,43 +563,50 @@ def test_runner_feeds_the_detector_real_innovations_only():
 
     class Spy(StandInDetector):
         def step(self, s, innov):
-            seen.append(innov.residual.copy())
+            seen.append(innov.nu.copy())
             return super().step(s, innov)
 
-    run = run_with_gaps(tk.filters.KF(), prior, z, mask, PolynomialFit(1, 30, short_window=5),
-                        motion, sensor, 0.1, Spy(threshold=20.0))
+    run = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z,
+                        0.1, mask, PolynomialFit(1, 30, short_window=5), Spy(threshold=20.0))
     res = np.array(seen)[:, 0, 0]
     assert np.isnan(res[mask]).all() and np.isfinite(res[~mask]).all()
     assert run.maneuver.shape == (70, 1) and run.maneuver[mask].all()  # on, and held
     np.testing.assert_allclose(run.pseudo[mask, 0, 0], pos[mask], rtol=REL)  # short window
-    long = run_with_gaps(tk.filters.KF(), prior, z, mask, PolynomialFit(1, 30), motion,
-                         sensor, 0.1, det)
+    long = run_with_gaps(tk.filters.KF(), prior, motion, sensor, z, 0.1,
+                         mask, PolynomialFit(1, 30), det)
     assert np.abs(long.pseudo[mask, 0, 0] - pos[mask]).max() > 1.0
     assert long.maneuver is not None
 
 
 @pytest.mark.parametrize("call, match", [
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z[..., 0], np.zeros(60, bool), "B0",
-                                      m, s, 0.1), r"z has shape \(60, 5\)"),
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z, np.zeros(59, bool), "B0", m, s,
-                                      0.1), "mask has 59 time steps"),
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z, np.zeros(60), "B0", m, s, 0.1),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z[..., 0],
+                                      0.1, np.zeros(60, bool), "B0"), r"z has shape \(60, 5\)"),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z, 0.1, np.zeros(59, bool),
+                                      "B0"), "mask has 59 time steps"),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z, 0.1, np.zeros(60), "B0"),
      "dtype float64"),
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z, np.zeros(60, bool), "B7", m, s,
-                                      0.1), "name = 'B7'"),
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z, np.zeros(60, bool), 3, m, s,
-                                      0.1), "handler = 3"),
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z, np.zeros(60, bool),
-                                      PolynomialFit(1, 10, 3), m, s, 0.1), "detector=None"),
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z, np.zeros(60, bool), "B0", m, s,
-                                      0.0), "dt = 0.0"),
-    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, z, np.zeros((60, 4), bool), "B0",
-                                      m, s, 0.1), "do not broadcast"),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z, 0.1, np.zeros(60, bool),
+                                      "B7"), "name = 'B7'"),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z, 0.1, np.zeros(60, bool),
+                                      3), "handler = 3"),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z, 0.1, np.zeros(60, bool),
+                                      PolynomialFit(1, 10, 3)), "detector=None"),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z, 0.0, np.zeros(60, bool),
+                                      "B0"), "dt = 0.0"),
+    (lambda m, s, p, z: run_with_gaps(tk.filters.KF(), p, m, s, z,
+                                      0.1, np.zeros((60, 4), bool), "B0"), "do not broadcast"),
 ])
 def test_runner_bad_input_names_the_value(call, match):
     motion, sensor, prior, z = _ca_problem()
     with pytest.raises(ValueError, match=match):
         call(motion, sensor, prior, z)
+
+
+def test_runner_refuses_the_old_argument_order():
+    """(f, prior, z, mask, handler, motion, sensor, dt) is now run_filter's order."""
+    motion, sensor, prior, z = _ca_problem()
+    with pytest.raises(TypeError, match=r"expected \(f, prior, motion, sensor, z, dt, mask"):
+        run_with_gaps(tk.filters.KF(), prior, z, np.zeros(60, bool), "B0", motion, sensor, 0.1)
 
 
 @pytest.mark.parametrize("name", ["NISDetector", "FadingMemoryDetector", "WindowDetector"])
@@ -614,7 +621,7 @@ def test_runner_with_the_real_detectors(name):
     prior = Gaussian(np.array([[0.0, 1.0]]), np.array([np.diag([0.01, 0.01])]))
     mask = mask_by_time(t, 4.0, 5.0)
     det = getattr(maneuver, name)(dim_z=1)
-    run = run_with_gaps(tk.filters.KF(), prior, pos[:, None, None], mask,
-                        PolynomialFit(1, 30, short_window=5), motion, sensor, 0.1, det)
+    run = run_with_gaps(tk.filters.KF(), prior, motion, sensor,
+                        pos[:, None, None], 0.1, mask, PolynomialFit(1, 30, short_window=5), det)
     assert not run.maneuver[t < 3.0].any() and run.maneuver[mask].all()
     np.testing.assert_allclose(run.pseudo[mask, 0, 0], pos[mask], rtol=REL)

@@ -20,7 +20,7 @@ from trackkit.tracking.gating import (
 
 
 def _same(a, b):
-    for name in ("track", "det", "d2", "loglik", "residual"):
+    for name in ("track", "det", "d2", "loglik", "nu"):
         x, y = getattr(a, name), getattr(b, name)
         assert x.shape == y.shape and x.tobytes() == y.tobytes(), name
     assert (a.n_tracks, a.n_dets, a.threshold) == (b.n_tracks, b.n_dets, b.threshold)
@@ -36,12 +36,16 @@ def test_hand_computed():
     np.testing.assert_allclose(g.d2, [1.0, 1.0, 4.0, 4.25], rtol=1e-15)
     logdet = np.log(np.linalg.det(2 * np.pi * S[0]))  # log det(2 pi S) = log(4 (2 pi)^2)
     np.testing.assert_allclose(g.loglik, -0.5 * (g.d2 + logdet), rtol=1e-14)
-    np.testing.assert_array_equal(g.residual, z[[0, 1, 2, 4]])
+    np.testing.assert_array_equal(g.nu, z[[0, 1, 2, 4]])
     # the likelihood is the Gaussian density
     from scipy.stats import multivariate_normal
     np.testing.assert_allclose(np.exp(g.loglik),
                                multivariate_normal(np.zeros(2), S[0]).pdf(z[[0, 1, 2, 4]]),
                                rtol=1e-13)
+    with pytest.raises(AttributeError, match="Gate.residual is now spelled Gate.nu"):
+        _ = g.residual
+    with pytest.raises(AttributeError, match="Innovation.residual is now spelled Innovation.nu"):
+        _ = tk.Innovation(g.nu, S).residual
 
 
 def test_correlated_S_and_threshold():
@@ -62,8 +66,8 @@ def test_bearing_across_the_cut(method):
     g = gate(zhat, S, z, 0.99, angular=[True], method=method)
     np.testing.assert_array_equal(g.track, [0, 0, 1, 2, 2])
     np.testing.assert_array_equal(g.det, [0, 2, 1, 0, 2])
-    np.testing.assert_allclose(g.residual[:, 0], [0.02, 0.005, 0.01, 0.005, -0.01], atol=1e-12)
-    np.testing.assert_allclose(g.d2, (g.residual[:, 0] / 0.01) ** 2, rtol=1e-9)
+    np.testing.assert_allclose(g.nu[:, 0], [0.02, 0.005, 0.01, 0.005, -0.01], atol=1e-12)
+    np.testing.assert_allclose(g.d2, (g.nu[:, 0] / 0.01) ** 2, rtol=1e-9)
 
 
 def test_unwrapped_angles_in_input():
@@ -78,7 +82,7 @@ def test_unwrapped_angles_in_input():
 
 def test_empty_inputs():
     g = gate(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.ones((3, 2)))
-    assert g.size == 0 and g.n_tracks == 0 and g.n_dets == 3 and g.residual.shape == (0, 2)
+    assert g.size == 0 and g.n_tracks == 0 and g.n_dets == 3 and g.nu.shape == (0, 2)
     g = gate(np.zeros((2, 2)), np.tile(np.eye(2), (2, 1, 1)), np.zeros((0, 2)))
     assert g.size == 0 and g.n_dets == 0
     g = gate(np.zeros((2, 2)), np.tile(np.eye(2), (2, 1, 1)), [], method="kdtree")
@@ -125,7 +129,7 @@ def test_predict_measurement_matches_the_filter():
     np.testing.assert_allclose(mp.S, innov.cov, rtol=1e-12)
     np.testing.assert_allclose(mp.zhat, sensor.h(b.mean), rtol=1e-15)
     # the gain maps the innovation to the filter's update
-    np.testing.assert_allclose(b.mean + (mp.K @ innov.residual[..., None])[..., 0], post.mean,
+    np.testing.assert_allclose(b.mean + (mp.K @ innov.nu[..., None])[..., 0], post.mean,
                                rtol=1e-12)
 
 

@@ -1,4 +1,4 @@
-"""JPDA* (Blom and Bloem 2000): ``jpda(..., star=True)`` against a literal brute-force
+"""JPDA* (Blom and Bloem 2000): ``jpda_probabilities(..., star=True)`` against a literal brute-force
 enumeration, its invariants, equality with plain JPDA when no swap is more likely, and the
 coalescence it removes on swapped-symmetric geometry."""
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import trackkit as tk
-from trackkit.tracking.association import _log_ratio, jpda
+from trackkit.tracking.association import _log_ratio, jpda_probabilities
 from trackkit.tracking.gating import Gate, gate, predict_measurement
 from trackkit.tracking.tracker import JPDA
 
@@ -77,7 +77,7 @@ def random_gate(rng: np.random.Generator) -> Gate:
 def test_star_matches_brute_force(seed):
     g = random_gate(np.random.default_rng(seed))
     for star in (False, True):
-        r = jpda(g, PD, LAM, star=star)
+        r = jpda_probabilities(g, PD, LAM, star=star)
         beta, beta0 = brute(g, star)
         np.testing.assert_allclose(r.beta, beta, atol=1e-12)
         np.testing.assert_allclose(r.beta0, beta0, atol=1e-12)
@@ -92,12 +92,12 @@ def test_star_equals_plain_without_swaps():
     # a chain: no two tracks gate the same two detections, so no event has a swap
     g = make_gate([(0, 0), (0, 1), (1, 1), (1, 2), (2, 2), (2, 3)], T=3, D=4,
                   loglik=[-1.0, -0.5, -4.0, -0.2, -3.0, -2.0])
-    a, b = jpda(g, PD, LAM), jpda(g, PD, LAM, star=True)
+    a, b = jpda_probabilities(g, PD, LAM), jpda_probabilities(g, PD, LAM, star=True)
     np.testing.assert_array_equal(a.beta, b.beta)
     np.testing.assert_array_equal(a.beta0, b.beta0)
     # all four pairs gated but swaps exactly as likely: nothing is pruned
     g = make_gate([(0, 0), (0, 1), (1, 0), (1, 1)], T=2, D=2, loglik=[-1.0, -2.0, -3.0, -4.0])
-    a, b = jpda(g, PD, LAM), jpda(g, PD, LAM, star=True)
+    a, b = jpda_probabilities(g, PD, LAM), jpda_probabilities(g, PD, LAM, star=True)
     np.testing.assert_allclose(a.beta, b.beta, rtol=1e-14)
 
 
@@ -109,7 +109,7 @@ def test_star_equals_plain_well_separated():
     z = np.concatenate([x + rng.normal(0, 10.0, x.shape), rng.uniform(-50, 50, (4, 2))])
     mp = predict_measurement(prior, sensor)
     g = gate(mp.zhat, mp.S, z)
-    a, b = jpda(g, PD, LAM), jpda(g, PD, LAM, star=True)
+    a, b = jpda_probabilities(g, PD, LAM), jpda_probabilities(g, PD, LAM, star=True)
     np.testing.assert_array_equal(a.beta, b.beta)
     np.testing.assert_array_equal(a.beta0, b.beta0)
 
@@ -126,8 +126,8 @@ def test_star_removes_coalescence():
     assert g.size == 4
     sep = {}
     for star in (False, True):
-        r = jpda(g, 0.99, 1e-4, star=star)
-        post = jpda_update(prior, mp.K, mp.S, g.track, g.residual, r.beta, r.beta0)
+        r = jpda_probabilities(g, 0.99, 1e-4, star=star)
+        post = jpda_update(prior, mp.K, mp.S, g.track, g.nu, r.beta, r.beta0)
         sep[star] = post.mean[1, 1] - post.mean[0, 1]
     # with certain association each mean moves 0.8 of the way to its detection: 2.6 apart
     assert sep[False] < 1.5

@@ -401,18 +401,18 @@ def test_variable_order_without_detections_is_the_cv_kalman_filter():
     runs, K = 200, 60
     _, Z = simulate(runs, K, seed=14)
     _, hist = run_filter(tk.filters.KF(), prior_for(runs), CV, RADAR, Z, DT, history=True)
-    r = run_variable_order(Z, DT, prior_for(runs), RADAR, NISDetector(pfa=1e-12), q_cv=Q_CV,
+    r = run_variable_order(prior_for(runs), RADAR, Z, DT, NISDetector(pfa=1e-12), q_cv=Q_CV,
                            q_ca=10.0)
     assert not r.mode.any() and not r.switched_on.any()
     assert r.estimate.mean.shape == (K, runs, 6) and r.estimate.cov.shape == (K, runs, 6, 6)
     np.testing.assert_array_equal(r.estimate.mean[..., :4], hist.mean)
     np.testing.assert_array_equal(r.estimate.cov[..., :4, :4], hist.cov)
     assert not r.estimate.mean[..., 4:].any() and not r.estimate.cov[..., 4:, :].any()
-    r_list = run_variable_order(Z, [DT] * K, prior_for(runs), RADAR, NISDetector(pfa=1e-12),
+    r_list = run_variable_order(prior_for(runs), RADAR, Z, [DT] * K, NISDetector(pfa=1e-12),
                                 q_cv=Q_CV, q_ca=10.0)
     np.testing.assert_array_equal(r_list.estimate.mean, r.estimate.mean)
 
-    r = run_variable_order(Z, DT, prior_for(runs), RADAR, NISDetector(pfa=0.01), q_cv=Q_CV,
+    r = run_variable_order(prior_for(runs), RADAR, Z, DT, NISDetector(pfa=0.01), q_cv=Q_CV,
                            q_ca=10.0)
     never = ~r.mode.any(0) & ~r.switched_on.any(0)
     assert 0.3 * runs < never.sum() < 0.7 * runs
@@ -472,7 +472,7 @@ def test_variable_order_reinitialises_at_k_minus_s_from_the_stored_measurements(
     sensor = tk.models.Position(dim=2, sigma=1.0)
     det = WindowDetector(L=3, pfa=1e-3)
     s = det.memory
-    r = run_variable_order(z, dt, prior, sensor, det, q_cv=0.1, q_ca=1.0, accel_std=accel_std)
+    r = run_variable_order(prior, sensor, z, dt, det, q_cv=0.1, q_ca=1.0, accel_std=accel_std)
     assert not r.mode[:, 0].any()
     k_up = int(np.flatnonzero(r.switched_on[:, 1])[0])
     k_down = int(np.flatnonzero(r.switched_off[:, 1])[0])
@@ -515,7 +515,7 @@ def test_variable_order_beats_the_cv_filter_on_a_constant_acceleration_leg():
     X, Z = simulate(runs, K, seed=15, accel=(0.0, 3 * G), leg=leg)
     _, hist = run_filter(tk.filters.KF(), prior_for(runs), CV, RADAR, Z, DT, history=True)
     err_cv = np.linalg.norm(hist.mean[..., :2] - X[..., :2], axis=-1)[leg[0]:leg[1]]
-    r = run_variable_order(Z, DT, prior_for(runs), RADAR, FadingMemoryDetector(alpha=0.8),
+    r = run_variable_order(prior_for(runs), RADAR, Z, DT, FadingMemoryDetector(alpha=0.8),
                            q_cv=Q_CV, q_ca=10.0)
     err = np.linalg.norm(r.estimate.mean[..., :2] - X[..., :2], axis=-1)[leg[0]:leg[1]]
     per_run = np.sqrt((err**2).mean(0)) < np.sqrt((err_cv**2).mean(0))
@@ -530,18 +530,20 @@ def test_variable_order_bad_inputs_name_the_quantity():
     det = NISDetector()
     ok = dict(q_cv=1.0, q_ca=1.0)
     with pytest.raises(ValueError, match=r"z has shape \(5,\)"):
-        run_variable_order(np.zeros(5), DT, prior_for(3), RADAR, det, **ok)
+        run_variable_order(prior_for(3), RADAR, np.zeros(5), DT, det, **ok)
     with pytest.raises(ValueError, match=r"prior has 3 state components"):
-        run_variable_order(Z, DT, Gaussian(np.zeros((3, 3)), np.eye(3)), RADAR, det, **ok)
+        run_variable_order(Gaussian(np.zeros((3, 3)), np.eye(3)), RADAR, Z, DT, det, **ok)
     with pytest.raises(ValueError, match=r"prior mean has batch shape \(4,\)"):
-        run_variable_order(Z, DT, prior_for(4), RADAR, det, **ok)
+        run_variable_order(prior_for(4), RADAR, Z, DT, det, **ok)
     with pytest.raises(ValueError, match=r"end_window = 0"):
-        run_variable_order(Z, DT, prior_for(3), RADAR, det, end_window=0, **ok)
+        run_variable_order(prior_for(3), RADAR, Z, DT, det, end_window=0, **ok)
     with pytest.raises(ValueError, match=r"end_pfa = 1.0"):
-        run_variable_order(Z, DT, prior_for(3), RADAR, det, end_pfa=1.0, **ok)
+        run_variable_order(prior_for(3), RADAR, Z, DT, det, end_pfa=1.0, **ok)
     with pytest.raises(ValueError, match=r"accel_std = -2.0"):
-        run_variable_order(Z, DT, prior_for(3), RADAR, det, accel_std=-2.0, **ok)
+        run_variable_order(prior_for(3), RADAR, Z, DT, det, accel_std=-2.0, **ok)
     with pytest.raises(ValueError, match=r"s = -1"):
-        run_variable_order(Z, DT, prior_for(3), RADAR, det, s=-1, **ok)
+        run_variable_order(prior_for(3), RADAR, Z, DT, det, s=-1, **ok)
     with pytest.raises(ValueError, match=r"dt has 2 steps but there are 5 measurements"):
-        run_variable_order(Z, [1.0, 1.0], prior_for(3), RADAR, det, **ok)
+        run_variable_order(prior_for(3), RADAR, Z, [1.0, 1.0], det, **ok)
+    with pytest.raises(TypeError, match=r"expected \(prior, sensor, z, dt, detector"):
+        run_variable_order(Z, DT, prior_for(3), RADAR, det, **ok)  # the order before run_filter's

@@ -8,12 +8,12 @@ predicts the same beliefs with ``tk.filters.KF`` and gates with the same chi-squ
 threshold (Stone Soup's ``PDAHypothesiser`` keeps ``d2 <= chi2.ppf(P_G, m)``).
 
 * GNN with a ``PDAHypothesiser``: Stone Soup's ``GNNWith2DAssignment`` maximises the sum of
-  the per-track normalised PDA probabilities, so trackkit runs ``gnn`` with ``pda_costs``.
+  the per-track normalised PDA probabilities, so trackkit runs ``gnn_assign`` with ``pda_costs``.
 * GNN with a ``DistanceHypothesiser`` (``Mahalanobis`` measure, ``missed_distance`` md):
-  trackkit gates at md^2 and runs ``gnn`` with ``distance_costs(g, md)``.
+  trackkit gates at md^2 and runs ``gnn_assign`` with ``distance_costs(g, md)``.
 * JPDA: Stone Soup's ``JPDA`` enumerates the joint events of all the tracks it is given, so
   it is given one cluster at a time (clusters small enough for it); the posterior means and
-  covariances of ``PDAUpdater`` are compared with ``jpda`` + ``jpda_update`` to 1e-9.
+  covariances of ``PDAUpdater`` are compared with ``jpda_probabilities`` + ``jpda_update`` to 1e-9.
 """
 
 from __future__ import annotations
@@ -44,8 +44,8 @@ from trackkit.tracking import GNN
 from trackkit.tracking.association import (
     clusters,
     distance_costs,
-    gnn,
-    jpda,
+    gnn_assign,
+    jpda_probabilities,
     pda_costs,
 )
 from trackkit.tracking.gating import gate, gate_threshold, predict_measurement
@@ -99,10 +99,10 @@ def test_gnn_pda_hypothesiser(seed, T):
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, P_G)
     assert clusters(g).count < T  # the scene has shared detections
-    ours = gnn(g, pda_costs(g, sc.p_d, sc.clutter_density, P_G)).det
+    ours = gnn_assign(g, pda_costs(g, sc.pd, sc.clutter_density, P_G)).det
     tracks, dets, pred, upd, t1 = _stonesoup(sc)
     hyp = PDAHypothesiser(pred, upd, clutter_spatial_density=sc.clutter_density,
-                          prob_detect=sc.p_d, prob_gate=P_G)
+                          prob_detect=sc.pd, prob_gate=P_G)
     theirs = _assignment_ss(GNNWith2DAssignment(hyp), tracks, dets, t1)
     np.testing.assert_array_equal(ours, theirs)
 
@@ -114,7 +114,7 @@ def test_gnn_distance_hypothesiser(seed, T):
     md = 3.5
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, threshold=md**2)
-    ours = gnn(g, distance_costs(g, md)).det
+    ours = gnn_assign(g, distance_costs(g, md)).det
     tracks, dets, pred, upd, t1 = _stonesoup(sc)
     hyp = DistanceHypothesiser(pred, upd, Mahalanobis(), missed_distance=md)
     theirs = _assignment_ss(GNNWith2DAssignment(hyp), tracks, dets, t1)
@@ -146,7 +146,7 @@ def test_tracker_distance_cost_with_missed_distance_10_is_stonesoups_gnn(seed):
     (sqrt(chi2.ppf(0.99, 2)) = 3.03, the miss cost without missed_distance) refuses."""
     md = 10.0
     rng = np.random.default_rng(600 + seed)
-    sc = scene(rng, 6, side=600.0, clutter=3.0, pos_std=(5.0, 15.0), p_d=0.5)
+    sc = scene(rng, 6, side=600.0, clutter=3.0, pos_std=(5.0, 15.0), pd=0.5)
     sc = sc._replace(z=_far_plots(sc, rng, 5.0, 9.5))
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, threshold=md**2)
@@ -163,7 +163,7 @@ def test_tracker_distance_cost_with_missed_distance_10_is_stonesoups_gnn(seed):
         live = tk.tracking.Tracks(sc.prior, np.arange(T), trk.logic.init(T), np.zeros(T),
                                   0.0, tk.tracking.IdCounter(T),
                                   (np.zeros((0, 2)), np.zeros((0, 2, 2)), 0.0))
-        return trk.step(live, tk.tracking.scans.Scan(1.0, 0, sc.z))
+        return trk.step(live, tk.io.Scan(1.0, 0, sc.z))
 
     out = step(GNN(cost="distance", missed_distance=md))
     hit = np.array([bool(chosen[t]) for t in tracks])
@@ -190,13 +190,13 @@ def test_jpda_pda_updater(seed, T):
     sc = scene(rng, T, side=150.0 * np.sqrt(T), clutter=10.0 + T / 2, pos_std=(5.0, 25.0))
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, P_G)
-    res = jpda(g, sc.p_d, sc.clutter_density, P_G)
+    res = jpda_probabilities(g, sc.pd, sc.clutter_density, P_G)
     assert not res.approximated.any()
-    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.residual, res.beta, res.beta0)
+    post = jpda_update(sc.predicted, mp.K, mp.S, g.track, g.nu, res.beta, res.beta0)
 
     tracks, dets, pred, upd, t1 = _stonesoup(sc, PDAUpdater)
     hyp = PDAHypothesiser(pred, upd, clutter_spatial_density=sc.clutter_density,
-                          prob_detect=sc.p_d, prob_gate=P_G)
+                          prob_detect=sc.pd, prob_gate=P_G)
     assoc = JPDA(hyp)
     cl = res.clusters
     ntr = np.bincount(cl.track, minlength=cl.count)
@@ -254,12 +254,12 @@ def test_range_bearing_across_the_cut(seed):
     g = gate(zhat, S, sc.z, P_G, angular=sc.sensor.angular)
     assert np.any(np.abs(sc.z[g.det, 1] - zhat[g.track, 1]) > np.pi)
     hyp = PDAHypothesiser(pred, upd, clutter_spatial_density=sc.clutter_density,
-                          prob_detect=sc.p_d, prob_gate=P_G)
-    ours = gnn(g, pda_costs(g, sc.p_d, sc.clutter_density, P_G)).det
+                          prob_detect=sc.pd, prob_gate=P_G)
+    ours = gnn_assign(g, pda_costs(g, sc.pd, sc.clutter_density, P_G)).det
     np.testing.assert_array_equal(ours, _assignment_ss(GNNWith2DAssignment(hyp), tracks, dets, t1))
 
-    res = jpda(g, sc.p_d, sc.clutter_density, P_G)
-    post = jpda_update(sc.predicted, K, S, g.track, g.residual, res.beta, res.beta0)
+    res = jpda_probabilities(g, sc.pd, sc.clutter_density, P_G)
+    post = jpda_update(sc.predicted, K, S, g.track, g.nu, res.beta, res.beta0)
     cl = res.clusters
     assoc = JPDA(hyp)
     for k in range(cl.count):
@@ -283,9 +283,9 @@ def test_lbp_matches_stonesoup(seed):
     sc = scene(rng, 40, side=400.0, clutter=20.0)
     mp = predict_measurement(sc.predicted, sc.sensor)
     g = gate(mp.zhat, mp.S, sc.z, P_G)
-    res = jpda(g, sc.p_d, sc.clutter_density, P_G, max_events=50)
+    res = jpda_probabilities(g, sc.pd, sc.clutter_density, P_G, max_events=50)
     assert res.approximated.any()
-    lr = np.log(sc.p_d) + g.loglik - np.log(sc.clutter_density) - np.log1p(-sc.p_d * P_G)
+    lr = np.log(sc.pd) + g.loglik - np.log(sc.clutter_density) - np.log1p(-sc.pd * P_G)
     W = np.zeros((g.n_tracks, g.n_dets + 1))
     W[:, 0] = 1.0
     W[g.track, g.det + 1] = np.exp(lr)

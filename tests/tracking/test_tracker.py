@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 
 import trackkit as tk
+import trackkit.tracking as tt
 from trackkit.io.scans import Scan
 from trackkit.tracking import (
     HistoryLogic,
     IdCounter,
     ScoreLogic,
     gate,
-    gnn,
-    jpda,
+    gnn_assign,
+    jpda_probabilities,
     loglik_costs,
     predict_measurement,
 )
@@ -109,7 +110,7 @@ def test_measurement_prediction_of_a_sigma_point_filter_is_its_own(f):
     z = plots_near(some_tracks(trk), RADAR, seed=5, extra=0)
     _, innov = trk.filter.update(b, z, RADAR)
     np.testing.assert_allclose(innov.cov, S, rtol=1e-12)
-    np.testing.assert_allclose(tk.angles.wrap(z - innov.residual - zhat), 0.0, atol=1e-9)
+    np.testing.assert_allclose(tk.angles.wrap(z - innov.nu - zhat), 0.0, atol=1e-9)
     # and it differs from the first-order prediction (the test would not see a mix-up)
     assert np.abs(S - predict_measurement(b, RADAR).S).max() > 1e-9 * np.abs(S).max()
 
@@ -122,7 +123,7 @@ def test_gnn_scan_equals_the_kernels_by_hand():
     b = trk.filter.predict(tracks.belief, CV, 2.0)
     mp = predict_measurement(b, RADAR)
     g = gate(mp.zhat, mp.S, z, trk.p_gate, angular=RADAR.angular)
-    a = gnn(g, loglik_costs(g, trk.pd, trk.clutter_density, trk.p_gate))
+    a = gnn_assign(g, loglik_costs(g, trk.pd, trk.clutter_density, trk.p_gate))
     za = np.full((len(tracks), 2), np.nan)
     za[a.det >= 0] = z[a.det[a.det >= 0]]
     want, _ = trk.filter.update(b, za, RADAR)
@@ -147,9 +148,9 @@ def test_jpda_scan_is_the_pdaf_update_of_the_kernel():
     b = trk.filter.predict(tracks.belief, CV, 2.0)
     mp = predict_measurement(b, POS)
     g = gate(mp.zhat, mp.S, z, trk.p_gate)
-    r = jpda(g, trk.pd, trk.clutter_density, trk.p_gate)
+    r = jpda_probabilities(g, trk.pd, trk.clutter_density, trk.p_gate)
     assert np.any((r.beta > 0.05) & (r.beta < 0.95)), "the scene must have real ambiguity"
-    want = jpda_update(b, mp.K, mp.S, g.track, g.residual, r.beta, r.beta0)
+    want = jpda_update(b, mp.K, mp.S, g.track, g.nu, r.beta, r.beta0)
     n = len(tracks)
     np.testing.assert_allclose(out.belief.mean[:n], want.mean, rtol=1e-10)
     np.testing.assert_allclose(out.belief.cov[:n], want.cov, rtol=1e-9)
@@ -264,6 +265,13 @@ def test_bad_input_is_named():
             Tracker(tk.filters.EKF(), CV, RADAR, **kw)
     with pytest.raises(ValueError, match="cost"):
         GNN(cost="nearest")
+    with pytest.raises(ValueError, match="GNN cost = 'seed004' is now spelled 'saturating'"):
+        GNN(cost="seed004")
+    assert GNN(cost="saturating").cost == "saturating"
+    for old, new in [("gnn", "gnn_assign"), ("jpda", "jpda_probabilities"),
+                     ("seed004_costs", "saturating_costs")]:
+        with pytest.raises(AttributeError, match=f"tracking.{old} is now spelled {new}"):
+            getattr(tt, old)
     for md in (0.0, -1.0, float("inf"), float("nan"), "10", True):
         with pytest.raises(ValueError, match=r"GNN missed_distance = .*expected a finite"):
             GNN(cost="distance", missed_distance=md)

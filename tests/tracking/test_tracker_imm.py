@@ -202,7 +202,7 @@ def test_new_tracks_start_from_the_initiators_gaussian_with_the_extras():
 def test_jpda_with_an_imm_is_the_merge_of_the_per_hypothesis_updates():
     # one scan by hand: predict, the IMM's measurement prediction and gate, JPDA's
     # marginals, every gated pair updated, merged per model (IMM.merge_hypotheses)
-    from trackkit.tracking import gate, jpda
+    from trackkit.tracking import gate, jpda_probabilities
 
     X, scan_list = scans(4)
     trk = imm_tracker(JPDA())
@@ -217,7 +217,7 @@ def test_jpda_with_an_imm_is_the_merge_of_the_per_hypothesis_updates():
     pred = trk.filter.predict(tracks.belief, None, DT)
     zhat, S = trk.measurement_prediction(pred, RADAR)
     g = gate(zhat, S, z, trk.p_gate, angular=RADAR.angular)
-    r = jpda(g, trk.pd, trk.clutter_density, trk.p_gate)
+    r = jpda_probabilities(g, trk.pd, trk.clutter_density, trk.p_gate)
     post, _ = trk.filter.update(pred.at(g.track), z[g.det], RADAR)
     want = trk.filter.merge_hypotheses(pred, post, g.track, r.beta0, r.beta)
     n = len(tracks)

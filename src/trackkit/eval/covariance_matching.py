@@ -69,7 +69,7 @@ class MatchingMetrics:
     def add(self, k: int, truth: Array, mean: Array, innovation, R: Array, sensor) -> None:
         """Step k: true states ``truth (B, n)``, estimates ``mean (B, n)``, the update's
         innovation, the R it used ``(..., m, m)`` and the (true) sensor of the step."""
-        r, S = innovation.residual, innovation.cov
+        r, S = innovation.nu, innovation.cov
         keep = ~np.isnan(r).any(-1)
         B = truth.shape[0]
         self.residuals, self.count = push_innovation(

@@ -528,9 +528,9 @@ class MonteCarloMetrics:
         sensors) pool their terms and degrees of freedom. An ``S`` that is not positive
         definite raises ``ValueError`` when the step is evaluated (at the latest at the
         next read or ``flush()``)."""
-        r = np.asarray(innovation.residual, dtype=float)
+        r = np.asarray(innovation.nu, dtype=float)
         if r.ndim < 1:
-            raise ValueError(f"innovation.residual has shape {r.shape}; expected (..., m)")
+            raise ValueError(f"innovation.nu has shape {r.shape}; expected (..., m)")
         m = r.shape[-1]
         S = np.asarray(innovation.cov, dtype=float)
         if S.shape[-2:] != (m, m):
@@ -578,7 +578,7 @@ class MonteCarloMetrics:
         ks = np.arange(k0, k0 + w, dtype=np.int64)
         self._evaluate(ks, x, mean, P, derived)
         if innovation is not None:
-            r = np.asarray(innovation.residual, dtype=float)
+            r = np.asarray(innovation.nu, dtype=float)
             m = r.shape[-1]
             S = np.asarray(innovation.cov, dtype=float)
             if r.ndim < 2 or r.shape[0] != w or S.shape[-2:] != (m, m):

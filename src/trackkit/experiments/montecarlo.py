@@ -158,7 +158,7 @@ class BlockResult:
     runs: int
     metrics: dict[str, MonteCarloMetrics]
     seconds: dict[str, float]
-    info: Array  # (T, n, n) sum over runs of p_d H^T R^-1 H at the truths
+    info: Array  # (T, n, n) sum over runs of pd H^T R^-1 H at the truths
     grads: dict[str, Array]  # derived group -> (T, n) sum over runs of the gradient
     example: Example | None = None
     matching: dict[str, dict[str, Array]] | None = None  # filter -> per-run J2, J3, J4
@@ -184,7 +184,7 @@ class _StepWindow:
             self.flush()
         if not self.used:
             self.k0 = k
-        parts = (g.mean, g.cov) if innov is None else (g.mean, g.cov, innov.residual,
+        parts = (g.mean, g.cov) if innov is None else (g.mean, g.cov, innov.nu,
                                                        innov.cov)
         bufs = self.buffers
         try:
@@ -223,7 +223,7 @@ class _StepWindow:
 
 def _pcrlb_ingredients(plan: Plan, truth: Array, groups: dict) -> tuple[Array, dict]:
     """Per step, summed over the block's runs: the measurement information
-    ``p_d H^T R^-1 H`` at the true states ``truth (T + 1, B, n)`` ``(T, n, n)``, and the
+    ``pd H^T R^-1 H`` at the true states ``truth (T + 1, B, n)`` ``(T, n, n)``, and the
     gradient of each derived group (speed, course, bearing) ``(T, n)``. The Jacobians come
     from each step's sensor; the rest is done a window of steps at a time."""
     T, n, d = plan.steps, plan.n, plan.dim
@@ -246,7 +246,7 @@ def _pcrlb_ingredients(plan: Plan, truth: Array, groups: dict) -> tuple[Array, d
 
 
 def _information(plan: Plan, sensors: list, truth: Array) -> Array:
-    """``p_d sum_runs H^T R^-1 H`` for steps of equal measurement size: ``truth (w, B, n)``,
+    """``pd sum_runs H^T R^-1 H`` for steps of equal measurement size: ``truth (w, B, n)``,
     one sensor per step."""
     w, B, n = truth.shape
     m = sensors[0].dim_z

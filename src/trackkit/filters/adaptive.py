@@ -40,6 +40,7 @@ from trackkit.filters.kalman import (
     sandwich,
 )
 from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = [
     "MCEKF",
@@ -117,7 +118,7 @@ class SageHusaBelief(NamedTuple):
 # --------------------------------------------------------------------------------------------
 
 
-def second_order_jacobian(sensor, x: Array) -> Array:
+def second_order_jacobian(sensor: SensorModel, x: Array) -> Array:
     """The paper's eq. 12 "Jacobian with a second-order term", read element-wise:
 
     ``H_ij = dh_i/dx_j + 1/2 d2h_i/dx_j^2``, i.e. ``J_h(x) + 1/2 diag(Hess h_i(x))`` row by row,
@@ -134,11 +135,11 @@ def second_order_jacobian(sensor, x: Array) -> Array:
     return J + 0.5 * np.diagonal(Hs, axis1=-2, axis2=-1)
 
 
-def _jacobian(sensor, x: Array, second_order: bool) -> Array:
+def _jacobian(sensor: SensorModel, x: Array, second_order: bool) -> Array:
     return second_order_jacobian(sensor, x) if second_order else np.asarray(sensor.jacobian(x))
 
 
-def _mc_update(x: Array, P: Array, r: Array, H: Array, R: Array, sensor,
+def _mc_update(x: Array, P: Array, r: Array, H: Array, R: Array, sensor: SensorModel,
                second_order: bool) -> tuple[Array, Array, Array, Array, Array]:
     """MC-EKF update (eqs. 10-11, with eq. 12-13's H when ``second_order``).
 
@@ -353,7 +354,8 @@ class MCEKF(Linearised):
         x, P = check_belief(g, None, f"{self.name}.init prior")
         return Gaussian._make((x, P))
 
-    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+    def update(self, belief: Gaussian, z: ArrayLike,
+               sensor: SensorModel) -> tuple[Gaussian, Innovation]:
         x, P, z = self._inputs(belief, z, sensor)
         miss = missing_rows(z)
         H = _jacobian(sensor, x, self.second_order)
@@ -459,7 +461,7 @@ class AMCEKF(Filter):
     def estimate(self, belief: AdaptiveBelief) -> Gaussian:
         return Gaussian._make((belief.mean, belief.cov))
 
-    def predict(self, belief: AdaptiveBelief, motion, dt: ArrayLike) -> AdaptiveBelief:
+    def predict(self, belief: AdaptiveBelief, motion: MotionModel, dt: ArrayLike) -> AdaptiveBelief:
         """``x- = f(x)``, ``P- = F P F^T + q_scale Q0(x, dt)``."""
         b = self.init(belief)
         x, P = check_belief(b, dim_x_of(motion), f"{self.name}.predict belief")
@@ -473,7 +475,7 @@ class AMCEKF(Filter):
         return b._replace(mean=g.mean, cov=g.cov)
 
     def update(self, belief: AdaptiveBelief, z: ArrayLike,
-               sensor) -> tuple[AdaptiveBelief, Innovation]:
+               sensor: SensorModel) -> tuple[AdaptiveBelief, Innovation]:
         b = self.init(belief)
         x, P = check_belief(b, None, f"{self.name}.update belief")
         z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
@@ -567,7 +569,7 @@ class AEKF(Filter):
     def estimate(self, belief: SageHusaBelief) -> Gaussian:
         return Gaussian._make((belief.mean, belief.cov))
 
-    def predict(self, belief: SageHusaBelief, motion, dt: ArrayLike) -> SageHusaBelief:
+    def predict(self, belief: SageHusaBelief, motion: MotionModel, dt: ArrayLike) -> SageHusaBelief:
         """``x- = f(x)``, ``P- = F P F^T + Q`` (Q the estimate when ``adapt_q``)."""
         b = self.init(belief)
         x, P = check_belief(b, dim_x_of(motion), f"{self.name}.predict belief")
@@ -584,7 +586,7 @@ class AEKF(Filter):
         return SageHusaBelief(g.mean, g.cov, b.R, Q, b.count)
 
     def update(self, belief: SageHusaBelief, z: ArrayLike,
-               sensor) -> tuple[SageHusaBelief, Innovation]:
+               sensor: SensorModel) -> tuple[SageHusaBelief, Innovation]:
         b = self.init(belief)
         x, P = check_belief(b, None, f"{self.name}.update belief")
         z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])

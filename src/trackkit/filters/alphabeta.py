@@ -3,29 +3,29 @@ and alpha-beta-gamma filters, their gain designers, variance-reduction ratios, s
 covariances and stability tests.
 
 Each position coordinate is filtered on its own with the same gains. Per coordinate, with
-scan period T, measured position ``x0(n)``, predicted ``x_p(n)`` and smoothed ``x_s(n)``
+scan period dt, measured position ``x0(n)``, predicted ``x_p(n)`` and smoothed ``x_s(n)``
 (thesis eqs. 2-4..2-6 and 2-33..2-36)::
 
     r(n)      = x0(n) - x_p(n)
     x_s(n)    = x_p(n) + alpha r(n)
-    v_s(n)    = v_s(n-1) + T a_s(n-1) + (beta / T) r(n)
-    a_s(n)    = a_s(n-1) + (2 gamma / T^2) r(n)                   (alpha-beta-gamma only)
-    x_p(n+1)  = x_s(n) + T v_s(n) + (T^2 / 2) a_s(n)
+    v_s(n)    = v_s(n-1) + dt a_s(n-1) + (beta / dt) r(n)
+    a_s(n)    = a_s(n-1) + (2 gamma / dt^2) r(n)                   (alpha-beta-gamma only)
+    x_p(n+1)  = x_s(n) + dt v_s(n) + (dt^2 / 2) a_s(n)
 
 In matrix form (2-1..2-3, 2-13..2-16, 2-41..2-44) ``x(n|n) = A x(n-1|n-1) + K y(n)`` with
 ``A = (I - K G) Phi``, ``G = [1 0 (0)]``, ``Phi`` the polynomial transition and
-``K = [alpha, beta/T, 2 gamma/T^2]^T``.
+``K = [alpha, beta/dt, 2 gamma/dt^2]^T``.
 
-**One gamma convention for the whole module: the acceleration gain is 2 gamma / T^2**
+**One gamma convention for the whole module: the acceleration gain is 2 gamma / dt^2**
 (eq. 2-35, the thesis's characteristic polynomial 2-49, Brookner's g-h-k filter and
 FilterPy's ``GHKFilter``, whose k is our gamma). The thesis's VRR formulas 2-45..2-47 are
-exact for an acceleration gain gamma'/T^2 (the missing-measurements thesis, section 2-4), so they
+exact for an acceleration gain gamma'/dt^2 (the missing-measurements thesis, section 2-4), so they
 are evaluated here at
 ``gamma' = 2 gamma``. Fading-memory and growing-memory gains for alpha-beta-gamma are given
 in this convention too.
 
 Memory lives in the belief (:class:`AlphaBetaBelief`): the scan count ``k`` (for the
-start-up rules and Simpson's gains) and ``tau``, the time since the row's last update (the T
+start-up rules and Simpson's gains) and ``tau``, the time since the row's last update (the dt
 of the next update's gains). The belief also carries the exact covariance of the
 constant-gain estimator, ``P- = F P F^T + Q`` and the Joseph form
 ``P+ = (I - K H) P- (I - K H)^T + K R K^T`` (valid for any gain), so NEES and NIS are
@@ -51,7 +51,9 @@ from trackkit.filters.base import (
     register,
 )
 from trackkit.linalg import symmetrize
+from trackkit.models.protocols import MotionModel, SensorModel
 from trackkit.models.sensors import Position
+from trackkit.renamed import renamed_keywords
 
 __all__ = [
     "kohn",
@@ -141,7 +143,7 @@ def benedict_bordner_gamma(alpha: ArrayLike, beta: ArrayLike) -> Array | float:
 
         gamma = 4 beta / alpha - 2 alpha - 2 beta
 
-    in the module's convention (acceleration gain 2 gamma / T^2, the convention of the
+    in the module's convention (acceleration gain 2 gamma / dt^2, the convention of the
     characteristic polynomial 2-49 that the thesis states beside it). With gamma = 0 the
     condition is eq. 2-24. ``alpha > 0``.
     """
@@ -172,7 +174,7 @@ def fading_memory(xi: ArrayLike) -> tuple[Array | float, Array | float]:
 
 def fading_memory_abg(xi: ArrayLike) -> tuple[Array | float, Array | float, Array | float]:
     """Critically damped (fading-memory) alpha-beta-gamma gains, acceleration gain
-    2 gamma / T^2::
+    2 gamma / dt^2::
 
         alpha = 1 - xi^3,   beta = 3/2 (1 - xi)^2 (1 + xi),   gamma = (1 - xi)^3 / 2
 
@@ -182,7 +184,7 @@ def fading_memory_abg(xi: ArrayLike) -> tuple[Array | float, Array | float, Arra
     ``alpha + beta + gamma = 3 - 3 xi`` and ``3 - 2 alpha - beta + gamma = 3 xi^2``; adding
     the last two gives ``2 gamma - alpha = 3 xi^2 - 3 xi``, so
     ``gamma = (1 - xi^3 + 3 xi^2 - 3 xi) / 2 = (1 - xi)^3 / 2`` and
-    ``beta = 3 - 3 xi - alpha - gamma``. With an acceleration gain gamma'/T^2 the same
+    ``beta = 3 - 3 xi - alpha - gamma``. With an acceleration gain gamma'/dt^2 the same
     filter has ``gamma' = (1 - xi)^3``.
     """
     x = _check_xi(xi)
@@ -214,17 +216,17 @@ def simpson(k: ArrayLike) -> tuple[Array | float, Array | float]:
 
 
 def simpson_abg(k: ArrayLike) -> tuple[Array | float, Array | float, Array | float]:
-    """Growing-memory alpha-beta-gamma gains (acceleration gain 2 gamma / T^2)::
+    """Growing-memory alpha-beta-gamma gains (acceleration gain 2 gamma / dt^2)::
 
         alpha_k = 3 (3k^2 - 3k + 2) / (k (k+1) (k+2))
         beta_k  = 18 (2k - 1) / (k (k+1) (k+2))
         gamma_k = 30 / (k (k+1) (k+2))
 
     Derivation: recursive least squares of a quadratic. With scan times ``i = 1..k`` and
-    ``phi_i = (1, (i-k) T, (i-k)^2 T^2 / 2)``, the fit's (position, velocity, acceleration)
+    ``phi_i = (1, (i-k) dt, (i-k)^2 dt^2 / 2)``, the fit's (position, velocity, acceleration)
     at scan k moves by ``M_k^{-1} phi_k r`` for a new residual r, ``M_k = sum_i phi_i
-    phi_i^T``; the components of ``M_k^{-1} phi_k`` are ``alpha_k``, ``beta_k / T`` and
-    ``2 gamma_k / T^2`` above. From k = 3 (gains (1, 3/2, 1/2), the quadratic through three
+    phi_i^T``; the components of ``M_k^{-1} phi_k`` are ``alpha_k``, ``beta_k / dt`` and
+    ``2 gamma_k / dt^2`` above. From k = 3 (gains (1, 3/2, 1/2), the quadratic through three
     points) the filter equals the least-squares quadratic of all data so far.
     """
     kf = _check_k(k)
@@ -274,7 +276,7 @@ def in_stability_region(alpha: ArrayLike, beta: ArrayLike) -> NDArray[np.bool_] 
 
 def in_stability_region_abg(alpha: ArrayLike, beta: ArrayLike,
                             gamma: ArrayLike) -> NDArray[np.bool_] | bool:
-    """The alpha-beta-gamma stability region (acceleration gain 2 gamma / T^2)::
+    """The alpha-beta-gamma stability region (acceleration gain 2 gamma / dt^2)::
 
         0 < alpha < 2,   0 < beta < 4 - 2 alpha,   0 < gamma < alpha beta / (2 - alpha)
 
@@ -290,68 +292,71 @@ def in_stability_region_abg(alpha: ArrayLike, beta: ArrayLike,
     return bool(out) if out.ndim == 0 else out
 
 
-def vrr(alpha: ArrayLike, beta: ArrayLike, T: ArrayLike = 1.0) -> VRR:
+@renamed_keywords(T="dt")
+def vrr(alpha: ArrayLike, beta: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
     """Steady-state VRR of the alpha-beta filter (eqs. 2-17..2-19)::
 
         C / sigma^2 = 1 / (alpha (4 - 2 alpha - beta))
-                      [[2 alpha^2 - 3 alpha beta + 2 beta,  beta (2 alpha - beta) / T],
-                       [beta (2 alpha - beta) / T,          2 beta^2 / T^2         ]]
+                      [[2 alpha^2 - 3 alpha beta + 2 beta,  beta (2 alpha - beta) / dt],
+                       [beta (2 alpha - beta) / dt,         2 beta^2 / dt^2         ]]
 
-    Batched over arrays of gains and T; nan where the gains are outside the stability
+    Batched over arrays of gains and dt; nan where the gains are outside the stability
     region (no steady state).
     """
     a, b = np.asarray(alpha, dtype=float), np.asarray(beta, dtype=float)
-    T = _positive(T, "T")
+    dt = _positive(dt, "dt")
     ok = in_stability_region(a, b)
     with np.errstate(divide="ignore", invalid="ignore"):
         den = np.where(ok, a * (4 - 2 * a - b), np.nan)
         x = (2 * a**2 - 3 * a * b + 2 * b) / den
-        xv = b * (2 * a - b) / (T * den)
-        v = 2 * b**2 / (T**2 * den)
+        xv = b * (2 * a - b) / (dt * den)
+        v = 2 * b**2 / (dt**2 * den)
     return VRR(_result(x), _result(v), _result(xv))
 
 
+@renamed_keywords(T="dt")
 def vrr_abg(alpha: ArrayLike, beta: ArrayLike, gamma: ArrayLike,
-            T: ArrayLike = 1.0) -> VRR3:
+            dt: ArrayLike = 1.0) -> VRR3:
     """Steady-state VRR of the alpha-beta-gamma filter: eqs. 2-45..2-47 evaluated at
-    ``gamma' = 2 gamma`` (the thesis's formulas hold for an acceleration gain gamma'/T^2;
-    this module's gain is 2 gamma / T^2), with the cross terms (derived from the discrete
+    ``gamma' = 2 gamma`` (the thesis's formulas hold for an acceleration gain gamma'/dt^2;
+    this module's gain is 2 gamma / dt^2), with the cross terms (derived from the discrete
     Lyapunov equation ``C = A C A^T + K K^T sigma^2``)::
 
         D        = (4 - 2 alpha - beta) (2 alpha beta + alpha gamma' - 2 gamma')
         C_xx / s = [2 beta (2 alpha^2 + 2 beta - 3 alpha beta)
                     - alpha gamma' (4 - 2 alpha - beta)] / D
-        C_vv / s = [4 beta^3 - 4 beta^2 gamma' + 2 gamma'^2 (2 - alpha)] / (T^2 D)
-        C_aa / s = 4 beta gamma'^2 / (T^4 D)
-        C_xv / s = beta (2 alpha - beta) (2 beta - gamma') / (T D)
+        C_vv / s = [4 beta^3 - 4 beta^2 gamma' + 2 gamma'^2 (2 - alpha)] / (dt^2 D)
+        C_aa / s = 4 beta gamma'^2 / (dt^4 D)
+        C_xv / s = beta (2 alpha - beta) (2 beta - gamma') / (dt D)
         C_xa / s = gamma' (4 alpha beta + 2 alpha gamma' - 2 beta^2 + beta gamma'
-                           - 4 gamma') / (T^2 D)
-        C_va / s = 2 beta gamma' (2 beta - gamma') / (T^3 D)
+                           - 4 gamma') / (dt^2 D)
+        C_va / s = 2 beta gamma' (2 beta - gamma') / (dt^3 D)
 
     with ``s = sigma^2``. Batched; nan outside the stability region.
     """
     a = np.asarray(alpha, dtype=float)
     b = np.asarray(beta, dtype=float)
     g2 = 2.0 * np.asarray(gamma, dtype=float)  # gamma' of the thesis's formulas
-    T = _positive(T, "T")
+    dt = _positive(dt, "dt")
     ok = in_stability_region_abg(a, b, np.asarray(gamma, dtype=float))
     with np.errstate(divide="ignore", invalid="ignore"):
         D = np.where(ok, (4 - 2 * a - b) * (2 * a * b + a * g2 - 2 * g2), np.nan)
         x = (2 * b * (2 * a**2 + 2 * b - 3 * a * b) - a * g2 * (4 - 2 * a - b)) / D
-        v = (4 * b**3 - 4 * b**2 * g2 + 2 * g2**2 * (2 - a)) / (T**2 * D)
-        acc = 4 * b * g2**2 / (T**4 * D)
-        xv = b * (2 * a - b) * (2 * b - g2) / (T * D)
-        xa = g2 * (4 * a * b + 2 * a * g2 - 2 * b**2 + b * g2 - 4 * g2) / (T**2 * D)
-        va = 2 * b * g2 * (2 * b - g2) / (T**3 * D)
+        v = (4 * b**3 - 4 * b**2 * g2 + 2 * g2**2 * (2 - a)) / (dt**2 * D)
+        acc = 4 * b * g2**2 / (dt**4 * D)
+        xv = b * (2 * a - b) * (2 * b - g2) / (dt * D)
+        xa = g2 * (4 * a * b + 2 * a * g2 - 2 * b**2 + b * g2 - 4 * g2) / (dt**2 * D)
+        va = 2 * b * g2 * (2 * b - g2) / (dt**3 * D)
     return VRR3(*(_result(q) for q in (x, v, acc, xv, xa, va)))
 
 
-def benedict_bordner_vrr(alpha: ArrayLike, T: ArrayLike = 1.0) -> VRR:
+@renamed_keywords(T="dt")
+def benedict_bordner_vrr(alpha: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
     """VRR of the Benedict-Bordner filter (beta = alpha^2 / (2 - alpha)) in closed form::
 
         VRR(x)  = alpha (6 - 5 alpha) / (alpha^2 - 8 alpha + 8)                      (2-25)
-        VRR(v)  = [2 alpha^3 / (2 - alpha)] / (T^2 (alpha^2 - 8 alpha + 8))           (2-26)
-        C_xv/s  = alpha^2 (4 - 3 alpha) / (T (2 - alpha) (alpha^2 - 8 alpha + 8))   (derived)
+        VRR(v)  = [2 alpha^3 / (2 - alpha)] / (dt^2 (alpha^2 - 8 alpha + 8))           (2-26)
+        C_xv/s  = alpha^2 (4 - 3 alpha) / (dt (2 - alpha) (alpha^2 - 8 alpha + 8))   (derived)
 
     The Benedict-Bordner gains are stable only for ``alpha < 4 - 2 sqrt(2) = 1.1716``
     (beta < 4 - 2 alpha); beyond, the result is nan, as for :func:`vrr`.
@@ -359,18 +364,19 @@ def benedict_bordner_vrr(alpha: ArrayLike, T: ArrayLike = 1.0) -> VRR:
     a = _array(alpha, "alpha")
     if not np.all((a > 0) & (a < 2)):
         raise ValueError(f"alpha = {np.asarray(alpha).tolist()!r}; expected 0 < alpha < 2")
-    T = _positive(T, "T")
+    dt = _positive(dt, "dt")
     q = np.where(a < 4 - 2 * math.sqrt(2), a**2 - 8 * a + 8, np.nan)
-    return VRR(_result(a * (6 - 5 * a) / q), _result(2 * a**3 / (2 - a) / (T**2 * q)),
-               _result(a**2 * (4 - 3 * a) / (T * (2 - a) * q)))
+    return VRR(_result(a * (6 - 5 * a) / q), _result(2 * a**3 / (2 - a) / (dt**2 * q)),
+               _result(a**2 * (4 - 3 * a) / (dt * (2 - a) * q)))
 
 
-def fading_memory_vrr(xi: ArrayLike, T: ArrayLike = 1.0) -> VRR:
+@renamed_keywords(T="dt")
+def fading_memory_vrr(xi: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
     """VRR of the fading-memory alpha-beta filter in closed form (0 <= xi < 1)::
 
         VRR(x) = (1 - xi) (1 + 4 xi + 5 xi^2) / (1 + xi)^3                (2-29)
-        C_xv/s = (1 - xi)^2 (1 + 3 xi) / (T (1 + xi)^3)                   (2-30, corrected)
-        VRR(v) = 2 (1 - xi)^3 / (T^2 (1 + xi)^3)                           (2-31)
+        C_xv/s = (1 - xi)^2 (1 + 3 xi) / (dt (1 + xi)^3)                   (2-30, corrected)
+        VRR(v) = 2 (1 - xi)^3 / (dt^2 (1 + xi)^3)                           (2-31)
 
     The thesis's 2-30 prints (as far as it can be read) ``(1 - xi)^2 (1 + 2 xi + 3 xi^2)``
     in the numerator, which disagrees with the general formula 2-17; the corrected form
@@ -380,25 +386,26 @@ def fading_memory_vrr(xi: ArrayLike, T: ArrayLike = 1.0) -> VRR:
     if not np.all(x < 1):
         raise ValueError(f"xi = {np.asarray(xi).tolist()!r}; expected 0 <= xi < 1 "
                          "(xi = 1 has zero gains and no steady state)")
-    T = _positive(T, "T")
+    dt = _positive(dt, "dt")
     c = (1 + x) ** 3
     return VRR(_result((1 - x) * (1 + 4 * x + 5 * x**2) / c),
-               _result(2 * (1 - x) ** 3 / (T**2 * c)),
-               _result((1 - x) ** 2 * (1 + 3 * x) / (T * c)))
+               _result(2 * (1 - x) ** 3 / (dt**2 * c)),
+               _result((1 - x) ** 2 * (1 + 3 * x) / (dt * c)))
 
 
+@renamed_keywords(T="dt")
 def steady_state_cov(alpha: ArrayLike, beta: ArrayLike, gamma: ArrayLike | None = None,
-                     T: ArrayLike = 1.0, sigma: ArrayLike = 1.0) -> Array:
+                     dt: ArrayLike = 1.0, sigma: ArrayLike = 1.0) -> Array:
     """Steady-state covariance of one coordinate's smoothed state on pure measurement
     noise of standard deviation ``sigma``: ``(..., 2, 2)`` over (x, v) from eq. 2-17
     (:func:`vrr`), or with ``gamma`` ``(..., 3, 3)`` over (x, v, a) (:func:`vrr_abg`).
-    Batched over gains, T and sigma; nan outside the stability region."""
+    Batched over gains, dt and sigma; nan outside the stability region."""
     s2 = _positive(sigma, "sigma") ** 2
     if gamma is None:
-        r = vrr(alpha, beta, T)
+        r = vrr(alpha, beta, dt)
         rows = [[r.x, r.xv], [r.xv, r.v]]
     else:
-        r = vrr_abg(alpha, beta, gamma, T)
+        r = vrr_abg(alpha, beta, gamma, dt)
         rows = [[r.x, r.xv, r.xa], [r.xv, r.v, r.va], [r.xa, r.va, r.a]]
     shape = np.broadcast_shapes(*(np.shape(e) for row in rows for e in row), np.shape(s2))
     C = np.stack([np.stack([np.broadcast_to(e, shape) for e in row], -1) for row in rows], -2)
@@ -408,13 +415,13 @@ def steady_state_cov(alpha: ArrayLike, beta: ArrayLike, gamma: ArrayLike | None 
 def characteristic_polynomial(alpha: ArrayLike, beta: ArrayLike,
                               gamma: ArrayLike | None = None) -> Array:
     """Coefficients, highest power first, of ``det(z I - A)``, ``A = (I - K G) Phi``
-    (independent of T)::
+    (independent of dt)::
 
         alpha-beta (2-20):        z^2 + (alpha + beta - 2) z + (1 - alpha)
         alpha-beta-gamma (2-49):  z^3 + (alpha + beta + gamma - 3) z^2
                                   + (3 - 2 alpha - beta + gamma) z - (1 - alpha)
 
-    (acceleration gain 2 gamma / T^2). Shape ``(..., 3)`` or ``(..., 4)``."""
+    (acceleration gain 2 gamma / dt^2). Shape ``(..., 3)`` or ``(..., 4)``."""
     a, b = _array(alpha, "alpha"), _array(beta, "beta")
     if gamma is None:
         cs = [np.ones_like(a + b), a + b - 2, 1 - a]
@@ -478,7 +485,7 @@ class ABGTrack(NamedTuple):
     a_p: Array
 
 
-def _track_inputs(z: ArrayLike, T: ArrayLike, gains: dict[str, ArrayLike], where: str):
+def _track_inputs(z: ArrayLike, dt: ArrayLike, gains: dict[str, ArrayLike], where: str):
     z = np.asarray(z, dtype=float)
     if z.ndim < 1 or z.shape[0] < 1:
         raise ValueError(f"{where}: z has shape {z.shape}; expected (K, ...) with K >= 1 "
@@ -488,7 +495,7 @@ def _track_inputs(z: ArrayLike, T: ArrayLike, gains: dict[str, ArrayLike], where
         raise ValueError(f"{where}: z[{', '.join(map(str, bad))}] = {z[bad]}; expected finite "
                          "measurements (the thesis's recursion has no missing scans; use "
                          "the filter class to coast through nan)")
-    T = _positive(T, f"{where}: T")
+    dt = _positive(dt, f"{where}: dt")
     out = []
     for name, g in gains.items():
         a = _array(g, f"{where}: {name}")
@@ -498,84 +505,86 @@ def _track_inputs(z: ArrayLike, T: ArrayLike, gains: dict[str, ArrayLike], where
             raise ValueError(f"{where}: {name} has shape {a.shape}, which does not broadcast "
                              f"against z {z.shape}; expected a scalar or per-scan gains "
                              "(K, 1, ...)") from None
-    return z, T, out
+    return z, dt, out
 
 
-def alpha_beta_track(z: ArrayLike, T: ArrayLike, alpha: ArrayLike,
+@renamed_keywords(T="dt")
+def alpha_beta_track(z: ArrayLike, dt: ArrayLike, alpha: ArrayLike,
                      beta: ArrayLike) -> ABTrack:
     """The thesis's alpha-beta recursion with its start-up rules over measurements
     ``z (K, ...)`` of one coordinate, scans on axis 0, batched over the other axes::
 
         x_s(1) = x_p(2) = x0(1),   v_s(1) = 0                               (2-7, 2-8)
-        x_s(2) = x0(2),            v_s(2) = (x0(2) - x0(1)) / T              (2-9)
+        x_s(2) = x0(2),            v_s(2) = (x0(2) - x0(1)) / dt              (2-9)
         for n >= 3:
-            x_p(n) = x_s(n-1) + T v_s(n-1)                                    (2-6)
+            x_p(n) = x_s(n-1) + dt v_s(n-1)                                    (2-6)
             x_s(n) = x_p(n) + alpha (x0(n) - x_p(n))                          (2-4)
-            v_s(n) = v_s(n-1) + (beta / T) (x0(n) - x_p(n))                   (2-5)
+            v_s(n) = v_s(n-1) + (beta / dt) (x0(n) - x_p(n))                   (2-5)
 
     (x_s(2) is not printed; x0(2) is the natural choice, as in the missing-measurements thesis,
     section 2-3.) ``alpha`` and
     ``beta`` are scalars or broadcast against z (per-scan gains such as Simpson's,
-    shape ``(K, 1, ...)``); ``T`` the scan period (s).
+    shape ``(K, 1, ...)``); ``dt`` the scan period (s).
     """
-    z, T, (a, b) = _track_inputs(z, T, {"alpha": alpha, "beta": beta}, "alpha_beta_track")
+    z, dt, (a, b) = _track_inputs(z, dt, {"alpha": alpha, "beta": beta}, "alpha_beta_track")
     x_s, v_s = np.empty(z.shape), np.empty(z.shape)
     x_p, v_p = np.full(z.shape, np.nan), np.full(z.shape, np.nan)
     x_s[0], v_s[0] = z[0], 0.0
     for n in range(1, z.shape[0]):
-        x_p[n] = x_s[n - 1] + T * v_s[n - 1]
+        x_p[n] = x_s[n - 1] + dt * v_s[n - 1]
         v_p[n] = v_s[n - 1]
         if n == 1:
             x_s[n] = z[n]
-            v_s[n] = (z[n] - z[n - 1]) / T
+            v_s[n] = (z[n] - z[n - 1]) / dt
             continue
         r = z[n] - x_p[n]
         x_s[n] = x_p[n] + a[n] * r
-        v_s[n] = v_s[n - 1] + b[n] / T * r
+        v_s[n] = v_s[n - 1] + b[n] / dt * r
     return ABTrack(x_s, v_s, x_p, v_p)
 
 
-def alpha_beta_gamma_track(z: ArrayLike, T: ArrayLike, alpha: ArrayLike, beta: ArrayLike,
+@renamed_keywords(T="dt")
+def alpha_beta_gamma_track(z: ArrayLike, dt: ArrayLike, alpha: ArrayLike, beta: ArrayLike,
                            gamma: ArrayLike) -> ABGTrack:
     """The thesis's alpha-beta-gamma recursion with its start-up rules over ``z (K, ...)``
-    (see :func:`alpha_beta_track`), acceleration gain 2 gamma / T^2::
+    (see :func:`alpha_beta_track`), acceleration gain 2 gamma / dt^2::
 
         x_s(1) = x_p(2) = x0(1),   v_s(1) = a_s(1) = 0                          (2-37, 2-38)
-        x_s(2) = x0(2),  v_s(2) = (x0(2) - x0(1)) / T,  a_s(2) = 0             (2-38, 2-39)
-        a_s(3) = (x0(3) + x0(1) - 2 x0(2)) / T^2                                (2-40)
-        x_s(3) = x0(3),  v_s(3) = (x0(3) - x0(2)) / T + T a_s(3) / 2
+        x_s(2) = x0(2),  v_s(2) = (x0(2) - x0(1)) / dt,  a_s(2) = 0             (2-38, 2-39)
+        a_s(3) = (x0(3) + x0(1) - 2 x0(2)) / dt^2                                (2-40)
+        x_s(3) = x0(3),  v_s(3) = (x0(3) - x0(2)) / dt + dt a_s(3) / 2
         for n >= 4:
-            x_p(n) = x_s(n-1) + T v_s(n-1) + (T^2/2) a_s(n-1)                   (2-36)
+            x_p(n) = x_s(n-1) + dt v_s(n-1) + (dt^2/2) a_s(n-1)                   (2-36)
             r      = x0(n) - x_p(n)
             x_s(n) = x_p(n) + alpha r                                           (2-33)
-            v_s(n) = v_s(n-1) + T a_s(n-1) + (beta / T) r                       (2-34)
-            a_s(n) = a_s(n-1) + (2 gamma / T^2) r                               (2-35)
+            v_s(n) = v_s(n-1) + dt a_s(n-1) + (beta / dt) r                       (2-34)
+            a_s(n) = a_s(n-1) + (2 gamma / dt^2) r                               (2-35)
 
     x_s(2), x_s(3) and v_s(3) are not printed; they are taken from the polynomial through
     the measurements so far (the line through two, the parabola through three), which is
     also what 2-39 and 2-40 are.
     """
-    z, T, (a, b, g) = _track_inputs(z, T, {"alpha": alpha, "beta": beta, "gamma": gamma},
+    z, dt, (a, b, g) = _track_inputs(z, dt, {"alpha": alpha, "beta": beta, "gamma": gamma},
                                     "alpha_beta_gamma_track")
     x_s, v_s, a_s = np.empty(z.shape), np.empty(z.shape), np.empty(z.shape)
     x_p, v_p, a_p = (np.full(z.shape, np.nan) for _ in range(3))
     x_s[0], v_s[0], a_s[0] = z[0], 0.0, 0.0
     for n in range(1, z.shape[0]):
-        x_p[n] = x_s[n - 1] + T * v_s[n - 1] + T**2 / 2 * a_s[n - 1]
-        v_p[n] = v_s[n - 1] + T * a_s[n - 1]
+        x_p[n] = x_s[n - 1] + dt * v_s[n - 1] + dt**2 / 2 * a_s[n - 1]
+        v_p[n] = v_s[n - 1] + dt * a_s[n - 1]
         a_p[n] = a_s[n - 1]
         if n == 1:
-            x_s[n], v_s[n], a_s[n] = z[n], (z[n] - z[n - 1]) / T, 0.0
+            x_s[n], v_s[n], a_s[n] = z[n], (z[n] - z[n - 1]) / dt, 0.0
             continue
         if n == 2:
-            a_s[n] = (z[n] + z[n - 2] - 2 * z[n - 1]) / T**2
+            a_s[n] = (z[n] + z[n - 2] - 2 * z[n - 1]) / dt**2
             x_s[n] = z[n]
-            v_s[n] = (z[n] - z[n - 1]) / T + T * a_s[n] / 2
+            v_s[n] = (z[n] - z[n - 1]) / dt + dt * a_s[n] / 2
             continue
         r = z[n] - x_p[n]
         x_s[n] = x_p[n] + a[n] * r
-        v_s[n] = v_s[n - 1] + T * a_s[n - 1] + b[n] / T * r
-        a_s[n] = a_s[n - 1] + 2 * g[n] / T**2 * r
+        v_s[n] = v_s[n - 1] + dt * a_s[n - 1] + b[n] / dt * r
+        a_s[n] = a_s[n - 1] + 2 * g[n] / dt**2 * r
     return ABGTrack(x_s, v_s, a_s, x_p, v_p, a_p)
 
 
@@ -596,9 +605,9 @@ def _coef(c, extra: int):
     return c if np.ndim(c) == 0 else np.asarray(c)[(...,) + (None,) * extra]
 
 
-def _phi_coeffs(m: int, T) -> list:
-    """``c_j = T^j / j!``: the per-axis transition is ``Phi[i, i + j] = c_j`` (2-13, 2-41)."""
-    return [1.0] + [T**j / math.factorial(j) for j in range(1, m)]
+def _phi_coeffs(m: int, dt) -> list:
+    """``c_j = dt^j / j!``: the per-axis transition is ``Phi[i, i + j] = c_j`` (2-13, 2-41)."""
+    return [1.0] + [dt**j / math.factorial(j) for j in range(1, m)]
 
 
 def _batched(a: Array, batch: tuple[int, ...], core: int) -> Array:
@@ -664,7 +673,7 @@ def _phi_full(c: list, m: int, d: int) -> Array:
 _checked: dict[tuple[int, float], weakref.ref] = {}
 
 
-def _check_motion(motion, x: Array, dt, c: list, m: int, d: int, where: str) -> None:
+def _check_motion(motion: MotionModel, x: Array, dt, c: list, m: int, d: int, where: str) -> None:
     """A motion model must share the tracker's transition (Q alone is taken from it)."""
     n = m * d
     if getattr(motion, "dim_x", None) != n:
@@ -703,7 +712,7 @@ class AlphaBetaBelief(NamedTuple):
     [x, y, vx, vy, ax, ay] (alpha-beta-gamma) for d = 2; ``cov (..., n, n)`` the exact
     covariance of the estimator's error; ``k (...)`` the measurements taken since the start
     or the last :meth:`AlphaBeta.reset` (the next update uses the gains of scan k + 1);
-    ``tau (...)`` the time predicted since the row's last update (s), the T of the next
+    ``tau (...)`` the time predicted since the row's last update (s), the dt of the next
     update's gains.
     """
 
@@ -881,7 +890,7 @@ class _ConstantGain(Filter):
                              f"broadcasting to the batch shape {batch}")
         return b._replace(k=k.astype(np.int64))
 
-    def predict(self, belief: Gaussian | AlphaBetaBelief, motion,
+    def predict(self, belief: Gaussian | AlphaBetaBelief, motion: MotionModel | None,
                 dt: ArrayLike) -> AlphaBetaBelief:
         """``x- = Phi x`` (2-6, 2-36, per coordinate), ``P- = Phi P Phi^T + Q`` and
         ``tau += dt``.
@@ -914,7 +923,7 @@ class _ConstantGain(Filter):
                                tau if tau.shape == batch else np.broadcast_to(tau, batch))
 
     def update(self, belief: Gaussian | AlphaBetaBelief, z: ArrayLike,
-               sensor) -> tuple[AlphaBetaBelief, Innovation]:
+               sensor: SensorModel) -> tuple[AlphaBetaBelief, Innovation]:
         """``r = z - H x-``, ``x+ = x- + K r``, ``P+ = (I - K H) P- (I - K H)^T + K R K^T``
         with ``K = [alpha, beta/tau, 2 gamma/tau^2]^T (x) I_d`` at the row's scan count
         (:meth:`scheduled_gains`); the innovation covariance is ``S = H P- H^T + R``.
@@ -949,7 +958,7 @@ class _ConstantGain(Filter):
         if np.any(bad):
             raise ValueError(f"{where}: tau = 0 (no time predicted since the last update) in "
                              f"{int(np.sum(np.broadcast_to(bad, batch)))} row(s) whose gains "
-                             "need the scan period T; expected a predict by T before each "
+                             "need the scan period; expected a predict by dt before each "
                              "update")
         T = np.where(tau > 0, tau, 1.0)
         g = [gains[0], gains[1] / T] + ([2 * gains[2] / T**2] if m == 3 else [])
@@ -1009,7 +1018,7 @@ class AlphaBeta(_ConstantGain):
 
 class AlphaBetaGamma(_ConstantGain):
     """The alpha-beta-gamma tracker (the missing-measurements thesis, section 2-4), acceleration
-    gain 2 gamma / T^2; state [x, y, vx, vy, ax, ay] for d = 2. Options as :class:`AlphaBeta`;
+    gain 2 gamma / dt^2; state [x, y, vx, vy, ax, ay] for d = 2. Options as :class:`AlphaBeta`;
     Simpson's gains are the growing-memory quadratic (:func:`simpson_abg`)."""
 
     name = "AlphaBetaGamma"

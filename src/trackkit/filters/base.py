@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import math
 import weakref
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.belief import Gaussian, Innovation
 from trackkit.linalg import check_covariance, symmetrize
+from trackkit.models.protocols import MotionModel, SensorModel
 
 Array = NDArray[np.float64]
 
@@ -176,24 +177,38 @@ def keep_prior_where_missing(
     miss = np.broadcast_to(miss, shape)
     x = np.where(miss[..., None], x0, post.mean)
     P = np.where(miss[..., None, None], P0, post.cov)
-    r = np.where(miss[..., None], np.nan, innov.residual)
+    r = np.where(miss[..., None], np.nan, innov.nu)
     return Gaussian._make((x, register(P))), Innovation(r, innov.cov)
 
 
-class Filter:
-    """Base of the stateless filter strategies.
+@runtime_checkable
+class Filter(Protocol):
+    """A stateless filter strategy, the interface every filter satisfies.
 
-    ``init(gaussian) -> belief`` (a filter with memory builds its belief type here),
-    ``predict(belief, motion, dt) -> belief`` and ``update(belief, z, sensor) ->
-    (belief, Innovation)``; ``estimate(belief) -> Gaussian``.
+    ``init(prior) -> belief`` (a filter with memory builds its belief type here; a stochastic
+    one, ``stochastic = True``, also takes ``rng=``), ``predict(belief, motion, dt) -> belief``,
+    ``update(belief, z, sensor) -> (belief, Innovation)`` (nan in z: no measurement, the row
+    keeps its prediction) and ``estimate(belief) -> Gaussian``. The bundled filters inherit the
+    identity ``init`` and ``estimate`` of a Gaussian belief from here.
     """
 
     name: str = "Filter"
 
-    def init(self, prior: Gaussian) -> Gaussian:
+    def __init__(self) -> None:
+        # a filter without options keeps an empty signature (a Protocol's default would
+        # show ``*args, **kwargs`` to the option tables that read it)
+        pass
+
+    def init(self, prior: Gaussian) -> Any:
         return prior
 
-    def estimate(self, belief: Gaussian) -> Gaussian:
+    def predict(self, belief: Any, motion: MotionModel | None, dt: ArrayLike) -> Any:
+        raise NotImplementedError
+
+    def update(self, belief: Any, z: ArrayLike, sensor: SensorModel) -> tuple[Any, Innovation]:
+        raise NotImplementedError
+
+    def estimate(self, belief: Any) -> Gaussian:
         return belief
 
     def __repr__(self) -> str:

@@ -52,6 +52,7 @@ from trackkit.filters.kalman import EKF, condition, jacobian_predict
 from trackkit.filters.particle import PF, resample_rows
 from trackkit.linalg import gaussian_loglik, mm, mmT, psd_factor, solve_psd, symmetrize
 from trackkit.models.motion import ConstantVelocity
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = [
     "RangePF",
@@ -81,7 +82,7 @@ _EKF = EKF()  # the RPEKF's components (a stateless strategy: one serves every b
 # --------------------------------------------------------------------------------------------
 
 
-def _origin(sensor, where: str) -> Array:
+def _origin(sensor: SensorModel, where: str) -> Array:
     """The sensor's 2-D origin (..., 2); a sensor without one cannot anchor a line of sight."""
     o = getattr(sensor, "origin", None)
     if o is None or np.shape(o)[-1:] != (2,):
@@ -90,7 +91,7 @@ def _origin(sensor, where: str) -> Array:
     return np.asarray(o, dtype=float)
 
 
-def _bearing_sensor(sensor, where: str) -> tuple[Array, Array, float]:
+def _bearing_sensor(sensor: SensorModel, where: str) -> tuple[Array, Array, float]:
     """``(origin, velocity, sign)`` of a single-bearing sensor: the measured bearing is
     ``sign * beta + offset`` with beta nautical (sign -1 and offset pi/2 for "math")."""
     if getattr(sensor, "dim_z", None) != 1 or tuple(getattr(sensor, "angular", ())) != (True,):
@@ -105,7 +106,7 @@ def _bearing_sensor(sensor, where: str) -> tuple[Array, Array, float]:
     return o, v, (1.0 if convention == "nautical" else -1.0)
 
 
-def _constant_velocity(motion, where: str) -> None:
+def _constant_velocity(motion: MotionModel, where: str) -> None:
     if not (isinstance(getattr(motion, "motion", motion), ConstantVelocity)
             and motion.dim_x == 4):
         raise ValueError(f"{where}: motion is {type(motion).__name__}; expected a 2-D "
@@ -295,14 +296,15 @@ class RPEKF(Filter):
         P = np.where(live[..., None], b.cov, 0.0)
         return Gaussian._make(combine(w, X, P))
 
-    def predict(self, belief: RangeBankBelief, motion, dt: ArrayLike) -> RangeBankBelief:
+    def predict(self, belief: RangeBankBelief, motion: MotionModel,
+                dt: ArrayLike) -> RangeBankBelief:
         """Every component's EKF prediction; the weights do not change."""
         b = self._belief(belief, f"{self.name}.predict belief")
         g = _EKF.predict(Gaussian._make((b.mean, b.cov)), motion, dt)
         return RangeBankBelief(g.mean, g.cov, b.log_weights, b.split)
 
     def update(self, belief: RangeBankBelief, z: ArrayLike,
-               sensor) -> tuple[RangeBankBelief, Innovation]:
+               sensor: SensorModel) -> tuple[RangeBankBelief, Innovation]:
         """Build the bank where this is the row's first bearing, then update every component
         and reweight by its likelihood."""
         b = self._belief(belief, f"{self.name}.update belief")
@@ -325,7 +327,7 @@ class RPEKF(Filter):
         # components lead while the sensor sees them: its pose broadcasts over the batch axes
         g = Gaussian._make((np.moveaxis(X, -2, 0), register(np.moveaxis(PX, -3, 0))))
         post, innov = _EKF.update(g, z, sensor)
-        nu, S = np.moveaxis(innov.residual, 0, -2), np.moveaxis(innov.cov, 0, -3)
+        nu, S = np.moveaxis(innov.nu, 0, -2), np.moveaxis(innov.cov, 0, -3)
         c = np.exp(logw)
         if miss is None:
             loglik = gaussian_loglik(nu, S)
@@ -598,7 +600,7 @@ def _rows(mask: Array, *arrays: Array) -> list[Array]:
 
 
 def _first_innovation(x: Array, P: Array, o: Array, z: Array, R: Array, sign: float,
-                      offset: float, sensor) -> tuple[Array, Array]:
+                      offset: float, sensor: SensorModel) -> tuple[Array, Array]:
     """Residual and covariance of a bearing against a Cartesian prior, linearised at its
     mean: ``beta = atan2(dx, dy)``, ``H = sign [dy, -dx, 0, 0] / rho^2``."""
     dx, dy = x[..., 0] - o[..., 0], x[..., 1] - o[..., 1]
@@ -666,7 +668,7 @@ class MPEKF(Filter):
         x[b.polar], P[b.polar] = xp, symmetrize(mm(mm(J, Py), J.mT))
         return Gaussian._make((x, P))
 
-    def predict(self, belief: MPBelief, motion, dt: ArrayLike) -> MPBelief:
+    def predict(self, belief: MPBelief, motion: MotionModel, dt: ArrayLike) -> MPBelief:
         b = self._belief(belief, f"{self.name}.predict belief")
         where = f"{self.name}.predict"
         _constant_velocity(motion, where)
@@ -696,7 +698,8 @@ class MPEKF(Filter):
             mean[cart], cov[cart] = g.mean, g.cov
         return MPBelief(mean, register(symmetrize(cov)), origin, b.velocity, polar)
 
-    def update(self, belief: MPBelief, z: ArrayLike, sensor) -> tuple[MPBelief, Innovation]:
+    def update(self, belief: MPBelief, z: ArrayLike,
+               sensor: SensorModel) -> tuple[MPBelief, Innovation]:
         b = self._belief(belief, f"{self.name}.update belief")
         where = f"{self.name}.update"
         o, vo, sign = _bearing_sensor(sensor, where)
@@ -884,7 +887,7 @@ class RangePF(Filter):
             return Gaussian._make((belief.mean, belief.cov))
         return self.pf.estimate(belief)
 
-    def predict(self, belief: Particles | PendingParticles, motion, dt: ArrayLike
+    def predict(self, belief: Particles | PendingParticles, motion: MotionModel, dt: ArrayLike
                 ) -> Particles | PendingParticles:
         if isinstance(belief, PendingParticles):
             g = _EKF.predict(Gaussian._make((belief.mean, belief.cov)), motion, dt)
@@ -892,7 +895,7 @@ class RangePF(Filter):
         return self.pf.predict(belief, motion, dt)
 
     def update(self, belief: Particles | PendingParticles, z: ArrayLike,
-               sensor) -> tuple[Particles | PendingParticles, Innovation]:
+               sensor: SensorModel) -> tuple[Particles | PendingParticles, Innovation]:
         if not isinstance(belief, PendingParticles):
             return self.pf.update(belief, z, sensor)
         where = "PF.update"

@@ -68,6 +68,7 @@ from trackkit.filters.adaptive import push_innovation, window_covariance
 from trackkit.filters.base import Filter, check_belief, missing_rows
 from trackkit.filters.kalman import EKF
 from trackkit.models.noise import with_noise
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = [
     "INPUT_SETS",
@@ -274,7 +275,7 @@ class FuzzyAdaptive(Filter):
 
     # --- predict and update ----------------------------------------------------------------
 
-    def predict(self, belief: FuzzyBelief, motion, dt: ArrayLike) -> FuzzyBelief:
+    def predict(self, belief: FuzzyBelief, motion: MotionModel, dt: ArrayLike) -> FuzzyBelief:
         """The base filter's prediction with the current Q."""
         b = self.init(belief)
         Q, Q0 = b.Q, b.Q0
@@ -288,7 +289,7 @@ class FuzzyAdaptive(Filter):
         return b._replace(mean=g.mean, cov=g.cov, Q=Q, Q0=Q0)
 
     def update(self, belief: FuzzyBelief, z: ArrayLike,
-               sensor) -> tuple[FuzzyBelief, Innovation]:
+               sensor: SensorModel) -> tuple[FuzzyBelief, Innovation]:
         b = self.init(belief)
         m = sensor.dim_z
         R0 = np.asarray(sensor.noise, dtype=float)
@@ -299,7 +300,7 @@ class FuzzyAdaptive(Filter):
         miss = missing_rows(np.asarray(z, dtype=float))
         keep = np.ones(batch, bool) if miss is None else ~np.broadcast_to(miss, batch)
 
-        buf, count = push_innovation(b.residuals, b.count, innov.residual, keep, self.window,
+        buf, count = push_innovation(b.residuals, b.count, innov.nu, keep, self.window,
                                      batch, f"{self.name}.update")
         S = np.broadcast_to(innov.cov, batch + (m, m))
         C = matching_covariance(buf, count)

@@ -36,6 +36,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation
+from trackkit.filters.base import Filter
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = [
     "measurement_times",
@@ -687,9 +689,9 @@ class GapRun(NamedTuple):
     belief: Any
 
 
-def run_with_gaps(f, prior: Any, z: ArrayLike, mask: ArrayLike, handler: GapHandler | str,
-                  motion, sensor, dt: ArrayLike, detector=None, *, t0: float = 0.0,
-                  keep_cov: bool = True) -> GapRun:
+def run_with_gaps(f: Filter, prior: Any, motion: MotionModel | None, sensor: SensorModel,
+                  z: ArrayLike, dt: ArrayLike, mask: ArrayLike, handler: GapHandler | str,
+                  detector=None, *, t0: float = 0.0, keep_cov: bool = True) -> GapRun:
     """Run filter ``f`` over ``z (K, ..., m)`` (step k measured at ``t0 + (k + 1) dt``, see
     ``measurement_times``), with the measurements that ``mask`` (``(K,)`` or ``(K, ...)``,
     True = missing) hides, and rows of z that are nan, replaced by ``handler``'s
@@ -701,8 +703,13 @@ def run_with_gaps(f, prior: Any, z: ArrayLike, mask: ArrayLike, handler: GapHand
     innovations of real measurements only (nan residuals at missing steps hold its
     statistic): pseudo-measurements agree with the fit by construction and say nothing of a
     manoeuvre. P' reads its on flags at the gap's start. ``prior`` is a Gaussian (passed
-    through ``f.init``) or the filter's own belief.
+    through ``f.init``) or the filter's own belief. The arguments come in
+    :func:`~trackkit.filters.run_filter`'s order.
     """
+    if isinstance(motion, np.ndarray | list) or not hasattr(sensor, "dim_z"):
+        raise TypeError("run_with_gaps: expected (f, prior, motion, sensor, z, dt, mask, "
+                        f"handler); got a {type(motion).__name__} for motion and a "
+                        f"{type(sensor).__name__} for sensor")
     if isinstance(handler, str):
         handler = make_handler(handler)
     if not isinstance(handler, GapHandler):
@@ -760,7 +767,7 @@ def run_with_gaps(f, prior: Any, z: ArrayLike, mask: ArrayLike, handler: GapHand
         real = np.where(miss[..., None], np.nan, zk)
         memory = handler.observe(memory, t, real)
         if dstate is not None:
-            r = np.where(miss[..., None], np.nan, innov.residual)
+            r = np.where(miss[..., None], np.nan, innov.nu)
             dstate = detector.step(dstate, Innovation(r, innov.cov))
             maneuver[k] = np.broadcast_to(dstate.on, batch)
         g = estimate(b)
@@ -869,13 +876,13 @@ class WithGaps:
         inner, innov = self.f.update(belief.inner, fed, sensor)
         real = np.where(miss[..., None], np.nan, zk)
         memory = self.handler.observe(memory, t, real)
-        r = np.where(miss[..., None], np.nan, innov.residual)
+        r = np.where(miss[..., None], np.nan, innov.nu)
         dstate = belief.detector
         if dstate is not None:
             dstate = self.detector.step(dstate, Innovation(r, innov.cov))
         pseudo = miss & ~np.isnan(zp).any(-1)
         out = GapBelief(inner, memory, dstate, belief.t, pseudo, zp)
-        return out, innov._replace(residual=r)
+        return out, innov._replace(nu=r)
 
     def estimate(self, belief: GapBelief) -> Gaussian:
         return self._estimate(belief.inner)

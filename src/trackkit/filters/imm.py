@@ -645,7 +645,7 @@ class IMM(Filter):
             x, Pj = self._part(b.mean, b.cov, j)
             g, innov = self.filters[j].update(Gaussian._make((x, register(Pj))), z, sensor)
             parts.append(g)
-            nus.append(innov.residual)
+            nus.append(innov.nu)
             Ss.append(innov.cov)
         batch = np.broadcast_shapes(*(np.shape(v)[:-1] for v in nus),
                                     *(np.shape(s)[:-2] for s in Ss))

@@ -55,6 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
 from trackkit.filters.kalman import EKF
+from trackkit.models.protocols import MotionModel
 from trackkit.optimize.base import Optimizer, OptimizeResult
 from trackkit.optimize.ga import GA
 
@@ -78,7 +79,7 @@ def _prior_mean(p: Array, v0: Array, f0: Array) -> Array:
                            np.broadcast_to(f0[:, None, None], shape + (1,))], -1)
 
 
-def aux_cost(p: Array, measurements: Array, sensors: Sequence[Any], motion, dt: Any,
+def aux_cost(p: Array, measurements: Array, sensors: Sequence[Any], motion: MotionModel, dt: Any,
              v0: Array, f0: Array, cov: Array, cost: str = "nis",
              aux_filter: Any = None) -> Array:
     """Auxiliary-filter cost ``J(p)`` ``(runs, n)`` of candidates p ``(runs, n, 2)``.
@@ -160,7 +161,7 @@ def _box(sensors: Sequence[Any], max_range: float) -> Array:
 def ga_initial_position(
     measurements: ArrayLike,
     sensors: Sequence[Any],
-    motion,
+    motion: MotionModel,
     dt: float | Sequence[float],
     *,
     rngs: Sequence[Any],

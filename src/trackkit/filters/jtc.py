@@ -85,6 +85,7 @@ from trackkit.models.classes import (
     mode_step_components,
     turn_terms,
 )
+from trackkit.models.protocols import MotionModel, SensorModel
 from trackkit.models.sensors import RangeBearing
 
 __all__ = ["JTC", "JTCBelief", "MultiFilterJTC", "MultiFilterBelief", "next_modes",
@@ -151,7 +152,7 @@ def _propagate(X: Parts, rows: Ints, tab: _Tables, wx: Array, wy: Array, dt: flo
                                 np.take(tab.u, rows), dt, wx, wy, along)
 
 
-def _residuals(X: Parts, z: Array, sensor) -> tuple[Array, ...]:
+def _residuals(X: Parts, z: Array, sensor: SensorModel) -> tuple[Array, ...]:
     """``z - h(x^j)`` per particle, one ``(B, N)`` array per measurement component, angles
     wrapped to (-pi, pi].
 
@@ -460,7 +461,8 @@ class JTC:
                          np.broadcast_to(np.log(self.class_prior), batch + (C,)).copy(), rng,
                          np.hypot(mean[..., 2], mean[..., 3]))
 
-    def predict(self, belief: JTCBelief, motion=None, dt: float = 1.0) -> JTCBelief:
+    def predict(self, belief: JTCBelief, motion: MotionModel | None = None,
+                dt: float = 1.0) -> JTCBelief:
         """Each particle's next mode from its class's chain, then its state by the mode's
         motion with acceleration noise ``sigma`` (``motion`` is not used)."""
         check_dt(dt, "JTC.predict")
@@ -480,7 +482,8 @@ class JTC:
 
     # -- update ------------------------------------------------------------------------------
 
-    def update(self, belief: JTCBelief, z: ArrayLike, sensor) -> tuple[JTCBelief, Innovation]:
+    def update(self, belief: JTCBelief, z: ArrayLike,
+               sensor: SensorModel) -> tuple[JTCBelief, Innovation]:
         """Weights ``p(z | x) g(v | c)``, the class posterior, the estimates, then the
         allocation ``N_c`` and resampling within each class (module docstring). A row whose
         z is missing (nan) keeps its prediction and its class posterior."""
@@ -682,7 +685,7 @@ class MultiFilterJTC:
             *parts, modes, np.broadcast_to(np.log(self.class_prior), batch + (C,)).copy(), rng,
             np.hypot(mean[..., 2], mean[..., 3]))
 
-    def predict(self, belief: MultiFilterBelief, motion=None, dt: float = 1.0
+    def predict(self, belief: MultiFilterBelief, motion: MotionModel | None = None, dt: float = 1.0
                 ) -> MultiFilterBelief:
         """Each class filter's prediction: modes from its chain, states by its modes."""
         check_dt(dt, "MultiFilterJTC.predict")
@@ -704,7 +707,7 @@ class MultiFilterJTC:
         return belief._replace(x=out[0], y=out[1], vx=out[2], vy=out[3], modes=mp, mean=None,
                                cov=None, class_mean=None, class_cov=None)
 
-    def update(self, belief: MultiFilterBelief, z: ArrayLike, sensor
+    def update(self, belief: MultiFilterBelief, z: ArrayLike, sensor: SensorModel
                ) -> tuple[MultiFilterBelief, Innovation]:
         """Each class filter's update and resampling; the class posterior from their
         likelihoods; the mixture estimate. A row whose z is missing keeps its prediction."""

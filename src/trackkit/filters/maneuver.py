@@ -9,7 +9,7 @@ kernels over any batch of tracks or runs:
     det = FadingMemoryDetector(alpha=0.8, pfa=1e-2, dim_z=2)  # rho = alpha rho + eps (3-20)
     det = WindowDetector(L=5, pfa=1e-2, dim_z=2)  # D_L = sum of the last L residuals (3-21)
     s = det.init(batch_shape)                  # a NamedTuple of arrays of batch_shape
-    s = det.step(s, innov)                     # innov: Innovation (residual (..., m), cov)
+    s = det.step(s, innov)                     # innov: Innovation (nu (..., m), cov)
     s.on, s.fired, s.statistic, s.onset, det.threshold, det.memory
 
 **Thresholds.** ``pfa`` is the per-step probability, under the no-manoeuvre hypothesis (a
@@ -67,6 +67,7 @@ from trackkit.filters.base import register
 from trackkit.filters.kalman import KF
 from trackkit.linalg import quadratic_form
 from trackkit.models.motion import ConstantAcceleration, ConstantVelocity
+from trackkit.models.protocols import SensorModel
 
 __all__ = [
     "DetectorState",
@@ -368,7 +369,7 @@ class WindowState(NamedTuple):
 
 def _innovation(innov: Any, m: int, batch: tuple[int, ...], owner: str) -> tuple[Array, Array]:
     """(residual, S) checked: residual ``batch + (m,)``, S broadcast to ``batch + (m, m)``."""
-    r = np.asarray(innov.residual, dtype=float)
+    r = np.asarray(innov.nu, dtype=float)
     if r.shape != batch + (m,):
         raise ValueError(f"{owner}.step: innovation residual has shape {r.shape}; the detector "
                          f"state has batch shape {batch} and dim_z = {m}, so expected "
@@ -783,7 +784,7 @@ def run_with_detector(
         b = f.predict(b, m_k, step)
         b, innov = f.update(b, z, sensor)
         if s is None:
-            s = detector.init(np.shape(innov.residual)[:-1])
+            s = detector.init(np.shape(innov.nu)[:-1])
         s = detector.step(s, innov)
         if response is not None:
             b = response.belief(b, s)
@@ -830,10 +831,10 @@ def _embed(mean: Array, cov: Array, d: int, accel_var: float | None) -> tuple[Ar
 
 
 def run_variable_order(
+    prior: Gaussian,
+    sensor: SensorModel,
     z: ArrayLike,
     dt: Any,
-    prior: Gaussian,
-    sensor: Any,
     detector: NISDetector | FadingMemoryDetector | WindowDetector,
     q_cv: ArrayLike,
     q_ca: ArrayLike,
@@ -868,7 +869,14 @@ def run_variable_order(
     switch are, bitwise, the CV Kalman filter on its own (when some row has
     switched back from CA with a prior covariance shared by all rows, the covariances become
     one per row and the others agree to rounding instead).
+
+    The arguments come in :func:`~trackkit.filters.run_filter`'s order (without a filter and a
+    motion model: the KFs and their CV and CA models are its own).
     """
+    if not (hasattr(prior, "mean") and hasattr(sensor, "dim_z")):
+        raise TypeError("run_variable_order: expected (prior, sensor, z, dt, detector, ...); "
+                        f"got a {type(prior).__name__} for prior and a "
+                        f"{type(sensor).__name__} for sensor")
     z = np.asarray(z, dtype=float)
     if z.ndim < 2:
         raise ValueError(f"run_variable_order: z has shape {z.shape}; expected (K, ..., m)")
@@ -969,7 +977,7 @@ class _VariableOrder:
         N, m = zf.shape[1:]
         self.b_cv = kf.predict(self.b_cv, self.cv, self.steps[k])
         self.b_cv, inn = kf.update(self.b_cv, zf[k], sensor)
-        r = np.broadcast_to(inn.residual, (N, m))
+        r = np.broadcast_to(inn.nu, (N, m))
         S = np.broadcast_to(inn.cov, (N, m, m))
         rows = np.flatnonzero(self.mode)
         if rows.size:
@@ -978,7 +986,7 @@ class _VariableOrder:
             g, inn_ca = kf.update(g, zf[k, rows], sensor)
             self.ca_mean[rows], self.ca_cov[rows] = g.mean, g.cov
             r, S = r.copy(), S.copy()
-            r[rows], S[rows] = inn_ca.residual, inn_ca.cov
+            r[rows], S[rows] = inn_ca.nu, inn_ca.cov
             self.delta_a[rows] = np.concatenate(
                 [self.delta_a[rows, 1:], self.accel_test(g.mean, g.cov)[:, None]], -1)
         return Innovation(r, S)

@@ -58,6 +58,7 @@ from trackkit.filters.base import (
     register,
 )
 from trackkit.linalg import cholesky, psd_factor
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = ["PF", "sample_gaussian", "propagate", "log_likelihood", "predicted_measurement",
            "resample_rows"]
@@ -136,7 +137,7 @@ def sample_gaussian(mean: Array, cov: Array, n_particles: int,
     return m[..., None, :] + (e @ L.T if L.ndim == 2 else e @ L.mT)
 
 
-def propagate(states: Array, motion, dt: ArrayLike, rng: np.random.Generator,
+def propagate(states: Array, motion: MotionModel, dt: ArrayLike, rng: np.random.Generator,
               angles: Sequence[int] = ()) -> Array:
     """``x_i <- f(x_i, dt) + L e_i`` with ``L L^T = Q(x_i, dt)``, ``e_i ~ N(0, I)``.
 
@@ -174,7 +175,7 @@ def propagate(states: Array, motion, dt: ArrayLike, rng: np.random.Generator,
     return x
 
 
-def _measure(sensor, X: Array) -> Array:
+def _measure(sensor: SensorModel, X: Array) -> Array:
     """``h`` of every particle, ``(..., N, m)``. A sensor whose pose carries batch axes must
     see the particle axis in front of them (its parameters broadcast against the trailing
     axes), so a one-particle probe decides how to call it."""
@@ -190,7 +191,7 @@ def _measure(sensor, X: Array) -> Array:
     return np.asarray(sensor.h(X), dtype=float)
 
 
-def _noise_R(sensor, batch: tuple[int, ...]) -> Array:
+def _noise_R(sensor: SensorModel, batch: tuple[int, ...]) -> Array:
     R = sensor.noise
     return R if type(R) is np.ndarray and R.dtype == _F64 else np.asarray(R, dtype=float)
 
@@ -240,7 +241,7 @@ def _columns(A: Array) -> Array:
     return C.mT
 
 
-def log_likelihood(states: Array, z: Array, sensor, Z: Array | None = None) -> Array:
+def log_likelihood(states: Array, z: Array, sensor: SensorModel, Z: Array | None = None) -> Array:
     """``log N(residual(z, h(x_i)); 0, R)`` for every particle, ``(..., N)``.
 
     ``z`` is ``(..., m)`` (batch axes broadcasting against the particles'); ``Z`` the
@@ -255,7 +256,7 @@ def log_likelihood(states: Array, z: Array, sensor, Z: Array | None = None) -> A
     return _log_likelihood(r, sensor, states.shape[:-2], missing_rows(z))
 
 
-def _log_likelihood(r: Array, sensor, batch: tuple[int, ...],
+def _log_likelihood(r: Array, sensor: SensorModel, batch: tuple[int, ...],
                     miss: NDArray[np.bool_] | None) -> Array:
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is a likelihood of 0
         ll, half_logdet = _quadratic(r, _noise_R(sensor, batch), batch)
@@ -268,7 +269,8 @@ def _log_likelihood(r: Array, sensor, batch: tuple[int, ...],
     return ll
 
 
-def predicted_measurement(r: Array, weights: Array | None, sensor) -> tuple[Array, Array]:
+def predicted_measurement(r: Array, weights: Array | None,
+                          sensor: SensorModel) -> tuple[Array, Array]:
     """``(rbar, S)`` from the particles' residuals ``r_i = residual(z, h(x_i))``
     ``(..., N, m)`` and their weights (None: equal): ``rbar = z - zbar = sum_i w_i r_i`` and
     ``S = sum_i w_i (r_i - rbar)(r_i - rbar)^T + R``.
@@ -282,7 +284,7 @@ def predicted_measurement(r: Array, weights: Array | None, sensor) -> tuple[Arra
         return _moments(r, weights, sensor, ang)
 
 
-def _moments(r: Array, weights: Array | None, sensor,
+def _moments(r: Array, weights: Array | None, sensor: SensorModel,
              ang: tuple[int, ...]) -> tuple[Array, Array]:
     if ang:
         if weights is None:  # equal weights: any particle is the heaviest
@@ -492,7 +494,7 @@ class PF(Filter):
         lw = _mark_uniform(np.full(X.shape[:-1], -math.log(self.n_particles)))
         return Particles._make((X, lw, gen, None))
 
-    def predict(self, belief: Particles, motion, dt: ArrayLike) -> Particles:
+    def predict(self, belief: Particles, motion: MotionModel, dt: ArrayLike) -> Particles:
         """``x_i <- f(x_i, dt) + v_i``, ``v_i ~ N(0, Q(x_i, dt))``; weights unchanged."""
         X, lw = _check_particles(belief, getattr(motion, "dim_x", None), "PF.predict belief")
         check_dt(dt, "PF.predict")
@@ -501,7 +503,7 @@ class PF(Filter):
         return Particles._make((register(Xp), lw, gen, belief.lost))
 
     def update(self, belief: Particles, z: ArrayLike,
-               sensor) -> tuple[Particles, Innovation]:
+               sensor: SensorModel) -> tuple[Particles, Innovation]:
         """``log w_i += log N(residual(z, h(x_i)); 0, R)``, normalise, resample rows whose
         ESS is below the threshold. Returns the posterior and the moment-matched
         innovation."""

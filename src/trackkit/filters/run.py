@@ -2,22 +2,24 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from trackkit.belief import Gaussian, Innovation
+from trackkit.filters.base import Filter
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = ["run_filter"]
 
 
 def run_filter(
-    f,
+    f: Filter,
     prior: Any,
-    motion,
-    sensor,
+    motion: MotionModel,
+    sensor: SensorModel | Sequence[SensorModel],
     measurements: Iterable[ArrayLike],
     dt: float | Iterable[float],
     history: bool = False,

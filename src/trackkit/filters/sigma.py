@@ -38,6 +38,7 @@ from trackkit.linalg import (
     symmetrize,
     triu,
 )
+from trackkit.models.protocols import MotionModel, SensorModel
 from trackkit.models.sensors import wrap_small
 
 __all__ = ["UKF", "CKF", "SigmaPoints"]
@@ -171,15 +172,15 @@ class _SigmaPointFilter(Filter):
     def _rule(self, n: int) -> SigmaPoints:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
+    def predict(self, belief: Gaussian, motion: MotionModel, dt: ArrayLike) -> Gaussian:
         """Unscented transform through f: ``x- = sum Wm f(X)``, ``P- = sum Wc dY dY^T + Q``."""
         return self._predict(belief, motion, dt, False)[0]
 
-    def predict_with_cross(self, belief: Gaussian, motion, dt: ArrayLike):
+    def predict_with_cross(self, belief: Gaussian, motion: MotionModel, dt: ArrayLike):
         """Prediction and the cross-covariance ``C = sum Wc (X - x)(Y - x-)^T`` (for RTS)."""
         return self._predict(belief, motion, dt, True)
 
-    def _predict(self, belief: Gaussian, motion, dt: ArrayLike, with_cross: bool):
+    def _predict(self, belief: Gaussian, motion: MotionModel, dt: ArrayLike, with_cross: bool):
         n = getattr(motion, "dim_x", None)
         x, P = check_belief(belief, n, f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
@@ -205,7 +206,8 @@ class _SigmaPointFilter(Filter):
         upper += _noise_upper(Q, batch, n)
         return mirror(upper, n)
 
-    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+    def update(self, belief: Gaussian, z: ArrayLike,
+               sensor: SensorModel) -> tuple[Gaussian, Innovation]:
         """Sigma points regenerated from the prediction; ``S = sum Wc dZ dZ^T + R``,
         ``C = sum Wc dX dZ^T``, ``K = C S^{-1}``, ``x+ = x- + K r``, ``P+ = P- - K S K^T``."""
         x, P = check_belief(belief, None, f"{self.name}.update belief")

@@ -17,13 +17,15 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from trackkit.belief import Gaussian
-from trackkit.filters.base import check_belief, register
+from trackkit.filters.base import Filter, check_belief, register
 from trackkit.linalg import solve_psd, symmetrize
+from trackkit.models.protocols import MotionModel
 
 __all__ = ["smooth"]
 
 
-def smooth(f, filtered: Gaussian, motion, dt: ArrayLike | Sequence[float]) -> Gaussian:
+def smooth(f: Filter, filtered: Gaussian, motion: MotionModel | Sequence[MotionModel],
+           dt: ArrayLike | Sequence[float]) -> Gaussian:
     """RTS-smooth a filtered sequence whose mean is ``(T, ..., n)`` and cov ``(T, ..., n, n)``.
 
     ``dt`` is one step length, or ``T - 1`` of them (``dt[k]`` from step k to k + 1).

@@ -84,7 +84,7 @@ from trackkit.models.manoeuvring import (
     step_jacobian_state,
     step_jacobian_theta,
 )
-from trackkit.models.motion import MotionModel
+from trackkit.models.motion import MotionBase
 from trackkit.models.sensors import Position
 
 __all__ = [
@@ -138,7 +138,7 @@ class Identification(NamedTuple):
 
 
 @dataclass(frozen=True, eq=False)
-class SampledVessel(MotionModel):
+class SampledVessel(MotionBase):
     """The augmented model over one sample period ``dt`` in ``substeps = m`` forward-Euler
     steps of ``h = dt / m``, the input interpolated linearly between the samples
     ``s_prev`` and ``s_next`` (each ``(..., 2)``): sub-step j uses the mean of the

@@ -13,7 +13,7 @@ positive to starboard) and engine speed (rpm). Coefficients
 It is linear in theta, ``f = Phi(x, s) theta`` with the block-sparse regressor matrix ``Phi``
 (3 x 16). Discretised by forward Euler with the mean input (paper eq. 4)::
 
-    x_{k+1} = x_k + T f(x_k, s_m(k), theta),   s_m(k) = (s_k + s_{k+1}) / 2
+    x_{k+1} = x_k + dt f(x_k, s_m(k), theta),  s_m(k) = (s_k + s_{k+1}) / 2
 
 The printed eq. 4 has "a9 r n^2"; the continuous eq. 2 has a9 n^2, which is what is used here.
 
@@ -51,7 +51,8 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from trackkit.models.motion import MotionModel
+from trackkit.models.motion import MotionBase
+from trackkit.renamed import renamed_keywords
 
 __all__ = [
     "COEFFICIENT_NAMES",
@@ -100,10 +101,10 @@ def _array(value: ArrayLike, last: int, name: str) -> Array:
     return a
 
 
-def _finite_step(T: ArrayLike, name: str = "T") -> Array:
-    t = np.asarray(T, dtype=float)
+def _finite_step(dt: ArrayLike, name: str = "dt") -> Array:
+    t = np.asarray(dt, dtype=float)
     if not np.all(np.isfinite(t)) or np.any(t < 0):
-        raise ValueError(f"{name} = {np.asarray(T).tolist()!r}; expected a finite step >= 0 s")
+        raise ValueError(f"{name} = {np.asarray(dt).tolist()!r}; expected a finite step >= 0 s")
     return t
 
 
@@ -270,46 +271,51 @@ def mean_input(s_k: ArrayLike, s_next: ArrayLike) -> Array:
     return 0.5 * (_array(s_k, 2, "s_k") + _array(s_next, 2, "s_next"))
 
 
-def step(x: ArrayLike, s_m: ArrayLike, theta: ArrayLike, T: ArrayLike,
+@renamed_keywords(T="dt")
+def step(x: ArrayLike, s_m: ArrayLike, theta: ArrayLike, dt: ArrayLike,
          norm: Normalisation = IDENTITY) -> Array:
-    """Forward Euler ``x_{k+1} = x_k + T f(x_k, s_m, theta)``."""
+    """Forward Euler ``x_{k+1} = x_k + dt f(x_k, s_m, theta)``."""
     x = _array(x, 3, "x")
-    T = _finite_step(T)
-    return x + T[..., None] * rhs_unchecked(x, _array(s_m, 2, "s_m"),
-                                            _array(theta, N_THETA, "theta"), norm)
+    dt = _finite_step(dt)
+    return x + dt[..., None] * rhs_unchecked(x, _array(s_m, 2, "s_m"),
+                                             _array(theta, N_THETA, "theta"), norm)
 
 
-def step_jacobian_state(x: ArrayLike, s_m: ArrayLike, theta: ArrayLike, T: ArrayLike,
+@renamed_keywords(T="dt")
+def step_jacobian_state(x: ArrayLike, s_m: ArrayLike, theta: ArrayLike, dt: ArrayLike,
                         norm: Normalisation = IDENTITY) -> Array:
-    """``d x_{k+1} / d x_k = I + T df/dx``, ``(..., 3, 3)``."""
-    T = _finite_step(T)
-    return np.eye(3) + T[..., None, None] * rhs_jacobian(x, s_m, theta, norm)
+    """``d x_{k+1} / d x_k = I + dt df/dx``, ``(..., 3, 3)``."""
+    dt = _finite_step(dt)
+    return np.eye(3) + dt[..., None, None] * rhs_jacobian(x, s_m, theta, norm)
 
 
-def step_jacobian_theta(x: ArrayLike, s_m: ArrayLike, T: ArrayLike,
+@renamed_keywords(T="dt")
+def step_jacobian_theta(x: ArrayLike, s_m: ArrayLike, dt: ArrayLike,
                         norm: Normalisation = IDENTITY) -> Array:
-    """``d x_{k+1} / d theta = T Phi(x_k, s_m)``, ``(..., 3, 16)``."""
-    T = _finite_step(T)
-    return T[..., None, None] * regressors(x, s_m, norm)
+    """``d x_{k+1} / d theta = dt Phi(x_k, s_m)``, ``(..., 3, 16)``."""
+    dt = _finite_step(dt)
+    return dt[..., None, None] * regressors(x, s_m, norm)
 
 
-def augmented_step(xa: ArrayLike, s_m: ArrayLike, T: ArrayLike,
+@renamed_keywords(T="dt")
+def augmented_step(xa: ArrayLike, s_m: ArrayLike, dt: ArrayLike,
                    norm: Normalisation = IDENTITY) -> Array:
-    """``[x + T f(x, s_m, theta), theta]`` for ``xa = [u, v, r, theta]`` (..., 19)."""
+    """``[x + dt f(x, s_m, theta), theta]`` for ``xa = [u, v, r, theta]`` (..., 19)."""
     xa = _array(xa, 3 + N_THETA, "xa")
-    x1 = step(xa[..., :3], s_m, xa[..., 3:], T, norm)
+    x1 = step(xa[..., :3], s_m, xa[..., 3:], dt, norm)
     theta = np.broadcast_to(xa[..., 3:], x1.shape[:-1] + (N_THETA,))
     return np.concatenate([x1, theta], -1)
 
 
-def augmented_jacobian(xa: ArrayLike, s_m: ArrayLike, T: ArrayLike,
+@renamed_keywords(T="dt")
+def augmented_jacobian(xa: ArrayLike, s_m: ArrayLike, dt: ArrayLike,
                        norm: Normalisation = IDENTITY) -> Array:
-    """The 19 x 19 transition Jacobian ``[[I + T df/dx, T Phi], [0, I]]`` (theta is a random
+    """The 19 x 19 transition Jacobian ``[[I + dt df/dx, dt Phi], [0, I]]`` (theta is a random
     walk)."""
     xa = _array(xa, 3 + N_THETA, "xa")
     x, th = xa[..., :3], xa[..., 3:]
-    Fx = step_jacobian_state(x, s_m, th, T, norm)
-    Ft = step_jacobian_theta(x, s_m, T, norm)
+    Fx = step_jacobian_state(x, s_m, th, dt, norm)
+    Ft = step_jacobian_theta(x, s_m, dt, norm)
     shape = np.broadcast_shapes(Fx.shape[:-2], Ft.shape[:-2])
     F = np.zeros(shape + (19, 19))
     F[..., :3, :3] = Fx
@@ -319,7 +325,7 @@ def augmented_jacobian(xa: ArrayLike, s_m: ArrayLike, T: ArrayLike,
 
 
 @dataclass(frozen=True, eq=False)
-class AugmentedVessel(MotionModel):
+class AugmentedVessel(MotionBase):
     """Motion model of the augmented state ``[u, v, r, theta]`` (19) for the filters.
 
     ``f(x, dt) = augmented_step(x, s_m, dt, norm)``, ``jacobian`` its 19 x 19 Jacobian and

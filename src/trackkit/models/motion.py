@@ -17,9 +17,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.models.discretize import discretize
+from trackkit.models.protocols import MotionModel
 
 __all__ = [
     "MotionModel",
+    "MotionBase",
     "LinearMotion",
     "ContinuousLinear",
     "ConstantVelocity",
@@ -93,8 +95,9 @@ def _memo(model: object, kind: str, dt: ArrayLike, build) -> Array:
     return value
 
 
-class MotionModel:
-    """Interface of every motion model (documentation only; models are duck-typed)."""
+class MotionBase:
+    """Shared base of the bundled motion models: the optional members' defaults and
+    ``noise_cov``. A model need only satisfy :class:`MotionModel`."""
 
     dim_x: int
     linear: bool = False
@@ -110,9 +113,14 @@ class MotionModel:
     def noise(self, x: Array, dt: ArrayLike) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def noise_cov(self, x: Array, dt: ArrayLike) -> Array:
+        """Q, the covariance of the process noise over the step ``dt`` from ``x``
+        (broadcastable to ``(..., n, n)``): read as ``sensor.noise_cov(x)`` reads R."""
+        return self.noise(x, dt)
+
 
 @dataclass(frozen=True, eq=False)
-class LinearMotion(MotionModel):
+class LinearMotion(MotionBase):
     """``x' = F x + w``, ``w ~ N(0, Q)`` with constant F and Q (``dt`` is ignored)."""
 
     F: Array
@@ -144,7 +152,7 @@ class LinearMotion(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class ContinuousLinear(MotionModel):
+class ContinuousLinear(MotionBase):
     """``dx/dt = A x + L w`` with white ``w`` of spectral density ``Qc``, discretised exactly
     (Van Loan) for each ``dt``."""
 
@@ -171,7 +179,7 @@ class ContinuousLinear(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class _NearlyConstant(MotionModel):
+class _NearlyConstant(MotionBase):
     """The white-noise derivative family: the k-th derivative of position is white noise of
     spectral density q, state [p..., v..., (a...)] with k blocks per axis.
 
@@ -246,7 +254,7 @@ class ConstantAcceleration(_NearlyConstant):
 
 
 @dataclass(frozen=True, eq=False)
-class Singer(MotionModel):
+class Singer(MotionBase):
     """Singer manoeuvre model: acceleration is a first-order Gauss-Markov process.
 
     Per axis ``da/dt = -a / tau + w`` with ``E[w w] = 2 sigma^2 / tau`` so that the stationary
@@ -348,7 +356,7 @@ def turn_transition(w: Array, dt: Array) -> Array:
 
 
 @dataclass(frozen=True, eq=False)
-class KnownTurnRate(MotionModel):
+class KnownTurnRate(MotionBase):
     """Constant turn at a known rate ``omega`` (rad/s, positive counter-clockwise), state
     [x, y, vx, vy]; Q is the constant-velocity Q with density q."""
 
@@ -374,7 +382,7 @@ class KnownTurnRate(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class CoordinatedTurn(MotionModel):
+class CoordinatedTurn(MotionBase):
     """Coordinated turn with the turn rate in the state, [x, y, vx, vy, omega].
 
     x' = x + s vx - c vy,  y' = y + c vx + s vy,  [vx', vy'] = Rot(omega dt) [vx, vy],
@@ -424,7 +432,7 @@ class CoordinatedTurn(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class RandomSine(MotionModel):
+class RandomSine(MotionBase):
     """The random-sine example of the missing-measurements thesis (sections 2-5-5-2 and 2-5-6-4):
     state [theta, omega, a], phase, angular velocity and amplitude; omega and a are random walks.
 
@@ -471,7 +479,7 @@ class RandomSine(MotionModel):
 
 
 @dataclass(frozen=True, eq=False)
-class Augmented(MotionModel):
+class Augmented(MotionBase):
     """A kinematic model with ``extras`` nearly constant components appended to the state,
     e.g. the radiated frequency f0 of Doppler-bearing tracking: ``[kinematics, f0]``.
 

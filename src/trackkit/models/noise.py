@@ -1,6 +1,7 @@
 """A model with its noise covariance replaced: what a filter believes R or Q to be.
 
-A filter reads R only as ``sensor.noise`` and Q only as ``motion.noise(x, dt)``, so a model
+A filter reads R only as ``sensor.noise`` and Q only as ``motion.noise(x, dt)`` (a caller
+reads both alike, ``sensor.noise_cov(x)`` and ``motion.noise_cov(x, dt)``), so a model
 whose noise is swapped is all an adaptive filter (or a filter with a deliberately wrong R0)
 needs; everything else (h, Jacobians, residual wrapping) is the wrapped model's. The noise may
 carry batch axes, ``(..., m, m)`` or ``(..., n, n)``, one matrix per batch row.
@@ -34,6 +35,9 @@ class SensorWithNoise:
         self.sensor = sensor
         self.noise = _square(R, sensor.dim_z, "R")
 
+    def noise_cov(self, x: Array | None = None) -> Array:
+        return self.noise
+
     def __getattr__(self, name: str) -> Any:  # everything but the noise is the sensor's
         return getattr(self.sensor, name)
 
@@ -50,6 +54,9 @@ class MotionWithNoise:
         self.Q = _square(Q, motion.dim_x, "Q")
 
     def noise(self, x: Array, dt: ArrayLike = 0.0) -> Array:
+        return self.Q
+
+    def noise_cov(self, x: Array, dt: ArrayLike = 0.0) -> Array:
         return self.Q
 
     def __getattr__(self, name: str) -> Any:

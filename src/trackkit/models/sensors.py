@@ -20,9 +20,11 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import block_diag
 
 from trackkit.angles import wrap
+from trackkit.models.protocols import SensorModel
 
 __all__ = [
     "SensorModel",
+    "SensorBase",
     "Position",
     "Bearing",
     "RangeBearing",
@@ -134,8 +136,9 @@ def _bearing_terms(u: Array, v: Array, convention: str) -> tuple[Array, Array, A
     return b, g, H
 
 
-class SensorModel:
-    """Shared behaviour of sensors: angle-aware residuals and the shape check of z."""
+class SensorBase:
+    """Shared behaviour of the bundled sensors: angle-aware residuals, R built once, and
+    ``noise_cov``. A sensor need only satisfy :class:`SensorModel`."""
 
     dim_z: int
     angular: tuple[bool, ...]
@@ -153,6 +156,11 @@ class SensorModel:
 
     def _noise(self) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
+
+    def noise_cov(self, x: Array | None = None) -> Array:
+        """R, the covariance of the measurement noise at ``x`` (``(..., m, m)``): read as
+        ``motion.noise_cov(x, dt)`` reads Q. A bundled sensor's R does not depend on x."""
+        return self.noise
 
     def _angle_mask(self):
         """None (no angle components), True (all) or the boolean mask; cached per sensor."""
@@ -189,7 +197,7 @@ class SensorModel:
 
 
 @dataclass(frozen=True, eq=False)
-class Position(SensorModel):
+class Position(SensorBase):
     """Position of dimension ``dim`` (the first ``dim`` state components); linear."""
 
     dim: int = 2
@@ -235,7 +243,7 @@ class Position(SensorModel):
 
 
 @dataclass(frozen=True, eq=False)
-class Bearing(SensorModel):
+class Bearing(SensorBase):
     """2-D bearing from ``origin`` to the target, z = [b].
 
     Nautical (default): ``b = atan2(x - xo, y - yo)``, clockwise from north.
@@ -291,7 +299,7 @@ class Bearing(SensorModel):
 
 
 @dataclass(frozen=True, eq=False)
-class RangeBearing(SensorModel):
+class RangeBearing(SensorBase):
     """2-D radar: z = [range, bearing] from ``origin``; bearing convention as ``Bearing``."""
 
     origin: ArrayLike = (0.0, 0.0)
@@ -351,7 +359,7 @@ class RangeBearing(SensorModel):
 
 
 @dataclass(frozen=True, eq=False)
-class AzimuthElevation(SensorModel):
+class AzimuthElevation(SensorBase):
     """3-D angles from ``origin``: z = [azimuth, elevation] (Naseri Solhdar, chapter 5).
 
     azimuth as ``Bearing`` on (x, y) (nautical by default; the thesis measures it from the x
@@ -417,7 +425,7 @@ class AzimuthElevation(SensorModel):
 
 
 @dataclass(frozen=True, eq=False)
-class BearingFrequency(SensorModel):
+class BearingFrequency(SensorBase):
     """Doppler-bearing sensor (Hashemi and Alfi 2019): z = [bearing, received frequency].
 
     State [x, y, vx, vy, f0]; ``origin`` and ``velocity`` are the observer's. With
@@ -510,7 +518,7 @@ class BearingFrequency(SensorModel):
 
 
 @dataclass(frozen=True, eq=False)
-class MultipathDelay(SensorModel):
+class MultipathDelay(SensorBase):
     """Surface and bottom multipath delays at one hydrophone (Naseri Solhdar, chapter 4).
 
     z = [tau1, tau2]: the surface-reflected and bottom-reflected arrival times minus the
@@ -572,7 +580,7 @@ class MultipathDelay(SensorModel):
 
 
 @dataclass(frozen=True, eq=False)
-class Sine(SensorModel):
+class Sine(SensorBase):
     """The sine measurement of the missing-measurements thesis: ``y = a sin(theta)`` on the state
     [theta, omega, a] (sections 2-5-5-2 and 2-5-6-4), or ``y = sin(theta)`` on [theta, omega] with
     ``amplitude=False`` (section 4-4)."""
@@ -611,13 +619,13 @@ class Sine(SensorModel):
 
 
 @dataclass(frozen=True, eq=False)
-class Stack(SensorModel):
+class Stack(SensorBase):
     """Several sensors observing the same state at once, z = [z_1, z_2, ...].
 
     R is block diagonal: the sensors' noises are independent.
     """
 
-    sensors: tuple = ()
+    sensors: tuple[SensorModel, ...] = ()
 
     def __post_init__(self) -> None:
         sensors = tuple(self.sensors)

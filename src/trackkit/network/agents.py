@@ -19,7 +19,7 @@ Per execution at time t (the order of Fig. 2, with the reconstruction's choices)
    target in range) at a time: each track's bearing from that sensor position at that time,
    ``zhat_i = atan2(x_i(t_k) - x_s, y_i(t_k) - y_s)``, ``S_i = H P_i(t_k) H^T + sigma^2``,
    the ellipsoidal ``gate`` (P_G = ``p_gate``), the cost ``c_ij = K1 (1 - exp(-K2 d2_ij))``
-   (``seed004_costs``) and the Munkres assignment (``gnn``).
+   (``saturating_costs``) and the Munkres assignment (``gnn_assign``).
 4. **Batches and composite measurements.** Each track accumulates its associated bearings. A
    batch of at least ``batch_min`` bearings is offered to ``composite_measurement`` (all such
    tracks in one call, nan-padded rows, t_f = t, x0 = the prediction). Its status decides:
@@ -94,7 +94,14 @@ from trackkit.network.tracks import (
     duplicates,
     match_tracks,
 )
-from trackkit.tracking import IdCounter, TimerLogic, gate, gnn, predict_measurement, seed004_costs
+from trackkit.tracking import (
+    IdCounter,
+    TimerLogic,
+    gate,
+    gnn_assign,
+    predict_measurement,
+    saturating_costs,
+)
 from trackkit.tracking.bearings import BearingSet, concat_bearings, empty_bearings
 from trackkit.tracking.initiate import initiate_from_bearing
 from trackkit.tracking.logic import TimerState, TrackStatus
@@ -427,7 +434,7 @@ def associate(mean: Array, cov: Array, t: float, bearings: BearingSet, settings:
     x, P = cv_predict(mean, cov, tk - t, settings.q)
     pred = predict_measurement(Gaussian(x, P), Bearing(origin=sk, sigma=float(bearings.sigma[0])))
     g = gate(pred.zhat, pred.S, bearings.z[:, None], settings.p_gate, angular=(True,))
-    return gnn(g, seed004_costs(g, settings.k1, settings.k2)).det
+    return gnn_assign(g, saturating_costs(g, settings.k1, settings.k2)).det
 
 
 def _append(tracks: Tracks, det: NDArray[np.intp], bearings: BearingSet) -> Tracks:

@@ -44,8 +44,8 @@ GLOSSARY: tuple[tuple[str, str], ...] = (
      "window (dimensionless). About `n` for a consistent filter; above `n` the filter is "
      "overconfident (its covariance is too small for its error), below `n` pessimistic."),
     ("ANIS",
-     "Average normalised innovation squared `r' S^-1 r` (`r` the measurement residual, `S` "
-     "its predicted covariance), over the runs that had a measurement and the steps of the "
+     "Average normalised innovation squared `nu' S^-1 nu` (`nu = z - zhat` the innovation, "
+     "`S` its predicted covariance), over the runs that had a measurement and the steps of the "
      "averaging window (dimensionless). About `m`, the measurement dimension, for a "
      "consistent filter. It needs no truth, so it is the check that also works on recorded "
      "data."),

@@ -22,7 +22,7 @@ The file (units in the field names as in the single-target schema; ``q`` in m^2/
     filter = "EKF"                 # KF (position radars only), EKF, UKF, CKF
     q = 1.0                        # the tracker's constant-velocity model
     associator = "GNN"             # or "JPDA"
-    cost = "loglik"                # GNN only: loglik, distance, seed004
+    cost = "loglik"                # GNN only: loglik, distance, saturating
     # missed_distance = 10.0       # cost "distance" only: a miss's cost and the gate
     logic = "score"                # SPRT score (alpha, beta, new_target_density) or
     alpha = 0.01                   # "history" (confirm = [M, N], delete = [P, R])
@@ -134,9 +134,10 @@ class TrackerSpec(Strict):
                            json_schema_extra=unit("m^2/s^3"))
     associator: Literal["GNN", "JPDA"] = Field(description="global nearest neighbour or "
                                                "joint probabilistic data association")
-    cost: Literal["loglik", "distance", "seed004"] | None = Field(
+    cost: Literal["loglik", "distance", "saturating"] | None = Field(
         None, description="GNN only: the assignment cost (default loglik: negative "
-        "log-likelihood ratio; distance: Mahalanobis; seed004: K1 (1 - exp(-K2 d^2)))")
+        "log-likelihood ratio; distance: Mahalanobis; saturating: K1 (1 - exp(-K2 d^2)), "
+        "Jalalipoor and Kardehi Moghaddam 2021)")
     missed_distance: PositiveFloat | None = Field(
         None, description="GNN with cost distance only: the Mahalanobis distance a missed "
         "detection costs, which is also the gate (default: the gate's edge, "
@@ -178,6 +179,13 @@ class TrackerSpec(Strict):
         None, description="the clutter density the tracker assumes, false plots per unit of "
         "measurement space per scan (default: the scene's; required when the scene has no "
         "clutter)", json_schema_extra=unit("1/(m rad) per scan"))
+
+    @field_validator("cost", mode="before")
+    @classmethod
+    def _renamed_cost(cls, v: object) -> object:
+        if v == "seed004":
+            raise ValueError("cost 'seed004' is now spelled 'saturating'")
+        return v
 
     @field_validator("confirm", "delete")
     @classmethod

@@ -2,7 +2,8 @@
 
     from trackkit import tracking as tt
     g = tt.gate(zhat, S, z, p_gate=0.99)                 # KD-tree pre-gate, batched fine test
-    a = tt.gnn(g, tt.loglik_costs(g, p_d=0.9, clutter_density=1e-6))     # or tt.jpda(...)
+    a = tt.gnn_assign(g, tt.loglik_costs(g, pd=0.9, clutter_density=1e-6))
+    # or r = tt.jpda_probabilities(g, pd=0.9, clutter_density=1e-6): the marginals beta_ij
     logic = tt.HistoryLogic(confirm=(2, 3), delete=(3, 3))   # M-of-N, or tt.ScoreLogic
     new = tt.single_point(z[a.unassigned], R, v_max=30.0)     # or two_point, converted plots
 
@@ -22,11 +23,11 @@ from trackkit.tracking.association import (
     JPDAResult,
     clusters,
     distance_costs,
-    gnn,
-    jpda,
+    gnn_assign,
+    jpda_probabilities,
     loglik_costs,
     pda_costs,
-    seed004_costs,
+    saturating_costs,
 )
 from trackkit.tracking.gating import (
     GATE_PROBABILITY,
@@ -73,11 +74,25 @@ from trackkit.tracking.tracker import (
 
 __all__ = [
     "GNN_DENSE_MAX_CELLS", "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult",
-    "clusters", "distance_costs", "gnn", "jpda", "loglik_costs", "pda_costs",
-    "seed004_costs", "GATE_PROBABILITY", "KDTREE_MIN_PAIRS", "Gate", "MeasurementPrediction",
-    "gate", "gate_threshold", "predict_measurement", "convert_range_bearing",
-    "converted_cov_given_truth", "pair_plots", "single_point", "two_point", "HistoryLogic",
-    "HistoryState", "IdCounter", "ScoreLogic", "ScoreState", "TimerLogic", "TimerState",
-    "TrackStatus", "lost", "concatenate", "confirmed", "select", "sprt_thresholds", "tentative",
-    "to_delete", "GNN", "JPDA", "SinglePoint", "StepInfo", "Tracker", "Tracks", "TwoPoint",
+    "clusters",
+    "distance_costs", "gnn_assign", "jpda_probabilities", "loglik_costs",
+    "pda_costs", "saturating_costs",
+    "GATE_PROBABILITY", "KDTREE_MIN_PAIRS", "Gate", "MeasurementPrediction", "gate",
+    "gate_threshold", "predict_measurement",
+    "convert_range_bearing", "converted_cov_given_truth", "pair_plots", "single_point",
+    "two_point",
+    "HistoryLogic", "HistoryState", "IdCounter", "ScoreLogic", "ScoreState", "TimerLogic",
+    "TimerState", "TrackStatus", "lost",
+    "concatenate", "confirmed", "select", "sprt_thresholds",
+    "tentative", "to_delete",
+    "GNN", "JPDA", "SinglePoint", "StepInfo", "Tracker", "Tracks", "TwoPoint",
 ]
+
+#: functions renamed to say what they do (not only the case tells them from GNN and JPDA)
+_RENAMED = {"gnn": "gnn_assign", "jpda": "jpda_probabilities", "seed004_costs": "saturating_costs"}
+
+
+def __getattr__(name: str):
+    if name in _RENAMED:
+        raise AttributeError(f"trackkit.tracking.{name} is now spelled {_RENAMED[name]}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -6,7 +6,7 @@ Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of ga
 
 * :func:`clusters`: connected components of the bipartite graph of gated pairs; tracks in
   different clusters share no detection, so association splits into independent problems.
-* :func:`gnn`: the global nearest neighbour, the one assignment (each track at most one
+* :func:`gnn_assign`: the global nearest neighbour, the one assignment (each track at most one
   detection, each detection at most one track) of least total cost, where a track may also
   take its miss alternative. Costs come from a cost function:
 
@@ -17,12 +17,12 @@ Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of ga
   - :func:`pda_costs`: ``c_ij = -beta_ij`` with beta the single-track PDA probabilities
     (Stone Soup's ``GNNWith2DAssignment`` over a ``PDAHypothesiser``, which maximises
     their sum);
-  - :func:`seed004_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of Jalalipoor and
+  - :func:`saturating_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of Jalalipoor and
   Kardehi Moghaddam (2021).
 
-* :func:`jpda`: marginal association probabilities from the feasible joint events of each
-  cluster (the tracker updates a track with each of its gated detections and moment-matches
-  the mixture, :func:`trackkit.belief.moment_match`).
+* :func:`jpda_probabilities`: marginal association probabilities from the feasible joint
+  events of each cluster (the tracker updates a track with each of its gated detections
+  and moment-matches the mixture, :func:`trackkit.belief.moment_match`).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite_matching
 from scipy.stats import chi2
 
+from trackkit.renamed import renamed_keywords
 from trackkit.tracking.gating import Gate
 
 __all__ = [
@@ -46,19 +47,20 @@ __all__ = [
     "JPDAResult",
     "clusters",
     "distance_costs",
-    "gnn",
-    "jpda",
+    "gnn_assign",
+    "jpda_probabilities",
+
     "loglik_costs",
     "pda_costs",
-    "seed004_costs",
+    "saturating_costs",
 ]
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
 
 #: a scan whose whole problem has at most this many cells, tracks x (detections + tracks), is
-#: solved by ``gnn`` as one dense ``linear_sum_assignment`` instead of cluster by cluster: the
-#: cluster search (a sparse graph and its components) costs about 0.27 ms a scan even for one
+#: solved by ``gnn_assign`` as one dense ``linear_sum_assignment`` instead of cluster by cluster:
+#: the cluster search (a sparse graph and its components) costs about 0.27 ms a scan even for one
 #: track, the dense solve 26 us for 3 tracks and 0.18 ms for 150 (43 800 cells); at 300
 #: tracks (178 500 cells) the clusters win, 0.46 against 0.62 ms (spread-out tracks, ~20
 #: clutter plots; benchmarks/bench_association.py, "GNN: dense against per cluster")
@@ -162,35 +164,36 @@ class Costs(NamedTuple):
 
 def _p_gate(g: Gate, p_gate: float | None) -> float:
     """P_G given, or the one that produced the gate: chi2.cdf(gamma, m)."""
-    return float(chi2.cdf(g.threshold, g.residual.shape[1])) if p_gate is None else p_gate
+    return float(chi2.cdf(g.threshold, g.nu.shape[1])) if p_gate is None else p_gate
 
 
-def _log_ratio(g: Gate, p_d: float, clutter_density: float, p_gate: float | None) -> Array:
+def _log_ratio(g: Gate, pd: float, clutter_density: float, p_gate: float | None) -> Array:
     """``log(P_D N_ij / lambda) - log(1 - P_D P_G)``: a pair's weight over the miss's."""
-    _check_pd(p_d, clutter_density)
+    _check_pd(pd, clutter_density)
     pg = _p_gate(g, p_gate)
-    return np.log(p_d) + g.loglik - np.log(clutter_density) - np.log1p(-p_d * pg)
+    return np.log(pd) + g.loglik - np.log(clutter_density) - np.log1p(-pd * pg)
 
 
-def _check_pd(p_d: float, clutter_density: float) -> None:
-    if not 0.0 < p_d <= 1.0:
-        raise ValueError(f"p_d = {p_d!r}; expected 0 < P_D <= 1")
+def _check_pd(pd: float, clutter_density: float) -> None:
+    if not 0.0 < pd <= 1.0:
+        raise ValueError(f"pd = {pd!r}; expected 0 < pd <= 1 (the detection probability P_D)")
     if not clutter_density > 0:
         raise ValueError(f"clutter_density = {clutter_density!r}; expected lambda > 0")
 
 
-def loglik_costs(g: Gate, p_d: float, clutter_density: float,
+@renamed_keywords(p_d="pd")
+def loglik_costs(g: Gate, pd: float, clutter_density: float,
                  p_gate: float | None = None) -> Costs:
     """Negative log-likelihood-ratio costs: ``c_ij = -log(P_D N_ij / lambda)`` and
     ``c_i0 = -log(1 - P_D P_G)`` (``P_G`` defaults to the gate's, chi2.cdf(gamma, m)).
 
     Summed over an assignment this is minus the log of the joint event's weight (see
-    :func:`jpda`), so the GNN picks the most probable joint event.
+    :func:`jpda_probabilities`), so the GNN picks the most probable joint event.
     """
-    _check_pd(p_d, clutter_density)
+    _check_pd(pd, clutter_density)
     pg = _p_gate(g, p_gate)
-    pair = -(np.log(p_d) + g.loglik - np.log(clutter_density))
-    return Costs(pair, np.full(g.n_tracks, -np.log1p(-p_d * pg)))
+    pair = -(np.log(pd) + g.loglik - np.log(clutter_density))
+    return Costs(pair, np.full(g.n_tracks, -np.log1p(-pd * pg)))
 
 
 def distance_costs(g: Gate, missed_distance: float | None = None) -> Costs:
@@ -204,7 +207,8 @@ def distance_costs(g: Gate, missed_distance: float | None = None) -> Costs:
     return Costs(np.where(d < md, d, np.inf), np.full(g.n_tracks, md))
 
 
-def pda_costs(g: Gate, p_d: float, clutter_density: float,
+@renamed_keywords(p_d="pd")
+def pda_costs(g: Gate, pd: float, clutter_density: float,
               p_gate: float | None = None) -> Costs:
     """``c_ij = -beta_ij``, ``c_i0 = -beta_i0``, with the single-track PDA probabilities
     ``beta_ij = L_ij / (1 - P_D P_G + sum_j L_ij)``, ``L_ij = P_D N_ij / lambda``.
@@ -212,11 +216,11 @@ def pda_costs(g: Gate, p_d: float, clutter_density: float,
     The GNN then maximises the sum of the per-track probabilities, which is what Stone Soup's
     ``GNNWith2DAssignment`` does with a ``PDAHypothesiser``; kept for comparison with it.
     """
-    beta, beta0 = _pda(g.track, _log_ratio(g, p_d, clutter_density, p_gate), g.n_tracks)
+    beta, beta0 = _pda(g.track, _log_ratio(g, pd, clutter_density, p_gate), g.n_tracks)
     return Costs(-beta, -beta0)
 
 
-def seed004_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | None = None,
+def saturating_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | None = None,
                   distance: Literal["mahalanobis", "residual"] = "mahalanobis") -> Costs:
     """The cost of Jalalipoor and Kardehi Moghaddam (2021), ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``.
 
@@ -233,7 +237,7 @@ def seed004_costs(g: Gate, k1: float = 1.0, k2: float = 0.5, miss_cost: float | 
     if distance == "mahalanobis":
         gamma2 = g.d2
     elif distance == "residual":
-        gamma2 = np.einsum("pi,pi->p", g.residual, g.residual)
+        gamma2 = np.einsum("pi,pi->p", g.nu, g.nu)
     else:
         raise ValueError(f"distance = {distance!r}; expected 'mahalanobis' or 'residual'")
     pair = k1 * -np.expm1(-k2 * gamma2)
@@ -252,7 +256,7 @@ class Assignment(NamedTuple):
     cost: float
 
 
-def gnn(g: Gate, costs: Costs,
+def gnn_assign(g: Gate, costs: Costs,
         method: Literal["auto", "clusters", "sparse", "dense"] = "auto") -> Assignment:
     """Least-cost assignment of gated pairs, each track taking one detection or its miss.
 
@@ -284,7 +288,7 @@ def gnn(g: Gate, costs: Costs,
         det = _gnn_dense(t, d, c, miss, T, D)
     elif method == "clusters":
         sub = g._replace(track=t, det=d, d2=g.d2[ok], loglik=g.loglik[ok],
-                         residual=g.residual[ok])
+                         nu=g.nu[ok])
         det = _gnn_clusters(sub, c, miss)
     else:
         raise ValueError(f"method = {method!r}; expected 'auto', 'dense', 'sparse' or "
@@ -388,7 +392,8 @@ class JPDAResult(NamedTuple):
     approximated: NDArray[np.bool_]
 
 
-def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = None, *,
+@renamed_keywords(p_d="pd")
+def jpda_probabilities(g: Gate, pd: float, clutter_density: float, p_gate: float | None = None, *,
          max_events: int = JPDA_MAX_EVENTS, cl: Clusters | None = None,
          star: bool = False) -> JPDAResult:
     """Parametric JPDA marginals (Bar-Shalom): a feasible joint event theta (each detection
@@ -410,7 +415,7 @@ def jpda(g: Gate, p_d: float, clutter_density: float, p_gate: float | None = Non
     JPDA (still reported in ``approximated``).
     """
     T = g.n_tracks
-    lr = _log_ratio(g, p_d, clutter_density, p_gate)
+    lr = _log_ratio(g, pd, clutter_density, p_gate)
     cl = clusters(g) if cl is None else cl
     beta = np.zeros(g.size)
     beta0 = np.ones(T)
@@ -462,8 +467,8 @@ def _enumerate(lt: Index, ld: Index, lr: Array, nt: int, nd: int, max_events: in
 
     Events are built track by track; each step extends every event so far by the track's
     miss and by each of its detections that the event has not used (vectorised over events
-    and options). ``star``: JPDA* pruning (see :func:`jpda`), vectorised over events and
-    track pairs.
+    and options). ``star``: JPDA* pruning (see :func:`jpda_probabilities`), vectorised over
+    events and track pairs.
     """
     ev = np.full((1, nt), -1, dtype=np.intp)  # each track's detection, -1 = miss (so far)
     used = np.zeros((1, nd), dtype=bool)

@@ -39,6 +39,7 @@ from trackkit.angles import wrap
 from trackkit.belief import Gaussian
 from trackkit.filters.kalman import kalman_gain
 from trackkit.linalg import cholesky
+from trackkit.renamed import renamed_attribute
 
 __all__ = [
     "GATE_PROBABILITY",
@@ -66,7 +67,7 @@ class Gate(NamedTuple):
     """Gated pairs, sorted by track then detection (``P`` pairs).
 
     ``track``, ``det`` (P,) indices; ``d2`` (P,) squared Mahalanobis distances; ``loglik``
-    (P,) ``log N(z_j; zhat_i, S_i)``; ``residual`` (P, m) the innovations ``nu_ij`` (angles
+    (P,) ``log N(z_j; zhat_i, S_i)``; ``nu`` (P, m) the innovations ``nu_ij`` (angles
     wrapped); ``n_tracks``, ``n_dets`` the sizes of the problem; ``threshold`` gamma.
     """
 
@@ -74,10 +75,12 @@ class Gate(NamedTuple):
     det: Index
     d2: Array
     loglik: Array
-    residual: Array
+    nu: Array
     n_tracks: int
     n_dets: int
     threshold: float
+
+    residual = renamed_attribute("Gate", "residual", "nu")
 
     @property
     def size(self) -> int:

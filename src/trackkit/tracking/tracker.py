@@ -38,10 +38,10 @@ from trackkit.models.sensors import Position, RangeBearing
 from trackkit.tracking.association import (
     JPDA_MAX_EVENTS,
     distance_costs,
-    gnn,
-    jpda,
+    gnn_assign,
+    jpda_probabilities,
     loglik_costs,
-    seed004_costs,
+    saturating_costs,
 )
 from trackkit.tracking.gating import GATE_PROBABILITY, Gate, gate, predict_measurement
 from trackkit.tracking.initiate import convert_range_bearing, single_point, two_point
@@ -75,7 +75,7 @@ class GNN:
     gated detections. ``cost``: "loglik" (negative log-likelihood ratio against clutter and
     a miss: the most probable joint event), "distance" (the Mahalanobis distance d, a miss
     costing ``missed_distance`` M, as Stone Soup's ``DistanceHypothesiser``) or
-    "seed004" (``K1 (1 - exp(-K2 d^2))``, Jalalipoor and Kardehi Moghaddam 2021).
+    "saturating" (``K1 (1 - exp(-K2 d^2))``, Jalalipoor and Kardehi Moghaddam 2021).
 
     With the distance cost and no ``missed_distance`` the miss costs the gate's edge
     sqrt(gamma), gamma = chi2.ppf(P_G, m). With ``missed_distance`` M the gate is M instead
@@ -83,15 +83,17 @@ class GNN:
     less than a miss. M = 10 in two dimensions would need P_G = 1 - 2e-22, which is 1.0 in
     floating point."""
 
-    cost: Literal["loglik", "distance", "seed004"] = "loglik"
+    cost: Literal["loglik", "distance", "saturating"] = "loglik"
     k1: float = 1.0
     k2: float = 0.5
     missed_distance: float | None = None
 
     def __post_init__(self) -> None:
-        if self.cost not in ("loglik", "distance", "seed004"):
+        if self.cost == "seed004":
+            raise ValueError("GNN cost = 'seed004' is now spelled 'saturating'")
+        if self.cost not in ("loglik", "distance", "saturating"):
             raise ValueError(f"GNN cost = {self.cost!r}; expected 'loglik', 'distance' or "
-                             "'seed004'")
+                             "'saturating'")
         md = self.missed_distance
         if md is None:
             return
@@ -112,7 +114,7 @@ class JPDA:
     ``trackerJPDA`` HitMissThreshold, default 0.2); a detection with total association
     probability of at least ``claim`` does not start a new track. ``star=True`` is JPDA*
     (Blom and Bloem 2000): the exact enumeration drops the events less likely than a swap of
-    two tracks' detections, against track coalescence (see :func:`jpda`)."""
+    two tracks' detections, against track coalescence (see :func:`jpda_probabilities`)."""
 
     max_events: int = JPDA_MAX_EVENTS
     hit: float = 0.2
@@ -274,7 +276,7 @@ class Tracker:
             return mp.zhat, mp.S
         z0 = np.asarray(sensor.h(self.estimate(belief).mean), dtype=float)
         _, innov = self.filter.update(belief, z0, sensor)
-        zhat = z0 - innov.residual
+        zhat = z0 - innov.nu
         ang = np.asarray(getattr(sensor, "angular", (False,) * z0.shape[-1]))
         if ang.any():
             zhat[:, ang] = wrap(zhat[:, ang])
@@ -363,8 +365,8 @@ class Tracker:
         elif a.cost == "distance":
             costs = distance_costs(g, a.missed_distance)
         else:
-            costs = seed004_costs(g, a.k1, a.k2)
-        assignment = gnn(g, costs)
+            costs = saturating_costs(g, a.k1, a.k2)
+        assignment = gnn_assign(g, costs)
         hit = assignment.det >= 0
         z_assigned = np.full((g.n_tracks, z.shape[1]), np.nan)
         z_assigned[hit] = z[assignment.det[hit]]
@@ -380,8 +382,8 @@ class Tracker:
 
     def _jpda(self, belief: Any, g: Gate, z: Array, sensor: Any, info: dict):
         a = self.associator
-        r = jpda(g, self.pd, self.clutter_density, self.p_gate, max_events=a.max_events,
-                 star=a.star)
+        r = jpda_probabilities(g, self.pd, self.clutter_density, self.p_gate,
+                               max_events=a.max_events, star=a.star)
         info["clusters"], info["approximated"] = r.clusters.count, int(r.approximated.sum())
         merge = getattr(self.filter, "merge_hypotheses", None)
         if merge is not None:
