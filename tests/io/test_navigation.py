@@ -64,7 +64,7 @@ def test_exact_without_noise_through_an_nmea_log(tmp_path):
     path = tmp_path / "turn.nmea"
     write_nmea(path, gps, ins, "2024-06-01T23:59:00")
     log, rep = read_nmea(path)
-    m = preprocess(log, reference=KHOR_MUSA, T=1.0)
+    m = preprocess(log, reference=KHOR_MUSA, dt=1.0)
     assert m.t[0] == 0.0 and m.t[-1] == 120.0 and np.all(np.diff(m.t) == 1.0)
     assert not m.gap.any() and m.gaps == ()
     tr = sample_truth(*truth, m.t)
@@ -88,7 +88,7 @@ def test_recovers_u_v_r_within_the_noise():
     truth = [np.broadcast_to(x, (runs,) + x.shape) if k else x
              for k, x in enumerate(steady_turn(duration=600.0))]
     gps, ins = simulate_gnss(*truth, rng=np.random.default_rng(42))
-    m = preprocess_sim(gps, ins, reference=KHOR_MUSA, T=1.0)
+    m = preprocess_sim(gps, ins, reference=KHOR_MUSA, dt=1.0)
     assert m.u.shape == (runs, 601) and not m.gap.any()
     tr = sample_truth(truth[0], *(x[0] for x in truth[1:]), m.t)
     du, dv, dr = m.u - tr.u, m.v - tr.v, m.r - tr.r
@@ -169,8 +169,8 @@ def test_rate_from_the_differenced_heading():
 
 def test_bad_arguments_name_the_field():
     gps, ins = simulate_gnss(*steady_turn(duration=10), rng=np.random.default_rng(0))
-    with pytest.raises(ValueError, match=r"T = 0.0; expected a positive grid period"):
-        preprocess_sim(gps, ins, T=0.0)
+    with pytest.raises(ValueError, match=r"dt = 0.0; expected a positive grid period"):
+        preprocess_sim(gps, ins, dt=0.0)
     log, _ = read_nmea(FIXTURES / "sar_trial.nmea")
     f = {k: getattr(log, k) for k in log.__dataclass_fields__}
     no_rot = NavLog(**{**f, "t_rate": [], "rate": [], "line_rate": []})
@@ -187,7 +187,7 @@ def test_bad_arguments_name_the_field():
         preprocess_sim(gps, late)
     with pytest.raises(ValueError, match=r"heading times are not finite and strictly"):
         preprocess_sim(gps, ins._replace(t=ins.t[::-1].copy()))
-    m = preprocess_sim(gps, ins, reference=EnuFrame(*KHOR_MUSA), start=2.0, end=5.0, T=0.5)
+    m = preprocess_sim(gps, ins, reference=EnuFrame(*KHOR_MUSA), start=2.0, end=5.0, dt=0.5)
     assert m.t.tolist() == [2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0]
 
 

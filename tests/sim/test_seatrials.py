@@ -155,8 +155,8 @@ def test_the_printed_coefficients_diverge_in_a_simulated_trial():
 @pytest.mark.parametrize(("kwargs", "field"), [
     ({"rate_limit": -1.0}, "rate_limit"),
     ({"rate_limit": 0.0}, "rate_limit"),
-    ({"T": np.nan}, "T"),
-    ({"T": np.inf}, "T"),
+    ({"dt": np.nan}, "dt"),
+    ({"dt": np.inf}, "dt"),
     ({"substeps": 0}, "substeps"),
     ({"duration": -5.0}, "duration"),
     ({"side": 0.0}, "side"),
@@ -181,3 +181,8 @@ def test_no_straight_line_speed_needs_an_explicit_speed():
         turning_circle(paper_coefficients().theta, IDENTITY, delta=0.3, rpm=2000.0)
     with pytest.raises(ValueError, match="alpha"):
         zigzag(TH, NORM, delta=0.1, alpha=0.0, rpm=2000.0)
+
+
+def test_the_old_time_step_keyword_is_refused_naming_dt():
+    with pytest.raises(TypeError, match="'T' is now spelled 'dt'"):
+        turning_circle(TH, NORM, delta=20 * DEG, rpm=2000.0, duration=10.0, T=1.0)

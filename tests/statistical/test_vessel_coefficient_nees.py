@@ -86,7 +86,7 @@ def _trial(theta, kind, params, key, m):
     """One trial of every hull: its grid z (R, K, 3) and inputs at the old grid (R, K, 2)
     and at the sub-steps (R, (K - 1) m + 1, 2), sensed and pre-processed as a log is."""
     norm = reference_vessel().norm
-    tr = _KINDS[kind](theta, norm, T=TRUTH_T, substeps=TRUTH_SUBSTEPS, **params)
+    tr = _KINDS[kind](theta, norm, dt=TRUTH_T, substeps=TRUTH_SUBSTEPS, **params)
     rngs = [run_seed(SEED, r, key) for r in range(theta.shape[0])]
     gps, ins = simulate_gnss(tr.t, tr.east, tr.north, tr.psi, tr.u, tr.v, tr.r, rng=rngs)
     meas = preprocess_sim(gps, ins, reference=KHOR_MUSA)
@@ -174,7 +174,7 @@ def test_the_trials_take_the_path_of_trackkit_identify():
     trials' identification: the inputs at 50 sub-steps, identify's defaults."""
     theta = reference_vessel().theta[None]
     z, _, s_sub = _trial(theta, "zigzag", PROGRAMMES["A"][0][1], 99, DEFAULT_SUBSTEPS)
-    tr = seatrials.zigzag(theta, reference_vessel().norm, T=TRUTH_T, substeps=TRUTH_SUBSTEPS,
+    tr = seatrials.zigzag(theta, reference_vessel().norm, dt=TRUTH_T, substeps=TRUTH_SUBSTEPS,
                           **PROGRAMMES["A"][0][1])
     gps, ins = simulate_gnss(tr.t, tr.east, tr.north, tr.psi, tr.u, tr.v, tr.r,
                              rng=[run_seed(SEED, 0, 99)])

@@ -98,7 +98,7 @@ def identify(
         "--filter", help="Identifier: augmented EKF, UKF or CKF, or batch least squares "
         "(ls).", show_default="ekf; a scenario: its identification.filters")] = None,
     period: Annotated[float | None, typer.Option(
-        "--period", callback=number(0, 60), help="Grid period T of the pre-processed u, v, "
+        "--period", callback=number(0, 60), help="Grid period dt of the pre-processed u, v, "
         "r (s), for a log.", show_default="1")] = None,
     runs: Annotated[int | None, typer.Option(
         "--runs", "-n", callback=at_least(1), help="Monte Carlo runs (a scenario).",

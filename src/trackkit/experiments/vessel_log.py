@@ -134,7 +134,7 @@ def _body_velocities(o: LogOptions, nav: Any, notes: list[str]) -> Any:
         notes.append("the log has no rate of turn (ROT); the yaw rate is the differenced INS "
                      "heading")
     try:
-        m = preprocess(nav, T=o.dt, rate_source=rate_source)
+        m = preprocess(nav, dt=o.dt, rate_source=rate_source)
     except ValueError as err:
         raise ValueError(f"{o.log}: {err}") from None
     if m.gaps:

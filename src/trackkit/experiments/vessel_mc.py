@@ -12,12 +12,12 @@ recorded GPS/INS log.
 joined); with ``"trial"`` the demonstrated trial alone. The measurements are made the way a
 sea trial makes them: the simulated GPS fixes (position, SOG, COG) and INS samples (heading,
 yaw rate) of ``sim.gnss`` at their own rates, then ``io.navigation.preprocess_sim`` to the
-body-frame ``z = [u, v, r]`` on the grid ``t_k = k T``. Run r draws its sensor noise from
+body-frame ``z = [u, v, r]`` on the grid ``t_k = k dt``. Run r draws its sensor noise from
 ``SeedSequence(seed, spawn_key=(r, 3))`` for the programme and ``(r, 4)`` for the trial (and
 its prior guess from ``(r, 2)``, ``identify.initial_guess``), so a run depends on (seed, r)
 alone. The programme's joined record is sensed in one pass per run: the sensors sample the
 truth between grid times by Hermite interpolation, which is meaningless across a join, but the
-grid times fall on samples of every stream (rates that are multiples of 1/T), and a grid value
+grid times fall on samples of every stream (rates that are multiples of 1/dt), and a grid value
 is the sample there.
 
 **Per filter** (``ekf``, ``ukf``, ``ckf``: ``identify.identify`` on the augmented state;
@@ -96,6 +96,7 @@ from trackkit.models.manoeuvring import (
     reference_vessel,
     rhs_jacobian,
 )
+from trackkit.renamed import renamed_keywords
 from trackkit.sim import seatrials
 
 __all__ = [
@@ -216,7 +217,7 @@ class VesselResult:
     scenario: str
     runs: int
     seed: int
-    T: float
+    dt: float
     truth: CoefficientSet
     data: str
     t: Array
@@ -238,7 +239,7 @@ class VesselResult:
 
 
 def _sensed(t: Array, pose: Array, x: Array, run_ids: list[int], seed: int, key: int,
-            sensors, T: float) -> BodyMeasurements:
+            sensors, dt: float) -> BodyMeasurements:
     """GPS/INS of the truth ``pose, x (R, K, 3)`` per run, pre-processed to the grid (batched
     over runs)."""
     from trackkit.io.navigation import preprocess_sim
@@ -247,24 +248,24 @@ def _sensed(t: Array, pose: Array, x: Array, run_ids: list[int], seed: int, key:
     rngs = [run_seed(seed, r, key) for r in run_ids]  # each run's noise from its own stream
     G, Ii = simulate_gnss(t, pose[..., 0], pose[..., 1], pose[..., 2], x[..., 0], x[..., 1],
                           x[..., 2], rng=rngs, gps=sensors.gps(), ins=sensors.ins())
-    return preprocess_sim(G, Ii, T=T, reference=KHOR_MUSA)
+    return preprocess_sim(G, Ii, dt=dt, reference=KHOR_MUSA)
 
 
 def _body(m: BodyMeasurements) -> Array:
     return np.stack([m.u, m.v, m.r], -1)
 
 
-def _run_filter(name: str, z: Array, s: Array, T: float, *, norm: Normalisation,
+def _run_filter(name: str, z: Array, s: Array, dt: float, *, norm: Normalisation,
                 starts: Array, theta0: Array, theta_sd0: float | Array, sigma_z: Array,
                 q_body, q_theta: float, substeps: int):
     """``(theta, theta_std, cov16, history, history_std, body, seconds)`` of one identifier;
     history and body are None for least squares."""
     t0 = time.perf_counter()
     if name == "ls":
-        fit = least_squares(z, s, T, norm=norm, starts=starts)
+        fit = least_squares(z, s, dt, norm=norm, starts=starts)
         sd = np.sqrt(np.diagonal(fit.cov, axis1=-2, axis2=-1))
         return fit.theta, sd, fit.cov, None, None, None, time.perf_counter() - t0
-    r = identify(z, s, T, norm=norm, starts=starts, filter=name, theta0=theta0,
+    r = identify(z, s, dt, norm=norm, starts=starts, filter=name, theta0=theta0,
                  theta_sd0=theta_sd0, sigma_z=sigma_z, q_body=q_body, q_theta=q_theta,
                  substeps=substeps)
     return (r.theta, r.theta_std[..., -1, :], r.cov[..., 3:, 3:], r.theta_history,
@@ -305,13 +306,13 @@ def _model_error(pred: Array, east: Array, north: Array) -> tuple[Array, Array]:
     return rms, big
 
 
-def anchored_track(body: Array, heading: Array, T: float, gps: Array, t: Array) -> Array:
+def anchored_track(body: Array, heading: Array, dt: float, gps: Array, t: Array) -> Array:
     """The track ``(..., K, 3)`` of body states ``(..., K, 3)`` and the measured heading
     ``(..., K)`` (``identify.dead_reckon``), shifted by the mean offset of the GPS positions
     ``(..., K, 2)`` from it: the least-squares start. Missing headings are interpolated."""
     heading = np.unwrap(_fill(t, heading), axis=-1)
     zero = np.zeros(np.broadcast_shapes(body.shape[:-2], heading.shape[:-1]) + (3,))
-    track = dead_reckon(_fill(t, np.moveaxis(body, -1, -2)).swapaxes(-1, -2), heading, T, zero)
+    track = dead_reckon(_fill(t, np.moveaxis(body, -1, -2)).swapaxes(-1, -2), heading, dt, zero)
     d = gps - track[..., :2]
     ok = np.isfinite(d).all(-1, keepdims=True)
     n = np.maximum(ok.sum(-2), 1)
@@ -328,13 +329,14 @@ def stable(theta: Array, norm: Normalisation, speed: float, rpm: float) -> NDArr
     return np.linalg.eigvals(J).real.max(-1) < 0
 
 
+@renamed_keywords(T="dt")
 def model_trials(theta: Array, norm: Normalisation, speed: float, rpm: float, length: float,
-                 *, T: float = 1.0, substeps: int = 10) -> ModelTrials:
+                 *, dt: float = 1.0, substeps: int = 10) -> ModelTrials:
     """The standard trials of the model ``theta (..., 16)`` (module docstring): simulated
-    with ``seatrials`` from ``speed`` at ``rpm``, T and ``substeps`` Euler steps per sample,
+    with ``seatrials`` from ``speed`` at ``rpm``, dt and ``substeps`` Euler steps per sample,
     their metrics and criteria (all of theta's leading shape)."""
     theta = np.asarray(theta, dtype=float)
-    kw = dict(rpm=rpm, speed=speed, T=T, substeps=substeps, max_duration=_MAX_TRIAL_S)
+    kw = dict(rpm=rpm, speed=speed, dt=dt, substeps=substeps, max_duration=_MAX_TRIAL_S)
     with np.errstate(all="ignore"):  # an unstable model overflows: its metrics become nan
         turn = seatrials.turning_circle(theta, norm, delta=_TURN_DELTA, **kw)
         zz = {k: seatrials.zigzag(theta, norm, delta=a, alpha=a, **kw) for k, a in _ZZ.items()}
@@ -380,7 +382,7 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
     shown = next((f for f in names if f != "ls"), names[0])
     truth = scenario.vessel.truth()
     norm, th = truth.norm, truth.theta
-    T, m_sub, t_sub = idn.period_s, idn.substeps, scenario.vessel.substeps
+    dt, m_sub, t_sub = idn.period_s, idn.substeps, scenario.vessel.substeps
     run_ids = list(range(R))
     sigma_z = scenario.sigma_z()
     speed, rpm = scenario.speed(), scenario.rpm()
@@ -393,10 +395,10 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
         t0 = time.perf_counter()
         params = scenario.trial_kwargs()
         fn = seatrials.zigzag if scenario.trial.kind == "zigzag" else seatrials.turning_circle
-        tr = fn(th, norm, T=T, substeps=t_sub, **params)
+        tr = fn(th, norm, dt=dt, substeps=t_sub, **params)
         pose = np.broadcast_to(np.stack([tr.east, tr.north, tr.psi], -1), (R, tr.t.size, 3))
         xb = np.broadcast_to(np.stack([tr.u, tr.v, tr.r], -1), (R, tr.t.size, 3))
-        m_trial = _sensed(tr.t, pose, xb, run_ids, seed, _TRIAL_KEY, scenario.sensors, T)
+        m_trial = _sensed(tr.t, pose, xb, run_ids, seed, _TRIAL_KEY, scenario.sensors, dt)
         K = m_trial.t.size  # the grid may end before the truth (sensor rates)
         trial_truth = (tr, pose[0, :K], xb[0, :K])
         s_trial = np.stack([tr.delta, tr.n], -1)[:K]
@@ -405,8 +407,8 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
     # the identification data
     t0 = time.perf_counter()
     if idn.data == "programme":
-        rec = programme(R, seed, truth=truth, dt=T, substeps=t_sub)
-        m = _sensed(rec.t, rec.pose, rec.x, run_ids, seed, _PROGRAMME_KEY, scenario.sensors, T)
+        rec = programme(R, seed, truth=truth, dt=dt, substeps=t_sub)
+        m = _sensed(rec.t, rec.pose, rec.x, run_ids, seed, _PROGRAMME_KEY, scenario.sensors, dt)
         K = m.t.size
         z, s, x_true = _body(m), rec.s[:, :K], rec.x[:, :K]
         starts, t_id, segments = rec.starts[:K], m.t, rec.segments
@@ -423,7 +425,7 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
     stats: dict[str, FilterStats] = {}
     for name in names:
         theta, sd, cov, hist, hist_sd, body, secs = _run_filter(
-            name, z, s, T, starts=starts, theta0=theta0, theta_sd0=idn.theta_sd0, **common)
+            name, z, s, dt, starts=starts, theta0=theta0, theta_sd0=idn.theta_sd0, **common)
         stats[name] = FilterStats(
             name=name, theta=theta, theta_std=sd, cov=cov,
             history=None if hist is None else hist[0],
@@ -440,13 +442,13 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
     if scenario.trial is not None:
         t0 = time.perf_counter()
         demo = _demo(scenario, params, trial_truth, m_trial, s_trial, best,
-                     own=idn.data == "trial", T=T, common=common, length=length)
+                     own=idn.data == "trial", dt=dt, common=common, length=length)
         clock["trial"] += time.perf_counter() - t0
     t0 = time.perf_counter()
-    model = model_trials(best.theta, norm, speed, rpm, length, T=T, substeps=m_sub)
-    model_truth = model_trials(th, norm, speed, rpm, length, T=T, substeps=t_sub)
+    model = model_trials(best.theta, norm, speed, rpm, length, dt=dt, substeps=m_sub)
+    model_truth = model_trials(th, norm, speed, rpm, length, dt=dt, substeps=t_sub)
     clock["model_trials"] = time.perf_counter() - t0
-    return VesselResult(scenario=scenario.name, runs=R, seed=seed, T=T, truth=truth,
+    return VesselResult(scenario=scenario.name, runs=R, seed=seed, dt=dt, truth=truth,
                         data=idn.data, t=t_id, segments=tuple(segments), sigma_z=sigma_z,
                         noise_rmse=noise_rmse, filters=stats, shown=shown,
                         settle_tol=idn.settle_tol, trial=demo, model=model,
@@ -454,7 +456,7 @@ def run_vessel(scenario, *, runs: int | None = None, seed: int | None = None,
 
 
 def _demo(scenario, params: dict, truth: tuple, m: BodyMeasurements, s: Array,
-          best: FilterStats, *, own: bool, T: float, common: dict, length: float
+          best: FilterStats, *, own: bool, dt: float, common: dict, length: float
           ) -> TrialDemo:
     """The demonstrated trial (module docstring)."""
     tr, pose, xb = truth
@@ -468,12 +470,12 @@ def _demo(scenario, params: dict, truth: tuple, m: BodyMeasurements, s: Array,
             filtered = best.body
         else:  # filtered from the identified coefficients (prior sd: median over runs)
             sd0 = np.maximum(np.median(best.theta_std, 0), 1e-9)
-            filtered = identify(z, s, T, filter=best.name, theta0=best.theta, theta_sd0=sd0,
+            filtered = identify(z, s, dt, filter=best.name, theta0=best.theta, theta_sd0=sd0,
                                 **common).body
-    filtered_pose = None if filtered is None else anchored_track(filtered, m.psi, T, gps, t)
+    filtered_pose = None if filtered is None else anchored_track(filtered, m.psi, dt, gps, t)
     pose0 = np.stack([m.east[:, 0], m.north[:, 0], m.psi[:, 0]], -1)
     with np.errstate(all="ignore"):  # a run's unstable model may overflow: its error is inf
-        pred = predict(best.theta, s, T, z[:, 0], norm=common["norm"], pose0=pose0,
+        pred = predict(best.theta, s, dt, z[:, 0], norm=common["norm"], pose0=pose0,
                        substeps=common["substeps"])
     model_rmse, model_max = _model_error(pred.pose, pose[:, 0], pose[:, 1])
     gps_err = np.hypot(gps[..., 0] - pose[:, 0], gps[..., 1] - pose[:, 1])
@@ -514,7 +516,7 @@ class RecordedIdentification:
     straight-line stability there; ``dropped``: leading samples dropped (no measurement)."""
 
     filter: str
-    T: float
+    dt: float
     t: Array
     s: Array
     z: Array
@@ -540,22 +542,22 @@ class RecordedIdentification:
     missing: int
 
 
-def inputs_at_substeps(inputs: MeasuredInputs, t: Array, T: float, substeps: int) -> Array:
+def inputs_at_substeps(inputs: MeasuredInputs, t: Array, dt: float, substeps: int) -> Array:
     """The measured inputs ``[delta (rad), n (rpm)]`` at the ends of the filter's ``m =
-    substeps`` sub-steps of the grid ``t (K,)`` of period ``T``: ``(..., (K - 1) m + 1, 2)``
-    at ``t_0 + j T / m`` (nan outside the
+    substeps`` sub-steps of the grid ``t (K,)`` of period ``dt``: ``(..., (K - 1) m + 1, 2)``
+    at ``t_0 + j dt / m`` (nan outside the
     record). A rate-limited nozzle starts and stops between grid samples; interpolated
     between the samples of a 1 s grid it is smoothed, which biases c1 by 10-20%
     (docs/vessel-comparison.md)."""
-    t_sub = np.minimum(t[0] + (T / substeps) * np.arange((t.size - 1) * substeps + 1), t[-1])
+    t_sub = np.minimum(t[0] + (dt / substeps) * np.arange((t.size - 1) * substeps + 1), t[-1])
     nozzle, rev_s = inputs_on_grid(inputs, t_sub)
     return np.stack([nozzle, 60.0 * rev_s], -1)  # rev/s to rpm, the identifier's unit
 
 
-def _inputs_resolve_substeps(inputs: MeasuredInputs, T: float) -> bool:
-    """Whether the inputs are logged at least every ``T / 5`` (median interval): fine enough
+def _inputs_resolve_substeps(inputs: MeasuredInputs, dt: float) -> bool:
+    """Whether the inputs are logged at least every ``dt / 5`` (median interval): fine enough
     to follow the nozzle's starts and stops between grid samples."""
-    return inputs.t.size > 1 and float(np.median(np.diff(inputs.t))) <= T / 5
+    return inputs.t.size > 1 and float(np.median(np.diff(inputs.t))) <= dt / 5
 
 
 def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: str = "ekf",
@@ -566,7 +568,7 @@ def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: st
     """Identify the 16 coefficients from a pre-processed log ``m`` and its measured
     ``inputs`` (engine speed in rev/s, converted to rpm here), with ``filter`` (one of
     ``identify.METHODS``); the prior is identify's (zero, sd 1), the coefficients in the prime
-    units of ``norm`` (default the reference vessel's). Inputs logged at least every T / 5
+    units of ``norm`` (default the reference vessel's). Inputs logged at least every dt / 5
     are given to the filter at its sub-steps' ends (``inputs_at_substeps``; identify's
     defaults: 50 sub-steps), coarser ones at the grid samples only (interpolated; identify's
     defaults for that: ten sub-steps and a larger Q).
@@ -576,7 +578,7 @@ def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: st
     length = ref.design["length"] if length is None else float(length)
     if filter not in METHODS:
         raise ValueError(f"filter = {filter!r}; expected one of {', '.join(METHODS)}")
-    t, T = m.t, float(m.T)
+    t, dt = m.t, float(m.dt)
     pose = np.stack([m.east, m.north, m.psi], -1)
     z = _body(m)
     ok = np.isfinite(z).all(-1) & np.isfinite(pose).all(-1)
@@ -587,13 +589,13 @@ def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: st
     k0 = int(np.argmax(ok))  # the record starts at its first complete sample
     t, z, pose = t[k0:], z[k0:], pose[k0:]
     if t.size < 3:
-        raise ValueError(f"the log gives {t.size} grid samples at T = {T:g} s; expected at "
+        raise ValueError(f"the log gives {t.size} grid samples at dt = {dt:g} s; expected at "
                          "least 3")
     lo, hi = (float(inputs.t[0]), float(inputs.t[-1])) if inputs.t.size else (math.nan,) * 2
-    fine = _inputs_resolve_substeps(inputs, T) and filter != "ls"
+    fine = _inputs_resolve_substeps(inputs, dt) and filter != "ls"
     if substeps is None:
         substeps = DEFAULT_SUBSTEPS if fine else SUBSTEPS_SAMPLED_INPUTS
-    s_sub = inputs_at_substeps(inputs, t, T, substeps)
+    s_sub = inputs_at_substeps(inputs, t, dt, substeps)
     if not np.all(np.isfinite(s_sub)):
         raise ValueError(f"{inputs_name} cover t = {lo:.3f} to {hi:.3f} s but the log's grid "
                          f"spans {t[0]:.3f} to {t[-1]:.3f} s (from the log's first record); "
@@ -606,7 +608,7 @@ def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: st
     try:
         with np.errstate(invalid="ignore", over="ignore"):  # reported below
             theta, sd, _, hist, hist_sd, body, _ = _run_filter(
-                filter, z, s_sub, T, norm=norm, starts=starts,
+                filter, z, s_sub, dt, norm=norm, starts=starts,
                 theta0=np.zeros(N_THETA),
                 theta_sd0=1.0, sigma_z=sigma_z, q_body=q_body, q_theta=0.0,
                 substeps=substeps)
@@ -622,19 +624,19 @@ def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: st
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(theta != 0, sd / np.abs(theta), np.inf)
     gps = pose[:, :2]
-    filtered_pose = anchored_track(body, pose[:, 2], T, gps, t)
+    filtered_pose = anchored_track(body, pose[:, 2], dt, gps, t)
     with np.errstate(all="ignore"):
-        pred = predict(theta, s, T, z[0], norm=norm, pose0=pose[0], substeps=substeps)
+        pred = predict(theta, s, dt, z[0], norm=norm, pose0=pose[0], substeps=substeps)
     model_rmse, _ = _model_error(pred.pose, gps[:, 0], gps[:, 1])
     speed = float(np.median(z[np.isfinite(z[:, 0]), 0]))
     rpm = float(np.median(s[:, 1]))
     if not (speed > 0):
         raise ValueError(f"the log's median surge speed is {speed:.3g} m/s; expected a "
                          "vessel under way (the standard trials start from it)")
-    trials = model_trials(theta, norm, speed, rpm, length, T=T, substeps=substeps)
+    trials = model_trials(theta, norm, speed, rpm, length, dt=dt, substeps=substeps)
     filt_err = np.hypot(filtered_pose[:, 0] - gps[:, 0], filtered_pose[:, 1] - gps[:, 1])
     return RecordedIdentification(
-        filter=filter, T=T, t=t, s=s, z=z, pose=pose, theta=theta, theta_std=sd,
+        filter=filter, dt=dt, t=t, s=s, z=z, pose=pose, theta=theta, theta_std=sd,
         rel_std=rel, history=hist, history_std=hist_sd, body=body,
         filtered_pose=filtered_pose, model_pose=pred.pose,
         model_rmse=float(model_rmse), filtered_rmse=float(_rms(filt_err, 0)), speed=speed,

@@ -216,7 +216,7 @@ def programme(runs: int | Sequence[int], seed: int, *,
         else:
             kw = {"q": q, "rng": [run_seed(seed, r, 1, i) for r in run_ids],
                   "psi0": np.zeros(R)}  # psi0 gives the batch its run axis
-        tr = _KINDS[spec.kind](truth.theta, truth.norm, T=dt, substeps=substeps,
+        tr = _KINDS[spec.kind](truth.theta, truth.norm, dt=dt, substeps=substeps,
                                **spec.params, **kw)
         K = tr.t.size
         parts.append(tr)

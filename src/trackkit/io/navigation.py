@@ -3,7 +3,7 @@ the body-frame measurement ``y = [u, v, r]`` on a uniform time grid; and the mea
 (nozzle angle, engine speed).
 
     log, report = read_nmea("trial.nmea")
-    m = preprocess(log, T=1.0)             # m.t, m.east, m.north, m.psi, m.u, m.v, m.r
+    m = preprocess(log, dt=1.0)             # m.t, m.east, m.north, m.psi, m.u, m.v, m.r
     inputs, _ = read_inputs_csv("inputs.csv", epoch=log.epoch)
     nozzle, n = inputs_on_grid(inputs, m.t)
 
@@ -19,12 +19,12 @@ The steps (Zolfagharnasab and Seif 2025 leave them open):
    ``u = ve sin psi + vn cos psi``, ``v = ve cos psi - vn sin psi`` (the inverse of
    ``east' = u sin psi + v cos psi``, ``north' = u cos psi - v sin psi``; v positive to
    starboard);
-5. resampling onto ``t_k = start + k T`` by linear interpolation: positions from the fixes,
+5. resampling onto ``t_k = start + k dt`` by linear interpolation: positions from the fixes,
    psi, u, v, r from their values at the velocity times. Linear, not smoothed: a grid time
    that falls on a sample gets the sample itself, so the noise the identifier's R must
    describe is the sensors' own (the EKF does the filtering).
 
-``start`` defaults to the first multiple of T from the epoch at which every stream has begun,
+``start`` defaults to the first multiple of dt from the epoch at which every stream has begun,
 the grid ends where the first stream ends. A grid time between two samples of a stream that
 are more than ``max_gap`` apart (default 2.5 times the stream's median interval) is a gap:
 the quantities from that stream are nan there, ``gap`` marks the grid point and ``gaps``
@@ -45,6 +45,7 @@ from trackkit.io._table import TIME_FORMATS, Field, csv_header, read_csv_table
 from trackkit.io.frames import EnuFrame, velocity_from_course
 from trackkit.io.nmea import NavLog, epoch_ns
 from trackkit.io.records import ReadReport
+from trackkit.renamed import renamed_keywords
 
 if TYPE_CHECKING:
     from trackkit.io.records import GpsFixes, InsSamples
@@ -82,7 +83,7 @@ class BodyMeasurements(NamedTuple):
     ``north`` ``(..., N)`` m in ``frame``; ``psi`` heading, rad clockwise from north,
     continuous (unwrapped, starting in [0, 2 pi)); ``u`` surge and ``v`` sway (positive to
     starboard) m/s; ``r`` yaw rate rad/s, positive clockwise. ``gap`` ``(N,)`` marks grid
-    points where some quantity is nan (in some run); ``gaps`` lists the input's gaps; ``T``
+    points where some quantity is nan (in some run); ``gaps`` lists the input's gaps; ``dt``
     is the grid period (s)."""
 
     t: Array
@@ -95,7 +96,7 @@ class BodyMeasurements(NamedTuple):
     gap: NDArray[np.bool_]
     gaps: tuple[Gap, ...]
     frame: EnuFrame
-    T: float
+    dt: float
 
 
 def to_body(ve: ArrayLike, vn: ArrayLike, psi: ArrayLike) -> tuple[Array, Array]:
@@ -156,11 +157,11 @@ def _check_stream(name: str, what: str, t: Array, *ys: Array) -> None:
 
 def _preprocess(t_pos: Array, lat: Array, lon: Array, t_vel: Array, sog: Array, cog: Array,
                 t_hdg: Array, heading: Array, t_rate: Array, rate: Array, *, frame: EnuFrame,
-                T: float, max_gap: float | None, rate_source: str, start: float | None,
+                dt: float, max_gap: float | None, rate_source: str, start: float | None,
                 end: float | None) -> BodyMeasurements:
-    T = float(T)
-    if not (np.isfinite(T) and T > 0):
-        raise ValueError(f"T = {T!r}; expected a positive grid period in seconds")
+    dt = float(dt)
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r}; expected a positive grid period in seconds")
     if max_gap is not None and not (max_gap > 0):
         raise ValueError(f"max_gap = {max_gap!r}; expected a positive number of seconds or "
                          "None")
@@ -189,13 +190,13 @@ def _preprocess(t_pos: Array, lat: Array, lon: Array, t_vel: Array, sog: Array, 
 
     first = max(float(v[0]) for v in streams.values())
     last = min(float(v[-1]) for v in streams.values())
-    t0 = float(np.ceil(first / T - 1e-9) * T) if start is None else float(start)
+    t0 = float(np.ceil(first / dt - 1e-9) * dt) if start is None else float(start)
     t1 = last if end is None else float(end)
     if not t1 >= t0:
         raise ValueError(f"the grid would start at {t0!r} s and end at {t1!r} s; expected the "
                          "position, velocity, heading and rate streams to overlap "
                          f"(they span {first!r} to {last!r} s together)")
-    grid = t0 + T * np.arange(int(np.floor((t1 - t0) / T + 1e-9)) + 1)
+    grid = t0 + dt * np.arange(int(np.floor((t1 - t0) / dt + 1e-9)) + 1)
     e_g, _ = interpolate(grid, t_pos, east, gaps_allowed["position"])
     n_g, _ = interpolate(grid, t_pos, north, gaps_allowed["position"])
     g = gaps_allowed["velocity"]
@@ -205,10 +206,11 @@ def _preprocess(t_pos: Array, lat: Array, lon: Array, t_vel: Array, sog: Array, 
     r_g, _ = interpolate(grid, t_vel, r_v, g)
     stack = np.stack([e_g, n_g, psi_g, u_g, v_g, r_g])
     gap = np.isnan(stack).reshape(-1, grid.shape[0]).any(axis=0)
-    return BodyMeasurements(grid, e_g, n_g, psi_g, u_g, v_g, r_g, gap, gaps, frame, T)
+    return BodyMeasurements(grid, e_g, n_g, psi_g, u_g, v_g, r_g, gap, gaps, frame, dt)
 
 
-def preprocess(log: NavLog, *, T: float = 1.0, reference: _reports.Reference = None,
+@renamed_keywords(T="dt")
+def preprocess(log: NavLog, *, dt: float = 1.0, reference: _reports.Reference = None,
                max_gap: float | None = None, rate_source: str = "gyro",
                start: float | None = None, end: float | None = None) -> BodyMeasurements:
     """A recorded log (:func:`~trackkit.io.nmea.read_nmea`,
@@ -218,11 +220,12 @@ def preprocess(log: NavLog, *, T: float = 1.0, reference: _reports.Reference = N
     ``start``/``end`` (s from the log's epoch) bound the grid."""
     frame = _reports.as_frame(reference, log.lat, log.lon)
     return _preprocess(log.t_pos, log.lat, log.lon, log.t_vel, log.sog, log.cog,
-                       log.t_heading, log.heading, log.t_rate, log.rate, frame=frame, T=T,
+                       log.t_heading, log.heading, log.t_rate, log.rate, frame=frame, dt=dt,
                        max_gap=max_gap, rate_source=rate_source, start=start, end=end)
 
 
-def preprocess_sim(gps: GpsFixes, ins: InsSamples, *, T: float = 1.0,
+@renamed_keywords(T="dt")
+def preprocess_sim(gps: GpsFixes, ins: InsSamples, *, dt: float = 1.0,
                    reference: _reports.Reference = None, max_gap: float | None = None,
                    rate_source: str = "gyro", start: float | None = None,
                    end: float | None = None) -> BodyMeasurements:
@@ -237,7 +240,7 @@ def preprocess_sim(gps: GpsFixes, ins: InsSamples, *, T: float = 1.0,
         frame = _reports.as_frame(reference, np.zeros(0), np.zeros(0))
     arr = [np.asarray(x, dtype=float) for x in (gps.t, gps.lat, gps.lon, gps.t, gps.sog,
                                                 gps.cog, ins.t, ins.heading, ins.t, ins.rate)]
-    return _preprocess(*arr, frame=frame, T=T, max_gap=max_gap, rate_source=rate_source,
+    return _preprocess(*arr, frame=frame, dt=dt, max_gap=max_gap, rate_source=rate_source,
                        start=start, end=end)
 
 

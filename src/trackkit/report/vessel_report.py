@@ -242,7 +242,7 @@ def vessel_results_document(res: VesselResult) -> dict[str, Any]:
         filters[name] = entry
     doc: dict[str, Any] = {
         "scenario": res.scenario, "kind": "vessel", "runs": res.runs, "seed": res.seed,
-        "period_s": res.T, "data": res.data, "samples": K,
+        "period_s": res.dt, "data": res.data, "samples": K,
         "data_trials": [s.name for s in res.segments],
         "units": UNITS,
         "truth": {"coefficients": _coefficients(res.truth.theta),
@@ -303,7 +303,7 @@ def recorded_results_document(rec: RecordedIdentification, log_read: Any = None,
               for k, v, s, r in zip(COEFFICIENT_NAMES, rec.theta, rec.theta_std, rec.rel_std,
                                     strict=True)}
     doc: dict[str, Any] = {
-        "kind": "vessel-log", "filter": rec.filter, "period_s": rec.T,
+        "kind": "vessel-log", "filter": rec.filter, "period_s": rec.dt,
         "samples": int(rec.t.size), "start_s": float(rec.t[0]), "end_s": float(rec.t[-1]),
         "dropped_leading_samples": rec.dropped, "missing_samples": rec.missing,
         "substeps": rec.substeps,

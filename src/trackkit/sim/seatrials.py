@@ -3,7 +3,7 @@ run axes.
 
 Every trial starts at t = 0 on a straight course (heading ``psi0``, body state
 ``[speed, 0, 0]``, nozzle amidships) and executes its first command at t = 0. Between output
-samples ``t_k = k T`` it takes ``substeps`` forward-Euler steps of ``h = T / substeps``::
+samples ``t_k = k dt`` it takes ``substeps`` forward-Euler steps of ``h = dt / substeps``::
 
     x <- x + h f(x, s_m, theta) + w,   s_m = (s(t) + s(t + h)) / 2,   w ~ N(0, q h)
 
@@ -39,6 +39,7 @@ from trackkit.models.manoeuvring import (
     rhs_unchecked,
     straight_line_speed,
 )
+from trackkit.renamed import renamed_keywords
 
 __all__ = ["Trial", "turning_circle", "zigzag", "acceleration_run"]
 
@@ -121,11 +122,11 @@ Command = Callable[[float, Array], tuple[Array, Array]]
 
 def _run(theta: Array, norm: Normalisation, batch: tuple[int, ...], speed: Array,
          psi0: Array, delta0: Array, n0: Array, command: Command,
-         done: Callable[[Array], Array] | None, *, T: float, substeps: int,
+         done: Callable[[Array], Array] | None, *, dt: float, substeps: int,
          duration: float | None, max_duration: float, rate_limit: float, rpm_rate: float,
          q: ArrayLike | None, rng: Rng) -> Trial:
     """The shared time loop; ``command(t, pose)`` gives the commanded ``(delta, n)``."""
-    T = _positive(T, "T")
+    dt = _positive(dt, "dt")
     if not (isinstance(substeps, int | np.integer) and substeps >= 1):
         raise ValueError(f"substeps = {substeps!r}; expected an integer >= 1")
     rate_limit = _positive(rate_limit, "rate_limit", allow_inf=True)
@@ -133,8 +134,8 @@ def _run(theta: Array, norm: Normalisation, batch: tuple[int, ...], speed: Array
     max_duration = _positive(max_duration, "max_duration")
     if duration is not None:
         duration = _positive(duration, "duration")
-    h = T / substeps
-    K = int(math.floor((duration if duration is not None else max_duration) / T + 1e-9))
+    h = dt / substeps
+    K = int(math.floor((duration if duration is not None else max_duration) / dt + 1e-9))
     noise = _Noise(q, rng, batch, h)
     zero = np.zeros(batch)
     x = np.stack([speed + zero, zero, zero], -1)
@@ -145,7 +146,7 @@ def _run(theta: Array, norm: Normalisation, batch: tuple[int, ...], speed: Array
         if duration is None and done is not None and done(pose).all():
             break
         for j in range(substeps):
-            dc, nc = command(k * T + j * h, pose)
+            dc, nc = command(k * dt + j * h, pose)
             d1 = d + np.clip(dc - d, -rate_limit * h, rate_limit * h)
             n1 = n + np.clip(nc - n, -rpm_rate * h, rpm_rate * h)
             s_m = np.stack([0.5 * (d + d1), 0.5 * (n + n1)], -1)
@@ -154,7 +155,7 @@ def _run(theta: Array, norm: Normalisation, batch: tuple[int, ...], speed: Array
             x, d, n = x1, d1, n1
         rec.append((d, n, x, pose))
     D, N, X, P = (np.stack(a, -1) for a in zip(*rec, strict=True))
-    t = T * np.arange(D.shape[-1])
+    t = dt * np.arange(D.shape[-1])
     return Trial(t, D, N, X[..., 0, :], X[..., 1, :], X[..., 2, :], P[..., 0, :],
                  P[..., 1, :], P[..., 2, :])
 
@@ -197,9 +198,10 @@ def _side(side: ArrayLike) -> Array:
     return s
 
 
+@renamed_keywords(T="dt")
 def turning_circle(theta: ArrayLike, norm: Normalisation, *, delta: ArrayLike,
                    rpm: ArrayLike, speed: ArrayLike | None = None, side: ArrayLike = 1.0,
-                   psi0: ArrayLike = 0.0, T: float = 1.0, substeps: int = 10,
+                   psi0: ArrayLike = 0.0, dt: float = 1.0, substeps: int = 10,
                    duration: float | None = None, max_duration: float = 1800.0,
                    rate_limit: float = _NOZZLE_RATE, rpm_rate: float = _RPM_RATE,
                    q: ArrayLike | None = None, rng: Rng = None) -> Trial:
@@ -216,14 +218,15 @@ def turning_circle(theta: ArrayLike, norm: Normalisation, *, delta: ArrayLike,
     def done(pose: Array) -> Array:
         return np.abs(pose[..., 2] - ex["psi0"]) >= 3 * np.pi
 
-    return _run(theta, norm, batch, speed, ex["psi0"], 0.0, rpm, command, done, T=T,
+    return _run(theta, norm, batch, speed, ex["psi0"], 0.0, rpm, command, done, dt=dt,
                 substeps=substeps, duration=duration, max_duration=max_duration,
                 rate_limit=rate_limit, rpm_rate=rpm_rate, q=q, rng=rng)
 
 
+@renamed_keywords(T="dt")
 def zigzag(theta: ArrayLike, norm: Normalisation, *, delta: ArrayLike, alpha: ArrayLike,
            rpm: ArrayLike, speed: ArrayLike | None = None, side: ArrayLike = 1.0,
-           psi0: ArrayLike = 0.0, commands: int = 5, T: float = 1.0, substeps: int = 10,
+           psi0: ArrayLike = 0.0, commands: int = 5, dt: float = 1.0, substeps: int = 10,
            duration: float | None = None, max_duration: float = 1800.0,
            rate_limit: float = _NOZZLE_RATE, rpm_rate: float = _RPM_RATE,
            q: ArrayLike | None = None, rng: Rng = None) -> Trial:
@@ -260,13 +263,14 @@ def zigzag(theta: ArrayLike, norm: Normalisation, *, delta: ArrayLike, alpha: Ar
         return finished | ((given >= commands) & reached(pose))
 
     return _run(theta, norm, batch, speed, ex["psi0"], 0.0, rpm, command, done,
-                T=T, substeps=substeps, duration=duration, max_duration=max_duration,
+                dt=dt, substeps=substeps, duration=duration, max_duration=max_duration,
                 rate_limit=rate_limit, rpm_rate=rpm_rate, q=q, rng=rng)
 
 
+@renamed_keywords(T="dt")
 def acceleration_run(theta: ArrayLike, norm: Normalisation, *, rpm_start: ArrayLike,
                      rpm_end: ArrayLike, t_step: float = 10.0, speed: ArrayLike | None = None,
-                     psi0: ArrayLike = 0.0, T: float = 1.0, substeps: int = 10,
+                     psi0: ArrayLike = 0.0, dt: float = 1.0, substeps: int = 10,
                      duration: float = 120.0, rate_limit: float = _NOZZLE_RATE,
                      rpm_rate: float = _RPM_RATE, q: ArrayLike | None = None,
                      rng: Rng = None) -> Trial:
@@ -283,6 +287,6 @@ def acceleration_run(theta: ArrayLike, norm: Normalisation, *, rpm_start: ArrayL
     def command(t: float, pose: Array) -> tuple[Array, Array]:
         return zero, (ex["rpm_end"] if t >= t_step - 1e-12 else rpm0) + zero
 
-    return _run(theta, norm, batch, speed, ex["psi0"], 0.0, rpm0, command, None, T=T,
+    return _run(theta, norm, batch, speed, ex["psi0"], 0.0, rpm0, command, None, dt=dt,
                 substeps=substeps, duration=duration, max_duration=duration,
                 rate_limit=rate_limit, rpm_rate=rpm_rate, q=q, rng=rng)
