@@ -137,3 +137,12 @@ def test_bad_input_names_the_field(kwargs, field):
     args = {"runs": 2, "seed": 1} | kwargs
     with pytest.raises(ValueError, match=field):
         programme(**args)
+
+
+def test_the_old_time_step_keyword_is_refused_naming_dt():
+    from trackkit.identify import least_squares, programme
+
+    with pytest.raises(TypeError, match="'T' is now spelled 'dt'"):
+        programme(1, 0, T=1.0)
+    with pytest.raises(TypeError, match="'T' is now spelled 'dt'"):
+        least_squares(np.zeros((5, 3)), np.zeros((5, 2)), T=1.0)

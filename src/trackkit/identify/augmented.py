@@ -86,6 +86,7 @@ from trackkit.models.manoeuvring import (
 )
 from trackkit.models.motion import MotionBase
 from trackkit.models.sensors import Position
+from trackkit.renamed import renamed_keywords
 
 __all__ = [
     "METHODS",
@@ -248,6 +249,7 @@ def _vector(value: ArrayLike, n: int, name: str, positive: bool = False) -> Arra
     return a
 
 
+@renamed_keywords(T="dt")
 def identify(z: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | None = None,
              starts: ArrayLike | None = None, filter: str | Filter = "ekf",
              theta0: ArrayLike | None = None, theta_sd0: ArrayLike = 1.0,

@@ -42,6 +42,7 @@ from trackkit.models.manoeuvring import (
     reference_vessel,
     regressors,
 )
+from trackkit.renamed import renamed_keywords
 
 __all__ = ["LeastSquaresFit", "EQUATIONS", "least_squares"]
 
@@ -65,6 +66,7 @@ class LeastSquaresFit(NamedTuple):
     condition: Array
 
 
+@renamed_keywords(T="dt")
 def least_squares(x: ArrayLike, s: ArrayLike, dt: float, *, norm: Normalisation | None = None,
                   starts: ArrayLike | None = None) -> LeastSquaresFit:
     """Fit theta (prime units of ``norm``, default the reference vessel's) to body states

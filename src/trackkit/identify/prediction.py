@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from trackkit.angles import wrap
 from trackkit.identify.augmented import SUBSTEPS_SAMPLED_INPUTS, SampledVessel
 from trackkit.models.manoeuvring import N_THETA, Normalisation, advance_pose, integrate_pose
+from trackkit.renamed import renamed_keywords
 
 __all__ = ["Prediction", "predict", "dead_reckon", "position_error", "rmse"]
 
@@ -39,6 +40,7 @@ class Prediction(NamedTuple):
     pose: Array
 
 
+@renamed_keywords(T="dt")
 def predict(theta: ArrayLike, s: ArrayLike, dt: float, x0: ArrayLike, *,
             norm: Normalisation, pose0: ArrayLike = (0.0, 0.0, 0.0),
             substeps: int = SUBSTEPS_SAMPLED_INPUTS) -> Prediction:
@@ -68,6 +70,7 @@ def predict(theta: ArrayLike, s: ArrayLike, dt: float, x0: ArrayLike, *,
     return Prediction(body, integrate_pose(body, dt, pose0))
 
 
+@renamed_keywords(T="dt")
 def dead_reckon(body: ArrayLike, heading: ArrayLike, dt: float,
                 pose0: ArrayLike) -> Array:
     """Track ``(..., K, 3)`` = ``[east, north, psi]`` from body states ``body (..., K, 3)``

@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from trackkit.models.manoeuvring import N_THETA, CoefficientSet, reference_vessel
+from trackkit.renamed import renamed_keywords
 from trackkit.sim import seatrials
 
 __all__ = [
@@ -188,6 +189,7 @@ def _noise(noise: NoiseLevels) -> NoiseLevels:
     return NoiseLevels(body, gps, heading)
 
 
+@renamed_keywords(T="dt")
 def programme(runs: int | Sequence[int], seed: int, *,
               trials: Sequence[TrialSpec] = DEFAULT_PROGRAMME,
               truth: CoefficientSet | None = None, dt: float = 1.0, substeps: int = 10,
