@@ -18,6 +18,14 @@ their goldens check the pipeline's numbers, the draws included, not the accuracy
 Regenerate (after a deliberate change of numbers, with the reason in the commit message):
 
     python tests/goldens/golden.py
+
+A change that must not move any number (a refactoring) is checked bit for bit, on one machine,
+by dumping every golden's numbers with all their digits before and after it and comparing the
+two files byte for byte:
+
+    python tests/goldens/golden.py --dump before.json     # on the old commit
+    python tests/goldens/golden.py --dump after.json      # on the new one
+    cmp before.json after.json
 """
 
 from __future__ import annotations
@@ -137,7 +145,20 @@ def make(name: str) -> dict:
     return {"numbers": numbers, "rtol": RTOL, "tolerance": tolerances(numbers, *perturbed)}
 
 
+def dump(path: str) -> None:
+    """Every golden's numbers with all their digits (``repr`` of each float), sorted, into
+    ``path``: two dumps of one machine are byte-identical exactly when no number moved."""
+    doc = {name: golden_numbers(name) for name in sorted(S.bundled())}
+    Path(path).write_text(json.dumps(doc, sort_keys=True) + "\n")
+    print(f"wrote {path} ({len(doc)} goldens)")
+
+
 def main() -> None:
+    import sys
+
+    if sys.argv[1:2] == ["--dump"] and len(sys.argv) == 3:
+        dump(sys.argv[2])
+        return
     for name in S.bundled():
         path = HERE / f"{name}.json"
         doc = make(name)
