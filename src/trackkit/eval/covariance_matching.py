@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from trackkit.filters.adaptive import AdaptiveBelief, push_innovation
 from trackkit.filters.fuzzy import dom_cost, matching_covariance
+from trackkit.models.protocols import SensorModel
 
 Array = NDArray[np.float64]
 
@@ -43,7 +44,7 @@ def noise_in_use(belief: Any, R0: Array) -> Array:
     return R if R is not None and R.shape[-1] else R0
 
 
-def measurement_noise_rms(z: Array, z_true: Array, sensor) -> Array:
+def measurement_noise_rms(z: Array, z_true: Array, sensor: SensorModel) -> Array:
     """J1 of each run ``(B, m)`` from measurements ``z (T, B, m)`` and their noise-free
     values ``z_true (T, B, m)``; steps without a measurement are left out."""
     e = sensor.residual(z_true, z)
@@ -66,7 +67,8 @@ class MatchingMetrics:
         self.logs = {k: np.full((steps, m), np.nan) for k in ("R", "S", "C", "DOM")} if log \
             else None
 
-    def add(self, k: int, truth: Array, mean: Array, innovation, R: Array, sensor) -> None:
+    def add(self, k: int, truth: Array, mean: Array, innovation, R: Array,
+            sensor: SensorModel) -> None:
         """Step k: true states ``truth (B, n)``, estimates ``mean (B, n)``, the update's
         innovation, the R it used ``(..., m, m)`` and the (true) sensor of the step."""
         r, S = innovation.nu, innovation.cov

@@ -264,7 +264,7 @@ class GapHandler:
     def _coefficients(self) -> int:
         return 0
 
-    def init(self, batch_shape: tuple[int, ...], sensor) -> GapMemory:
+    def init(self, batch_shape: tuple[int, ...], sensor: SensorModel) -> GapMemory:
         batch, L, m, p = tuple(batch_shape), self.memory, sensor.dim_z, self._coefficients()
         return GapMemory(np.full(batch + (L, m), np.nan), np.full(batch + (L,), np.nan),
                          np.zeros(batch, np.int64), np.full(batch + (p, m), np.nan),
@@ -287,7 +287,7 @@ class GapHandler:
         tb = np.where(real[..., None], np.concatenate([memory.t[..., 1:], tn], -1), memory.t)
         return memory._replace(z=zb, t=tb, count=count, fitted=fitted)
 
-    def pseudo(self, memory: GapMemory, t: ArrayLike, missing: ArrayLike, sensor,
+    def pseudo(self, memory: GapMemory, t: ArrayLike, missing: ArrayLike, sensor: SensorModel,
                estimate: Gaussian | None = None,
                maneuver: ArrayLike | None = None) -> tuple[Array, GapMemory]:
         raise NotImplementedError  # pragma: no cover - interface
@@ -303,7 +303,7 @@ class Coast(GapHandler):
 
     label = "B0"
 
-    def pseudo(self, memory, t, missing, sensor, estimate=None, maneuver=None):
+    def pseudo(self, memory, t, missing, sensor: SensorModel, estimate=None, maneuver=None):
         return np.full(memory.count.shape + (sensor.dim_z,), np.nan), memory
 
 
@@ -314,7 +314,7 @@ class HoldLast(GapHandler):
     label = "B1"
     memory = 1
 
-    def pseudo(self, memory, t, missing, sensor, estimate=None, maneuver=None):
+    def pseudo(self, memory, t, missing, sensor: SensorModel, estimate=None, maneuver=None):
         miss = np.broadcast_to(np.asarray(missing, bool), memory.count.shape)
         return np.where(miss[..., None], memory.z[..., -1, :], np.nan), memory
 
@@ -333,7 +333,7 @@ class MeanOfLast(GapHandler):
     def memory(self) -> int:  # type: ignore[override]
         return self.n
 
-    def pseudo(self, memory, t, missing, sensor, estimate=None, maneuver=None):
+    def pseudo(self, memory, t, missing, sensor: SensorModel, estimate=None, maneuver=None):
         miss = np.broadcast_to(np.asarray(missing, bool), memory.count.shape)
         L = self.n
         valid = _recent(memory.count, L, L)
@@ -393,7 +393,7 @@ class PolynomialFit(_Fit):
     def _coefficients(self) -> int:
         return self.degree + 1
 
-    def pseudo(self, memory, t, missing, sensor, estimate=None, maneuver=None):
+    def pseudo(self, memory, t, missing, sensor: SensorModel, estimate=None, maneuver=None):
         batch = memory.count.shape
         miss = np.broadcast_to(np.asarray(missing, bool), batch)
         w = _windows(self, batch, maneuver)
@@ -448,13 +448,13 @@ class SineFit(_Fit):
     def _coefficients(self) -> int:
         return 3
 
-    def init(self, batch_shape: tuple[int, ...], sensor) -> GapMemory:
+    def init(self, batch_shape: tuple[int, ...], sensor: SensorModel) -> GapMemory:
         if sensor.dim_z != 1:
             raise ValueError(f"SineFit: the sensor measures {sensor.dim_z} components; "
                              "expected 1 (y = a sin(theta))")
         return super().init(batch_shape, sensor)
 
-    def pseudo(self, memory, t, missing, sensor, estimate=None, maneuver=None):
+    def pseudo(self, memory, t, missing, sensor: SensorModel, estimate=None, maneuver=None):
         batch = memory.count.shape
         miss = np.broadcast_to(np.asarray(missing, bool), batch)
         w = _windows(self, batch, maneuver)
@@ -526,11 +526,11 @@ def _slot_sum(u: Array) -> Array:
     return total
 
 
-def _angular(sensor) -> NDArray[np.bool_]:
+def _angular(sensor: SensorModel) -> NDArray[np.bool_]:
     return np.asarray(tuple(getattr(sensor, "angular", ())) or (False,) * sensor.dim_z, bool)
 
 
-def _wrap_angles(z: Array, sensor) -> Array:
+def _wrap_angles(z: Array, sensor: SensorModel) -> Array:
     ang = _angular(sensor)
     return np.where(ang, wrap(z), z) if ang.any() else z
 
@@ -853,11 +853,12 @@ class WithGaps:
         return GapBelief(inner, None, dstate, np.full(batch, self.t0), np.zeros(batch, bool),
                          None)
 
-    def predict(self, belief: GapBelief, motion, dt: float) -> GapBelief:
+    def predict(self, belief: GapBelief, motion: MotionModel, dt: float) -> GapBelief:
         inner = self.f.predict(belief.inner, motion, dt)
         return belief._replace(inner=inner, t=belief.t + dt)
 
-    def update(self, belief: GapBelief, z: ArrayLike, sensor) -> tuple[GapBelief, Innovation]:
+    def update(self, belief: GapBelief, z: ArrayLike,
+               sensor: SensorModel) -> tuple[GapBelief, Innovation]:
         m = sensor.dim_z
         zk = np.asarray(z, dtype=float)
         batch = belief.t.shape

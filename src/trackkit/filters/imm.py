@@ -89,6 +89,7 @@ from trackkit.linalg import (
     symmetrize,
     triu,
 )
+from trackkit.models.protocols import SensorModel
 
 __all__ = [
     "IMM",
@@ -721,7 +722,7 @@ def _fast_predict(mu: Array, X: Array, P: Array, p: Array, motions, dt) -> IMMBe
     return IMMBelief(c, Xp, register(mirror(Ppu, n)))
 
 
-def _fast_update_models(X: Array, P: Array, z: Array, zhat: Array, sensor, H: Array,
+def _fast_update_models(X: Array, P: Array, z: Array, zhat: Array, sensor: SensorModel, H: Array,
                         R: Array):
     """Every model's KF update at once (``X (N, r, n)``, ``P (N, r, n, n)``, ``z (N, m)``,
     ``zhat = h(X) (N, r, m)``, H and R unbatched): ``(x+, P+, nu (N, r, m), S (N, r, m, m),

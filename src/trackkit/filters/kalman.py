@@ -31,6 +31,7 @@ from trackkit.filters.kalman_fast import (
     update_one,
 )
 from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
+from trackkit.models.protocols import MotionModel, SensorModel
 
 __all__ = ["KF", "EKF", "IEKF"]
 
@@ -38,7 +39,7 @@ Array = NDArray[np.float64]
 _F64 = np.dtype(np.float64)
 
 
-def jacobian_predict(x: Array, P: Array, motion, dt: ArrayLike) -> Gaussian:
+def jacobian_predict(x: Array, P: Array, motion: MotionModel, dt: ArrayLike) -> Gaussian:
     """``x- = f(x, dt)``, ``P- = F P F^T + Q`` with F the Jacobian of f at x.
 
     P- is exactly symmetric. A model whose F or Q is not n x n gets the formula as written.
@@ -120,7 +121,7 @@ def _second_order_terms(Hs: Array, P: Array) -> tuple[Array, Array]:
     return dz, B
 
 
-def linearize(sensor, x: Array) -> tuple[Array, Array]:
+def linearize(sensor: SensorModel, x: Array) -> tuple[Array, Array]:
     """``(h(x), H(x))``: the sensor's fused ``linearize`` when it has one."""
     lin = getattr(sensor, "linearize", None)
     zhat, H = (sensor.h(x), sensor.jacobian(x)) if lin is None else lin(x)
@@ -134,21 +135,21 @@ def dim_x_of(motion_or_sensor) -> int | None:
 class Linearised(Filter):
     """Shared prediction of the Jacobian-based filters."""
 
-    def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
+    def predict(self, belief: Gaussian, motion: MotionModel, dt: ArrayLike) -> Gaussian:
         """``x- = f(x, dt)``; ``P- = F P F^T + Q``."""
         x, P = check_belief(belief, getattr(motion, "dim_x", None),
                             f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
         return jacobian_predict(x, P, motion, dt)
 
-    def predict_with_cross(self, belief: Gaussian, motion, dt: ArrayLike):
+    def predict_with_cross(self, belief: Gaussian, motion: MotionModel, dt: ArrayLike):
         """Prediction and the cross-covariance ``Cov(x_k, x_{k+1}) = P F^T`` (for RTS)."""
         x, P = check_belief(belief, dim_x_of(motion), f"{self.name}.predict belief")
         check_dt(dt, f"{self.name}.predict")
         F = np.asarray(motion.jacobian(x, dt))
         return jacobian_predict(x, P, motion, dt), mmT(P, F)
 
-    def _inputs(self, belief, z, sensor):
+    def _inputs(self, belief, z, sensor: SensorModel):
         x, P = check_belief(belief, None, f"{self.name}.update belief")
         z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
         return x, P, z
@@ -159,7 +160,7 @@ class KF(Linearised):
 
     name = "KF"
 
-    def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
+    def predict(self, belief: Gaussian, motion: MotionModel, dt: ArrayLike) -> Gaussian:
         if not getattr(motion, "linear", False):
             raise TypeError(f"KF needs a linear motion model; {type(motion).__name__} is "
                             "nonlinear (use EKF, IEKF, UKF or CKF)")
@@ -168,8 +169,9 @@ class KF(Linearised):
         check_dt(dt, f"{self.name}.predict")
         return jacobian_predict(x, P, motion, dt)
 
-    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
-        """``r = z - H x-``; ``K = P- H^T S^{-1}``; Joseph-form covariance."""
+    def update(self, belief: Gaussian, z: ArrayLike,
+               sensor: SensorModel) -> tuple[Gaussian, Innovation]:
+        """``nu = z - H x-``; ``K = P- H^T S^{-1}``; Joseph-form covariance."""
         if not getattr(sensor, "linear", False):
             raise TypeError(f"KF needs a linear sensor model; {type(sensor).__name__} is "
                             "nonlinear (use EKF, IEKF, UKF or CKF)")
@@ -212,7 +214,8 @@ class EKF(Linearised):
             raise ValueError(f"EKF order = {order!r}; expected 1 or 2")
         self.order = order
 
-    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+    def update(self, belief: Gaussian, z: ArrayLike,
+               sensor: SensorModel) -> tuple[Gaussian, Innovation]:
         x, P, z = self._inputs(belief, z, sensor)
         miss = missing_rows(z)
         zhat, H = linearize(sensor, x)
@@ -260,7 +263,8 @@ class IEKF(Linearised):
         self.line_search = bool(line_search)
         self.max_halvings = int(max_halvings)
 
-    def update(self, belief: Gaussian, z: ArrayLike, sensor) -> tuple[Gaussian, Innovation]:
+    def update(self, belief: Gaussian, z: ArrayLike,
+               sensor: SensorModel) -> tuple[Gaussian, Innovation]:
         x0, P, z = self._inputs(belief, z, sensor)
         miss = missing_rows(z)
         R = sensor.noise

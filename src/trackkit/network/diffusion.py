@@ -41,6 +41,7 @@ from trackkit.belief import Gaussian
 from trackkit.filters.base import check_belief, check_dt, output
 from trackkit.filters.kalman import KF
 from trackkit.linalg import check_covariance, cholesky, mm, solve_psd, symmetrize
+from trackkit.models.protocols import MotionModel
 
 __all__ = [
     "DiffusionKF",
@@ -459,7 +460,7 @@ class DiffusionKF:
     def n_agents(self) -> int:
         return int(self.adjacency.shape[-1])
 
-    def predict(self, belief: Gaussian, motion, dt: ArrayLike) -> Gaussian:
+    def predict(self, belief: Gaussian, motion: MotionModel, dt: ArrayLike) -> Gaussian:
         """``x_k- = F x_k``, ``P_k- = F P_k F^T + Q`` for every agent (eqs. 44-45; the
         printed ``G v(k)`` term is zero-mean and left out): the core KF prediction. The paper's
         ``G Q G^T`` is ``trackkit.models.LinearMotion(F, G Q G^T)``;

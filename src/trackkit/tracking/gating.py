@@ -39,6 +39,7 @@ from trackkit.angles import wrap
 from trackkit.belief import Gaussian
 from trackkit.filters.kalman import kalman_gain
 from trackkit.linalg import cholesky
+from trackkit.models.protocols import SensorModel
 from trackkit.renamed import renamed_attribute
 
 __all__ = [
@@ -105,7 +106,7 @@ def gate_threshold(p_gate: float, m: int) -> float:
     return float(chi2.ppf(p_gate, m))
 
 
-def predict_measurement(belief: Gaussian, sensor) -> MeasurementPrediction:
+def predict_measurement(belief: Gaussian, sensor: SensorModel) -> MeasurementPrediction:
     """First-order (EKF) measurement prediction of every track in ``belief`` (axis 0 = track):
     ``zhat = h(x)``, ``S = H P H^T + R``, ``K = P H^T S^{-1}`` with ``H`` the Jacobian at x."""
     x, P = np.asarray(belief.mean, dtype=float), np.asarray(belief.cov, dtype=float)
