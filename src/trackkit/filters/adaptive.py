@@ -4,7 +4,7 @@ new Q adaptation (the proposed AMCEKF), and a Sage-Husa adaptive EKF as the pape
 baseline [16].
 
 Notation follows the paper: prediction ``x- = x(t|t-1)``, ``P- = P(t|t-1)``; update
-``x+ = x(t|t)``, ``P+ = P(t|t)``; innovation ``r = z - h(x-)`` (bearing wrapped to (-pi, pi]
+``x+ = x(t|t)``, ``P+ = P(t|t)``; innovation ``nu = z - h(x-)`` (bearing wrapped to (-pi, pi]
 by ``sensor.residual``), ``S = H P- H^T + R``. Equation numbers are the paper's.
 
 Memory lives in the belief: :class:`AdaptiveBelief` for the AMCEKF (R and Q scale factors and
@@ -341,7 +341,7 @@ class MCEKF(Linearised):
     (see :func:`second_order_jacobian`) for both H (at x-) and H+ (at x+); needs
     ``sensor.hessian``.
 
-    The returned innovation is ``r = z - h(x-)`` with ``S = H P- H^T + R``.
+    The returned innovation is ``nu = z - h(x-)`` with ``S = H P- H^T + R``.
     """
 
     name = "MCEKF"
@@ -415,7 +415,7 @@ class AMCEKF(Filter):
       factorisation is needed.
 
     ``adapt_r=False, adapt_q=False`` is the plain MC-EKF (with ``second_order`` as given).
-    The returned innovation is ``r = z - h(x-)`` with ``S = H P- H^T + R(t)``.
+    The returned innovation is ``nu = z - h(x-)`` with ``S = H P- H^T + R(t)``.
     """
 
     name = "AMCEKF"
@@ -521,16 +521,16 @@ class AEKF(Filter):
     any documented adaptive EKF will do. This is the widely used
     Sage-Husa estimator (A. P. Sage and G. W. Husa, "Adaptive filtering with unknown prior
     statistics", Proc. JACC, 1969) with the exponential forgetting factor b. At the k-th
-    update of a row (k = 0, 1, ...), with r = z - h(x-), H = J_h(x-)::
+    update of a row (k = 0, 1, ...), with nu = z - h(x-), H = J_h(x-)::
 
         d_k   = (1 - b) / (1 - b^(k+1))
-        R_k   = (1 - d_k) R_{k-1} + d_k (r r^T - H P- H^T)
-        S     = H P- H^T + R_k,   K = P- H^T S^{-1},   x+ = x- + K r
+        R_k   = (1 - d_k) R_{k-1} + d_k (nu nu^T - H P- H^T)
+        S     = H P- H^T + R_k,   K = P- H^T S^{-1},   x+ = x- + K nu
         P+    = (I - K H) P- (I - K H)^T + K R_k K^T                      (Joseph)
 
     and, with ``adapt_q=True``, using ``F P F^T = P- - Q_{k-1}``::
 
-        Q_k   = (1 - d_k) Q_{k-1} + d_k (K r r^T K^T + P+ - F P F^T)
+        Q_k   = (1 - d_k) Q_{k-1} + d_k (K nu nu^T K^T + P+ - F P F^T)
               = Q_{k-1} + d_k (delta delta^T + P+ - P-),   delta = x+ - x-
 
     used by the next prediction ``P- = F P F^T + Q_k``. R_{-1} = ``sensor.noise`` and
@@ -544,7 +544,7 @@ class AEKF(Filter):
     positive semi-definite keeps Q_{k-1}); nothing else is repaired. ``forgetting`` b in
     (0, 1), default 0.97 (an effective memory of about 1/(1-b) = 33 steps).
 
-    The returned innovation is ``r = z - h(x-)`` with ``S = H P- H^T + R_k``.
+    The returned innovation is ``nu = z - h(x-)`` with ``S = H P- H^T + R_k``.
     """
 
     name = "AEKF"

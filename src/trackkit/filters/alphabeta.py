@@ -924,7 +924,7 @@ class _ConstantGain(Filter):
 
     def update(self, belief: Gaussian | AlphaBetaBelief, z: ArrayLike,
                sensor: SensorModel) -> tuple[AlphaBetaBelief, Innovation]:
-        """``r = z - H x-``, ``x+ = x- + K r``, ``P+ = (I - K H) P- (I - K H)^T + K R K^T``
+        """``nu = z - H x-``, ``x+ = x- + K nu``, ``P+ = (I - K H) P- (I - K H)^T + K R K^T``
         with ``K = [alpha, beta/tau, 2 gamma/tau^2]^T (x) I_d`` at the row's scan count
         (:meth:`scheduled_gains`); the innovation covariance is ``S = H P- H^T + R``.
 

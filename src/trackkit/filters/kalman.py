@@ -63,14 +63,14 @@ def kalman_gain(P: Array, H: Array, R: Array) -> tuple[Array, Array, Array]:
     return A, S, solve_psd(S, A.mT).mT
 
 
-def joseph_update(x: Array, P: Array, r: Array, H: Array, R: Array
+def joseph_update(x: Array, P: Array, nu: Array, H: Array, R: Array
                   ) -> tuple[Array, Array, Array]:
-    """The Kalman update for residual r as the textbook writes it (Bar-Shalom, Li and
+    """The Kalman update for the innovation nu as the textbook writes it (Bar-Shalom, Li and
     Kirubarajan 2001, section 5.2.3; the covariance in Joseph form, Bucy and Joseph 1968):
 
         S  = H P H^T + R
         K  = P H^T S^{-1}
-        x+ = x + K r
+        x+ = x + K nu
         P+ = (I - K H) P (I - K H)^T + K R K^T
 
     on any batch shapes; returns ``(x+, P+, S)``, S and P+ symmetrised (exactly symmetric).
@@ -81,15 +81,15 @@ def joseph_update(x: Array, P: Array, r: Array, H: Array, R: Array
     S = symmetrize(H @ P @ H.mT + R)
     K = solve_psd(S, (P @ H.mT).mT).mT  # P H^T S^{-1}, as (S^{-1} (P H^T)^T)^T: S symmetric
     I_KH = np.eye(n) - K @ H
-    x_new = x + (K @ r[..., None])[..., 0]
+    x_new = x + (K @ nu[..., None])[..., 0]
     P_new = symmetrize(I_KH @ P @ I_KH.mT + K @ R @ K.mT)
     return x_new, P_new, S
 
 
 def condition(
-    x: Array, P: Array, r: Array, H: Array, R: Array
+    x: Array, P: Array, nu: Array, H: Array, R: Array
 ) -> tuple[Array, Array, Array]:
-    """The Kalman update for residual r, :func:`joseph_update`: returns ``(x+, P+, S)``, P+
+    """The Kalman update for the innovation nu, :func:`joseph_update`: returns ``(x+, P+, S)``, P+
     exactly symmetric.
 
     Measurements of up to ``FAST_MAX_M`` components (every sensor model but a stack of
@@ -103,10 +103,10 @@ def condition(
     if type(R) is not np.ndarray or R.dtype is not _F64:
         R = np.asarray(R, dtype=float)
     if H.shape[-2] > FAST_MAX_M:
-        return joseph_update(x, P, r, H, R)
-    if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and r.ndim == 1:
-        return update_one(x, P, r, H, R)
-    return update_batch(x, P, r, H, R)
+        return joseph_update(x, P, nu, H, R)
+    if x.ndim == 1 and P.ndim == 2 and H.ndim == 2 and R.ndim == 2 and nu.ndim == 1:
+        return update_one(x, P, nu, H, R)
+    return update_batch(x, P, nu, H, R)
 
 
 def _second_order_terms(Hs: Array, P: Array) -> tuple[Array, Array]:
