@@ -161,3 +161,26 @@ def test_no_two_modules_share_a_name_for_different_jobs():
             continue
         seen.setdefault(p.name, []).append(str(rel))
     assert not {n: w for n, w in seen.items() if len(w) > 1}
+
+
+#: a function longer than this cannot be read on one screen
+MAX_FUNCTION_LINES = 120
+#: a command's module stays short: options in, one library call, the summary out
+MAX_CLI_MODULE_LINES = 400
+
+
+def test_no_function_in_src_is_over_120_lines():
+    long = []
+    for p in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                n = node.end_lineno - node.lineno + 1
+                if n > MAX_FUNCTION_LINES:
+                    long.append(f"{p.relative_to(SRC)}::{node.name} ({n} lines)")
+    assert not long, long
+
+
+def test_the_command_modules_are_short():
+    long = {p.name: n for p in (PACKAGE / "cli").glob("*.py")
+            if (n := len(p.read_text().splitlines())) >= MAX_CLI_MODULE_LINES}
+    assert not long, long
