@@ -20,7 +20,7 @@ from trackkit import cli
 from trackkit.experiments import sweep as sweep_module
 
 from .cli_helpers import LEAKS, assert_user_error, trackkit
-from .eval.test_sweep import (
+from .experiments.test_sweep import (
     BLOCK,
     BLOCKS,
     PARAMS,
@@ -226,7 +226,7 @@ def test_a_pickled_block_is_refused_unread_and_fresh_recomputes_it(tmp_path):
     import pickle
     import zlib
 
-    from .eval.test_checkpoint import _Plant
+    from .experiments.test_checkpoint import _Plant
 
     scenario = short_bo_cv_toml(tmp_path / "bo.toml")
     out, marker = tmp_path / "camp", tmp_path / "ran-code"
