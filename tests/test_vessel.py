@@ -1,7 +1,7 @@
-"""Seed 003's vessel model (trackkit.models.manoeuvring): the data tables, a hand-computed Euler
-step, Jacobians against central finite differences, the section 4.3 instability of the printed
-coefficients, kinematics, the reference vessel's stability and the augmented model in the
-EKF, UKF and CKF."""
+"""The vessel model of Zolfagharnasab and Seif (2025) (trackkit.models.manoeuvring): the data
+tables, a hand-computed Euler step, Jacobians against central finite differences, the section 4.3
+instability of the printed coefficients, kinematics, the reference vessel's stability and the
+augmented model in the EKF, UKF and CKF."""
 
 from __future__ import annotations
 

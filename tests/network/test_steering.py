@@ -1,5 +1,5 @@
-"""Agent course control (seed 004 section 2.9, eqs. 52-64): the sub-objectives on simple
-geometries, the turn-rate limit (property test), the range constraints in closed loop (many
+"""Agent course control (Jalalipoor and Kardehi Moghaddam 2021, eqs. 52-64): the sub-objectives on
+simple geometries, the turn-rate limit (property test), the range constraints in closed loop (many
 runs batched, fixed seeds), the circular blend, the straight option, batching, bad input and
 the motion of :func:`move`."""
 
