@@ -4,8 +4,8 @@ runs, against FilterPy's ``ExtendedKalmanFilter``, measured in one process.
 Data: ``trackkit.identify.programme`` (the default near-continuous truth, T = 1 s), the first
 ``--steps`` samples of each run. The identifier is the paper's: one forward-Euler step per
 sample with the mean input (eq. 4), coefficients as a random walk, H = [I3 0]. FilterPy runs
-one problem step by step with a hand-written model and the analytic Jacobians of the seed's
-section 2.4 (``predict_x`` overridden with the nonlinear step, ``F`` set to the Jacobian, its
+one problem step by step with a hand-written model and its analytic
+Jacobians (``predict_x`` overridden with the nonlinear step, ``F`` set to the Jacobian, its
 Joseph-form update); trackkit runs ``identify`` batched over ``--runs`` runs. Before timing,
 trackkit's first run (in the batch) is checked against FilterPy's, sample by sample.
 
