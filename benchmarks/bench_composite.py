@@ -1,4 +1,4 @@
-"""Composite measurement (seed 004) speed and agreement against
+"""Composite measurement (Jalalipoor and Kardehi Moghaddam 2021) speed and agreement against
 ``scipy.optimize.least_squares``, in one process, on two problem families.
 
 ``crossing`` (the family of the first measurement): a CV target seen by two sensors 15 km

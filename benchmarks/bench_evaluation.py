@@ -16,7 +16,7 @@ the two stages are timed apart, best of ``repeat``, interleaved:
   bound series).
 
 The evaluation is timed for the working tree's code ("after") and, with ``--before REF``
-(default: the commit before issue 16's evaluation work), for that commit's
+(default: the commit before the exact accumulation of the metrics), for that commit's
 ``eval/metrics.py`` and ``eval/montecarlo.py`` loaded from git, on the same recorded
 estimates; both results are compared (largest relative difference of the per-step RMSE,
 NEES and NIS). Prints the split and the ratio evaluation / filtering, for all the filters
@@ -46,7 +46,7 @@ from trackkit.experiments.montecarlo import filter_rng, plan_of, with_run
 from trackkit.scenario.simulate import simulate_block
 
 ROOT = Path(__file__).resolve().parents[1]
-#: the commit before the evaluation work of issue 16 (exact accumulation of every term)
+#: the commit before the evaluation work (exact accumulation of every term)
 BEFORE = "dd01dab"
 
 

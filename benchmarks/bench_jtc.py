@@ -1,9 +1,9 @@
 """Joint tracking and classification: speed against Stone Soup's multi-model particle filter,
 and the single filter against the multi-filter baseline, measured in one process.
 
-The problem is jtc-fighter's (seed 002 paper a): a target at 340 m/s with two 3 deg/s turns,
-a range-bearing radar at the origin (20 m, 0.2 deg), 1 s scans. Stone Soup runs one problem
-with ``MultiModelPredictor`` and ``MultiModelParticleUpdater`` (systematic resampling every
+The problem is jtc-fighter's (Hosseini, Haeri and Khaloozadeh 2019): a target at 340 m/s with two 3
+deg/s turns, a range-bearing radar at the origin (20 m, 0.2 deg), 1 s scans. Stone Soup runs one
+problem with ``MultiModelPredictor`` and ``MultiModelParticleUpdater`` (systematic resampling every
 step) at 5 000 particles over five linear models (a constant velocity and four known turn
 rates, +-0.5 and +-1 deg/s: Stone Soup has no acceleration input for a CA mode; the models
 cost the same, one matrix product each) with the paper's 0.6/0.1 transition; per step

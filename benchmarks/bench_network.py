@@ -1,5 +1,5 @@
-"""A ``net-baseline`` Monte Carlo in-process (seed 004, issue 14): the time per run and the
-share of it in each phase of the agents' program.
+"""A ``net-baseline`` Monte Carlo in-process (Jalalipoor and Kardehi Moghaddam 2021): the time per
+run and the share of it in each phase of the agents' program.
 
 Runs ``--runs`` runs of the bundled ``net-baseline`` scenario through ``run_network_mc``
 (steered agents, the centralised reference, scoring and the per-run PCRLB), as
@@ -8,7 +8,7 @@ function that does it with a ``perf_counter`` pair (a few microseconds per call,
 milliseconds per call inside), so the shares add up to the agents' part of the run:
 
 - association: ``agents.associate`` (CV prediction to the scan time, measurement prediction,
-  gate, the seed-004 cost and Munkres), once per source per execution;
+  gate, the saturating cost and Munkres), once per source per execution;
 - course control: ``Agent.steer`` (the three sub-objectives, the distance constraints, the
   turn-rate limit and the blend);
 - composite measurement: ``agents.composites`` (the batched Gauss-Newton fit);

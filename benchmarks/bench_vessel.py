@@ -1,11 +1,11 @@
-"""Seed 003 identification speed: the 19-state augmented EKF batched over runs, against
-FilterPy's ``ExtendedKalmanFilter``, measured in one process.
+"""Identification speed (Zolfagharnasab and Seif 2025): the 19-state augmented EKF batched over
+runs, against FilterPy's ``ExtendedKalmanFilter``, measured in one process.
 
 Data: ``trackkit.identify.programme`` (the default near-continuous truth, T = 1 s), the first
 ``--steps`` samples of each run. The identifier is the paper's: one forward-Euler step per
 sample with the mean input (eq. 4), coefficients as a random walk, H = [I3 0]. FilterPy runs
-one problem step by step with a hand-written model and the analytic Jacobians of the seed's
-section 2.4 (``predict_x`` overridden with the nonlinear step, ``F`` set to the Jacobian, its
+one problem step by step with a hand-written model and its analytic
+Jacobians (``predict_x`` overridden with the nonlinear step, ``F`` set to the Jacobian, its
 Joseph-form update); trackkit runs ``identify`` batched over ``--runs`` runs. Before timing,
 trackkit's first run (in the batch) is checked against FilterPy's, sample by sample.
 
@@ -121,7 +121,7 @@ def main() -> None:
                                -1) for r in range(a.runs)])
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"Python {platform.python_version()}, numpy {np.__version__}")
-    print(f"seed 003 identification, 19 states, {K} samples (T = 1 s, {int(starts.sum())} "
+    print(f"vessel identification, 19 states, {K} samples (T = 1 s, {int(starts.sum())} "
           f"trial starts); trackkit batched over {a.runs} runs\n")
 
     # first: trackkit's first run (in the batch) is FilterPy's
@@ -168,7 +168,7 @@ def main() -> None:
         per = t / (a.runs * steps)
         print(f"| {name} | {a.runs} | {t:.3f} | {per * 1e6:.2f} | {per * 1e3:.5f} | "
               f"{fp / per:.1f}x |")
-    print("\nissue 15 target: >= 100x per run-step for the batched EKF")
+    print("\ntarget: >= 100x per run-step for the batched EKF")
 
 
 if __name__ == "__main__":

@@ -74,11 +74,12 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
 # Scheduling units other than the file, by node-id prefix (the first match wins); None makes
 # each test a unit of its own.
 SCHEDULING_UNITS = {
-    # the seed-000 tunings, cached per scenario per process (experiments.tuning), take about
-    # 5 min of CPU: the tests that use them share a worker, or the tunings run twice
+    # the uw-* scenarios' tunings (Naseri Solhdar), cached per scenario per process
+    # (experiments.tuning), take about 5 min of CPU: the tests that use them share a worker, or the
+    # tunings run twice
     "tests/report/test_show_roundtrip.py::test_show_then_compare_gives_the_same_results_tuned":
-        "seed-000 tunings",
-    "tests/statistical/test_seed000.py::": "seed-000 tunings",
+        "uw tunings",
+    "tests/statistical/test_underwater_claims.py::": "uw tunings",
     # the uw-ch5 goldens share uw-ch5-fixed's (short) tuning through tune.on: about 30 s
     "tests/goldens/test_goldens.py::test_bundled_scenario_matches_golden[uw-ch5-":
         "uw-ch5 goldens",

@@ -1,4 +1,4 @@
-"""Adaptive filters of seed 002 paper (b) (trackkit.filters.adaptive): MC-EKF, the
+"""Adaptive filters of Hashemi and Alfi (2019) (trackkit.filters.adaptive): MC-EKF, the
 second-order Jacobian term, the innovation-window R adaptation, the lambda Q adaptation, the
 Sage-Husa AEKF baseline; batch invariance, missing measurements, and a DBT sanity run.
 
@@ -46,8 +46,8 @@ SIGMA_B, SIGMA_F = np.deg2rad(2.0), 0.3
 
 
 def dbt_problem(B: int = 5, T: int = 10, seed: int = 0, q: float = 1e-4):
-    """Seed 002 scenario 1 geometry (courses CCW from east): observer from the origin at 5 kn,
-    course 20 deg; target from (6000, 6000) m at 15 kn, course 260 deg, 500 Hz; sigma 2 deg,
+    """Hashemi and Alfi's scenario 1 geometry (courses CCW from east): observer from the origin at
+    5 kn, course 20 deg; target from (6000, 6000) m at 15 kn, course 260 deg, 500 Hz; sigma 2 deg,
     0.3 Hz, c = 1500 m/s; T = 1 s. The prior is drawn around the truth from P0."""
     rng = np.random.default_rng(seed)
     vo = 5 * KNOT * np.array([np.cos(np.deg2rad(20)), np.sin(np.deg2rad(20))])

@@ -1,8 +1,9 @@
-"""Constant-gain trackers of seed 001 (sections 2.1-2.4 and the tests of section 5).
+"""Constant-gain trackers of the missing-measurements thesis (sections 2-1 to 2-4 and its
+printed examples).
 
 References are computed here, independently of trackkit.filters.alphabeta: the closed-loop
 matrix ``A = (I - K G) Phi`` is written out by hand and its steady state solved with
-``scipy.linalg.solve_discrete_lyapunov``; the printed numbers of 001.md section 5 are checked
+``scipy.linalg.solve_discrete_lyapunov``; the thesis's printed numbers are checked
 to their printed digits and to exact rational arithmetic (``fractions.Fraction``) of the
 thesis's formulas; least-squares fits use ``numpy.linalg.lstsq``.
 
@@ -139,7 +140,7 @@ def test_designers_give_the_thesis_gains():
 
 
 def test_simpson_gains_k_1_to_5():
-    """001.md 5: (1, 3), (1, 1), (0.8333, 0.5), (0.7, 0.3), (0.6, 0.2) for k = 1..5."""
+    """The thesis prints (1, 3), (1, 1), (0.8333, 0.5), (0.7, 0.3), (0.6, 0.2) for k = 1..5."""
     table = [(Fraction(1), Fraction(3)), (Fraction(1), Fraction(1)),
              (Fraction(5, 6), Fraction(1, 2)), (Fraction(7, 10), Fraction(3, 10)),
              (Fraction(3, 5), Fraction(1, 5))]
@@ -171,7 +172,7 @@ def test_fading_memory_puts_every_root_at_xi():
 
 
 # --------------------------------------------------------------------------------------------
-# The numbers of 001.md section 5
+# The numbers the missing-measurements thesis prints
 
 
 def _vrr_exact(a: Fraction, b: Fraction):
@@ -247,8 +248,8 @@ def test_vrr_matches_lyapunov_on_random_gains():
 def test_alpha_beta_gamma_characteristic_polynomial_and_vrr():
     """np.poly of (I - K G) Phi with K3 = 2 gamma / dt^2 is eq. 2-49; the VRR formulas
     2-45..2-47 at gamma' = 2 gamma (and our cross terms) equal the Lyapunov solve; and the
-    thesis's formulas at gamma itself are the filter with K3 = gamma / dt^2 (the warning of
-    001.md 2.4)."""
+    thesis's formulas at gamma itself are the filter with K3 = gamma / dt^2 (the warning on
+    the thesis's section 2-4)."""
     rng = np.random.default_rng(3)
     n_ok = 0
     for _ in range(400):

@@ -1,4 +1,4 @@
-"""Bad input (DESIGN.md section 6): filters reject wrong shapes, non-finite priors and
+"""Bad input: filters reject wrong shapes, non-finite priors and
 covariances that are not symmetric positive semi-definite with a ValueError that names the
 quantity and the shapes; models reject invalid parameters at construction. Nothing is
 silently repaired.
@@ -381,7 +381,7 @@ def test_sensor_state_length_check():
         EKF().update(tk.Gaussian(*_good(())), np.zeros(2), BearingFrequency())
 
 
-# -- the Python API (issue 10): cheap checks at construction, bad dt and inf in z ---------------
+# -- the Python API: cheap checks at construction, bad dt and inf in z ---------------
 
 
 @pytest.mark.parametrize(

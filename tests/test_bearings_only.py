@@ -1,4 +1,4 @@
-"""The bearings-only specialists (issue 13): the range-parameterised EKF and the
+"""The bearings-only specialists: the range-parameterised EKF and the
 modified-polar EKF, their kernels, Jacobians, batching and bad input."""
 
 from __future__ import annotations

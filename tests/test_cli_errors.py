@@ -1,4 +1,4 @@
-"""What a new user does to ``trackkit`` (issue 10), through the real command in a subprocess:
+"""What a new user does to ``trackkit``, through the real command in a subprocess:
 every mistake is one message in words that names the file, option or value, with the right
 exit code, no traceback or numpy warning, and nothing written where it should not be; Ctrl-C
 at any moment exits 130 with one line.

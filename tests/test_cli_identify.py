@@ -1,4 +1,4 @@
-"""``trackkit identify`` (seed 003, issue 15): a recorded GPS/INS log with its inputs (the
+"""``trackkit identify`` (Zolfagharnasab and Seif 2025): a recorded GPS/INS log with its inputs (the
 simulator-written fixture that crosses midnight), every bundled vessel scenario at a small
 run count, bad logs and inputs, and byte-identical results for one seed."""
 

@@ -1,5 +1,5 @@
-"""The Doppler-bearing comparison's two other options (issue 16): the GA initialiser of seed
-002 paper (b) as ``[prior] initialiser = "ga"`` (validated, every filter started from the same
+"""The Doppler-bearing comparison's two other options: the GA initialiser of Hashemi and Alfi
+(2019) as ``[prior] initialiser = "ga"`` (validated, every filter started from the same
 GA estimate, a run's start independent of its block), and a truth with process noise
 (``target.motion.q > 0``), whose PCRLB carries the truth's Q."""
 

@@ -1,7 +1,8 @@
 """Filters (trackkit.filters): KF, EKF (orders 1 and 2), IEKF, UKF, CKF, RTS smoothing and
 run_filter. No external oracles here (those live in tests/oracles): batch invariance, missing
 measurements, symmetry, equalities between filters that must hold exactly on linear models,
-the seed 001 random-sine problem, statistical consistency (NEES/NIS) and streaming memory.
+the random-sine problem of the missing-measurements thesis, statistical consistency (NEES/NIS) and
+streaming memory.
 """
 
 from __future__ import annotations
@@ -347,7 +348,7 @@ def test_square_root_ckf_stays_definite_where_the_ckf_does_not():
 
 
 # --------------------------------------------------------------------------------------------
-# Seed 001 random sine (S3)
+# The missing-measurements thesis's random sine (S3)
 # --------------------------------------------------------------------------------------------
 
 

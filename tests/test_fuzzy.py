@@ -1,4 +1,4 @@
-"""Fuzzy-adaptive Kalman filtering of seed 000 (trackkit.filters.fuzzy): the Mamdani system,
+"""Fuzzy-adaptive Kalman filtering of Naseri Solhdar (trackkit.filters.fuzzy): the Mamdani system,
 the windowed matching covariance, the DOM cost and the OFKF / OFEKF / OFUKF wrapper.
 
 Expectations are computed by hand in the tests (explicit formulas, ``np.linalg.inv``, Python
@@ -36,7 +36,7 @@ from trackkit.models import (
 
 FAST = settings(max_examples=60, deadline=None, derandomize=True, database=None)
 
-# The chapter-3 benchmark of seed 000 (section 2.8): 3 states, z = [x1, x2] + v.
+# Naseri Solhdar's chapter-3 benchmark: 3 states, z = [x1, x2] + v.
 F3 = np.array([[0.77, 0.20, 0.0], [0.22, 0.72, 0.22], [0.02, 0.0, 0.72]])
 Q3 = 0.02 * np.eye(3)
 R_TRUE = np.diag([0.8, 9.0])

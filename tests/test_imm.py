@@ -1,7 +1,8 @@
 """The IMM filter: its reductions (one model, identical models), batching, unequal state sizes
 against hand-written references of mixing and combination, the mixture innovation and
-likelihood, missing measurements, bad input, the JPDA combination, and seed 001's S7
-(the coordinated-turn target of the EKF/UKF toolbox's eimm_demo1) by Monte Carlo."""
+likelihood, missing measurements, bad input, the JPDA combination, and S7 of the
+missing-measurements thesis (the coordinated-turn target of the EKF/UKF toolbox's eimm_demo1)
+by Monte Carlo."""
 
 from __future__ import annotations
 
@@ -45,8 +46,8 @@ def cv_ct(inner=("KF", "EKF"), fill="others") -> IMM:
 
 
 def s7_truth(n: int = 200) -> np.ndarray:
-    """eimm_demo1's trajectory (001.md section 3, S7), steps 1..n as rows 0..n-1: x0 =
-    (0, 0, 1, 0, 0); turn rate +1 on steps 41-90, -1 on 111-160, straight otherwise; the
+    """eimm_demo1's trajectory (S7 of the missing-measurements thesis), steps 1..n as rows 0..n-1:
+    x0 = (0, 0, 1, 0, 0); turn rate +1 on steps 41-90, -1 on 111-160, straight otherwise; the
     step into step i uses step i's turn rate (the demo sets it one step before)."""
     w = np.zeros(n + 1)
     w[41:91], w[111:161] = 1.0, -1.0
@@ -654,7 +655,7 @@ def test_merge_hypotheses_is_the_per_model_moment_match_of_the_mixture():
     close(one.cov, post.at([1]).cov)
 
 
-# --- seed 001, S7: the coordinated-turn target ---------------------------------------------
+# --- the missing-measurements thesis, S7: the coordinated-turn target ----------------------
 
 
 def s7_rmse(runs: int, seed: int, inner=("KF", "EKF"), fill="others"):
@@ -677,10 +678,10 @@ def s7_rmse(runs: int, seed: int, inner=("KF", "EKF"), fill="others"):
 @pytest.mark.slow
 @pytest.mark.parametrize("inner", [("KF", "EKF"), ("KF", "UKF")])
 def test_s7_imm_beats_the_best_single_model(inner):
-    """Seed 001 S7 (eimm_demo1), 200 runs, seed 2026. Measured mean position RMSE: IMM with
-    a CT EKF 0.179, with a CT UKF 0.164, CV KF (q = 0.05) 0.222, the IMM's CT model alone
-    (EKF) 1.03; the IMM beats both single models in 198 of 200 runs (either inner filter).
-    Asked: better in the mean and in at least 80% of runs. Confidence: 198 wins in 200 put
+    """The missing-measurements thesis's S7 (eimm_demo1), 200 runs, seed 2026. Measured mean
+    position RMSE: IMM with a CT EKF 0.179, with a CT UKF 0.164, CV KF (q = 0.05) 0.222, the IMM's
+    CT model alone (EKF) 1.03; the IMM beats both single models in 198 of 200 runs (either inner
+    filter). Asked: better in the mean and in at least 80% of runs. Confidence: 198 wins in 200 put
     the one-sided 99.9% (Clopper-Pearson) lower bound of the per-run win rate at 0.945, well
     above 0.8; and were the true rate only 0.9, fewer than 160 wins would have probability
     7e-6. The seed is fixed, so the test is deterministic."""

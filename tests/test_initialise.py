@@ -1,9 +1,9 @@
-"""GA-based initialisation of Doppler-bearing tracking (seed 002, paper b, B.2.8).
+"""GA-based initialisation of Doppler-bearing tracking (Hashemi and Alfi 2019, section 4-2).
 
-Geometry of seed 002 scenario 1 (courses counter-clockwise from east, as the paper's direction
-words imply): observer from the origin at 5 kn on course 20 deg; target from (6000, 6000) m at
-15 kn on course 260 deg radiating 500 Hz; bearing sigma 2 deg, frequency sigma 0.3 Hz,
-c = 1500 m/s, dt = 1 s. The paper claims the GA finds the initial position to < 1000 m.
+Geometry of Hashemi and Alfi's scenario 1 (courses counter-clockwise from east, as the paper's
+direction words imply): observer from the origin at 5 kn on course 20 deg; target from
+(6000, 6000) m at 15 kn on course 260 deg radiating 500 Hz; bearing sigma 2 deg, frequency sigma
+0.3 Hz, c = 1500 m/s, dt = 1 s. The paper claims the GA finds the initial position to < 1000 m.
 """
 
 from __future__ import annotations

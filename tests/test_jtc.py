@@ -1,5 +1,5 @@
-"""Joint tracking and classification (seed 002 paper a): the class models, the mode chain,
-the single-filter JTC and the multi-filter baseline, against references written from the
+"""Joint tracking and classification (Hosseini, Haeri and Khaloozadeh 2019): the class models, the
+mode chain, the single-filter JTC and the multi-filter baseline, against references written from the
 formulas (loops over runs, classes and particles) and against what the paper states."""
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ RADAR = tk.models.RangeBearing(origin=[0.0, 0.0], sigma_range=20.0,
 
 
 def test_speed_likelihoods_have_the_papers_values_at_200_mps():
-    # 002.md A.2.6: g(c1)(200) = 0.8 - (0.7/200)(200 - 100) = 0.45 and, with the sign fixed,
-    # g(c2)(200) = 0.1 + (0.85/500)(200 - 150) = 0.185
+    # the paper's speed likelihoods: g(c1)(200) = 0.8 - (0.7/200)(200 - 100) = 0.45 and, with the
+    # sign fixed, g(c2)(200) = 0.1 + (0.85/500)(200 - 150) = 0.185
     assert AIRLINER.speed_likelihood(200.0) == pytest.approx(0.45, rel=1e-15, abs=0)
     assert FIGHTER.speed_likelihood(200.0) == pytest.approx(0.185, rel=1e-15, abs=0)
 

@@ -1,8 +1,8 @@
 """Motion models (trackkit.models.motion, trackkit.models.discretize).
 
-Jacobians against central finite differences, closed forms of Q (CV, CA, Singer, seed 001
-CWPA via Van Loan and the random-sine model of seed 001 eqs 2-94/2-95), the coordinated turn
-through omega = 0, batched dt and the shape/PSD of every noise matrix.
+Jacobians against central finite differences, closed forms of Q (CV, CA, Singer, the
+missing-measurements thesis's CWPA via Van Loan and its random-sine model, eqs 2-94/2-95), the
+coordinated turn through omega = 0, batched dt and the shape/PSD of every noise matrix.
 """
 
 from __future__ import annotations
@@ -70,7 +70,8 @@ def _singer_closed_form(T, tau, sigma):
 
 
 def _cwpa_A_L():
-    """Seed 001 eq 2-61/2-62: X = (x, y, vx, vy, ax, ay), ones at (1,3),(2,4),(3,5),(4,6)."""
+    """The missing-measurements thesis, eq 2-61/2-62: X = (x, y, vx, vy, ax, ay), ones at
+    (1,3),(2,4),(3,5),(4,6)."""
     A = np.zeros((6, 6))
     for i, j in [(0, 2), (1, 3), (2, 4), (3, 5)]:
         A[i, j] = 1.0
@@ -160,8 +161,9 @@ def test_ct_jacobian_domega_column_at_zero_turn_rate():
     assert np.all(np.isfinite(J))
 
 
-def test_ct_matches_seed_001_turn_matrix():
-    # seed 001 section 2.14: F(omega) with sin(w dt)/w, (cos(w dt) - 1)/w, ...
+def test_ct_matches_the_thesis_turn_matrix():
+    # the missing-measurements thesis's coordinated turn: F(omega) with sin(w dt)/w,
+    # (cos(w dt) - 1)/w, ...
     ct = CoordinatedTurn()
     rng = np.random.default_rng(3)
     for _ in range(10):
@@ -321,8 +323,9 @@ def test_discretize_reproduces_cv_and_ca(dt):
 
 
 @pytest.mark.parametrize("dt", [0.1, 0.5, 1.0, 2.5])
-def test_discretize_seed001_cwpa_uses_dt3_over_3(dt):
-    # seed 001 section 2.5: A (2-65) and Q (2-66) with the corrected dt^3/3, times q = 0.2
+def test_discretize_thesis_cwpa_uses_dt3_over_3(dt):
+    # the missing-measurements thesis: A (2-65) and Q (2-66) with the corrected dt^3/3, times
+    # q = 0.2
     A, L = _cwpa_A_L()
     F, Q = discretize(A, L, np.diag([0.2, 0.2]), dt)
     F_expected = np.array(
@@ -422,7 +425,7 @@ def test_known_turn_rate_equals_coordinated_turn_at_fixed_omega(omega, dt):
 
 
 @pytest.mark.parametrize("dt", [0.01, 0.1, 1.0])
-def test_random_sine_matches_seed001_eq_2_94_2_95(dt):
+def test_random_sine_matches_thesis_eq_2_94_2_95(dt):
     q1, q2 = 0.2, 0.1
     m = RandomSine(q1=q1, q2=q2)
     A = np.array([[1, dt, 0], [0, 1, 0], [0, 0, 1]])

@@ -1,4 +1,4 @@
-"""Multi-target scenarios (issue 11): the schema and its messages, the bundled files, the
+"""Multi-target scenarios: the schema and its messages, the bundled files, the
 driver and the report files."""
 
 from __future__ import annotations

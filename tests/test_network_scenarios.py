@@ -1,5 +1,6 @@
-"""Network scenarios (seed 004, issue 14): the schema and its messages, the bundled files and
-their geometry, the Monte Carlo and its report, and the ``trackkit network`` command."""
+"""Network scenarios (Jalalipoor and Kardehi Moghaddam 2021): the schema and its messages, the
+bundled files and their geometry, the Monte Carlo and its report, and the ``trackkit network``
+command."""
 
 from __future__ import annotations
 

@@ -66,7 +66,7 @@ def test_rastrigin_2d_global_minimum() -> None:
 
 @pytest.mark.parametrize("kind", ["arithmetic", "single_point"])
 def test_other_crossovers_converge_on_the_sphere(kind: str) -> None:
-    """Arithmetic and single-point (seed 000's swap-tails) crossovers with Gaussian
+    """Arithmetic and single-point (Naseri Solhdar's swap-tails) crossovers with Gaussian
     mutation: worst of 30 seeds was 2e-5 and 2e-4 in d = 2."""
     res = GA(crossover_kind=kind).minimize(sphere, box(2), rngs(range(10)))
     assert np.all(res.best_f < 1e-2), res.best_f
@@ -200,7 +200,7 @@ def test_zero_generations_scores_the_initial_population() -> None:
 
 def test_repeat_reports_best_mean_worst_over_independent_runs() -> None:
     ga = GA(population=20, generations=30)
-    seeds = list(range(100, 115))  # seed 000: 15 independent runs
+    seeds = list(range(100, 115))  # Naseri Solhdar, Table 3-2: 15 independent runs
     stats = repeat(ga, rastrigin, box(4), seeds)
     assert stats["best"] <= stats["mean"] <= stats["worst"]
     res = stats["results"]

@@ -52,7 +52,7 @@ def test_shifted_sphere_reaches_the_minimum(kind: str, d: int, tol: float) -> No
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_rastrigin_2d_best_of_15_runs_is_the_global_minimum(kind: str) -> None:
-    """15 independent runs of 50 x 100 (seed 000's protocol with more iterations). Over 100
+    """15 independent runs of 50 x 100 (Naseri Solhdar's protocol with more iterations). Over 100
     sets of 15 runs the worst best-of-15 was 5e-11 (PSO) and 1e-5 (ICA); the nearest local
     minimum is 0.995, so best < 1e-3 checks that the global basin was found and converged."""
     stats = repeat(make(kind, 50, 100), rastrigin, box(2), seeds=range(15))
@@ -64,7 +64,7 @@ def test_rastrigin_2d_best_of_15_runs_is_the_global_minimum(kind: str) -> None:
 @pytest.mark.parametrize("kind", KINDS)
 def test_repeat_reports_best_mean_worst_over_independent_runs(kind: str) -> None:
     opt = make(kind, 20, 30)
-    seeds = list(range(100, 115))  # seed 000: 15 independent runs
+    seeds = list(range(100, 115))  # Naseri Solhdar, Table 3-2: 15 independent runs
     stats = repeat(opt, rastrigin, box(4), seeds)
     res = stats["results"]
     assert isinstance(res, OptimizeResult) and res.best_f.shape == (15,)

@@ -1,4 +1,4 @@
-"""Named error windows (``[report] windows``, issue 16): validated with messages that name the
+"""Named error windows (``[report] windows``): validated with messages that name the
 field, the value and the expectation; carried into the Monte Carlo result from the per-step
 sums (no accumulation of their own, the same bits for any chunking); shown in results.json,
 the HTML report and the ``trackkit run`` tables."""

@@ -1,4 +1,4 @@
-"""Issue 10, the scenario cases through the real CLI: a user's bad scenario file stops
+"""Bad scenario files through the real CLI: a user's bad scenario file stops
 ``trackkit run`` with exit code 2 and a message that names the file, the field and the value,
 with no traceback or numpy warning and nothing written."""
 

@@ -1,4 +1,4 @@
-"""Missing measurements in the scenario engine (issue 12): the [gaps] table and the filters'
+"""Missing measurements in the scenario engine: the [gaps] table and the filters'
 gaps handlers, the WithGaps wrapper against run_with_gaps, pseudo flags, the results' gap
 fields, the report's table and time plot, and determinism over block chunkings."""
 

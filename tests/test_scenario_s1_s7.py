@@ -1,7 +1,7 @@
-"""Seed 001's S1 (ab-kohn) and S7 (imm-turn) as bundled scenarios: the AlphaBeta,
-AlphaBetaGamma and IMM filter types (options, refusals, built filters against direct
+"""The missing-measurements thesis's S1 (ab-kohn) and S7 (imm-turn) as bundled scenarios: the
+AlphaBeta, AlphaBetaGamma and IMM filter types (options, refusals, built filters against direct
 construction), S1 against the alpha-beta's analytic steady state, and S7's claim that the
-IMM beats each single model (issue 12)."""
+IMM beats each single model."""
 
 from __future__ import annotations
 

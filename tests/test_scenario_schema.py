@@ -1,4 +1,4 @@
-"""The scenario package (issue 10): filter options validated from one table that agrees with
+"""The scenario package: filter options validated from one table that agrees with
 the constructors, plain scenario names, numbers a run cannot carry refused at load, ``load``
 errors in words, TOML out (``dumps``) that reads back to an equal scenario, and the generated
 scenario reference kept current."""

@@ -2,9 +2,10 @@
 
 Every sensor's Jacobian and Hessian against central finite differences over random geometry
 (kept away from singular configurations), bearing conventions, angle-only residual wrapping,
-the multipath-delay model of seed 000 section 2.9 (image method, closed-form inverse, the
-corrected tau2 Jacobian), azimuth/elevation (seed 000 section 2.10), the Doppler-bearing
-Jacobian of seed 002 B.2.1, the sine sensor of seed 001 and batched (moving) observers.
+the multipath-delay model of Naseri Solhdar, chapter 4 (image method, closed-form inverse,
+the corrected tau2 Jacobian), azimuth/elevation (Naseri Solhdar, chapter 5), the
+Doppler-bearing Jacobian of Hashemi and Alfi (2019), the sine sensor of the
+missing-measurements thesis and batched (moving) observers.
 """
 
 from __future__ import annotations
@@ -274,11 +275,11 @@ def test_stack_composes_h_jacobian_noise():
 
 
 # --------------------------------------------------------------------------------------------
-# Azimuth / elevation (seed 000 section 2.10)
+# Azimuth / elevation (Naseri Solhdar, chapter 5)
 # --------------------------------------------------------------------------------------------
 
 
-def test_azimuth_elevation_values_and_seed000_jacobian():
+def test_azimuth_elevation_values_and_thesis_jacobian():
     o = np.array([1.0, 2.0, -3.0])
     rel = np.array([30.0, -40.0, 20.0])
     x = np.concatenate([o + rel, [1.0, 1.0, 1.0]])
@@ -307,7 +308,7 @@ def test_azimuth_elevation_up_is_positive():
 
 
 # --------------------------------------------------------------------------------------------
-# Multipath delays (seed 000 section 2.9)
+# Multipath delays (Naseri Solhdar, chapter 4)
 # --------------------------------------------------------------------------------------------
 
 
@@ -337,7 +338,7 @@ def test_multipath_delays_equal_reflected_path_differences(hs, hb, frac, rho, ph
     tau = sensor.h(x)
     np.testing.assert_allclose(tau, [(surf - R) / c, (bott - R) / c], rtol=1e-9, atol=1e-15)
     assert np.all(tau > 0)  # reflected paths are longer
-    # seed 000 eqs 4-1, 4-2 with R_Z = Z_T - Z_O
+    # Naseri Solhdar, eqs 4-1, 4-2 with R_Z = Z_T - Z_O
     t1 = (np.sqrt(R**2 + 4 * hs**2 - 4 * dz * hs) - R) / c
     t2 = (np.sqrt(R**2 + 4 * hb**2 + 4 * dz * hb) - R) / c
     np.testing.assert_allclose(tau, [t1, t2], rtol=1e-9, atol=1e-15)
@@ -407,7 +408,7 @@ def test_multipath_tau2_jacobian_is_the_corrected_form(num, dz, rho):
 
 
 # --------------------------------------------------------------------------------------------
-# Doppler-bearing (seed 002 B.2.1)
+# Doppler-bearing (Hashemi and Alfi 2019)
 # --------------------------------------------------------------------------------------------
 
 
@@ -416,7 +417,7 @@ def test_multipath_tau2_jacobian_is_the_corrected_form(num, dz, rho):
     st.floats(-3000, 3000), st.floats(-3000, 3000), st.floats(-20, 20), st.floats(-20, 20),
     st.floats(50, 2000), st.floats(-10, 10), st.floats(-10, 10), st.floats(1400, 1550),
 )
-def test_bearing_frequency_matches_seed002(num, dx, dy, vx, vy, f0, ovx, ovy, c):
+def test_bearing_frequency_matches_hashemi_alfi(num, dx, dy, vx, vy, f0, ovx, ovy, c):
     if np.hypot(dx, dy) < 10:
         dx += 20.0
     o = np.array([200.0, -100.0])
@@ -439,7 +440,7 @@ def test_bearing_frequency_matches_seed002(num, dx, dy, vx, vy, f0, ovx, ovy, c)
         ]
     )
     num.close(s.jacobian(x), expected, rtol=1e-11, atol=1e-300, per_row=True,
-              what="DBT jacobian vs seed 002")
+              what="DBT jacobian vs Hashemi and Alfi")
 
 
 def test_bearing_frequency_doppler_sign():
@@ -457,11 +458,11 @@ def test_bearing_frequency_rejects_wrong_state_length():
 
 
 # --------------------------------------------------------------------------------------------
-# Sine (seed 001 eqs 2-96 ... 2-100)
+# Sine (the missing-measurements thesis, eqs 2-96 ... 2-100)
 # --------------------------------------------------------------------------------------------
 
 
-def test_sine_values_jacobian_hessian_seed001():
+def test_sine_values_jacobian_hessian_thesis():
     th, w, a = 0.7, 10.0, 1.3
     s = Sine()
     x = np.array([th, w, a])

@@ -1,7 +1,7 @@
-"""Seed 003's vessel model (trackkit.models.manoeuvring): the data tables, a hand-computed Euler
-step, Jacobians against central finite differences, the section 4.3 instability of the printed
-coefficients, kinematics, the reference vessel's stability and the augmented model in the
-EKF, UKF and CKF."""
+"""The vessel model of Zolfagharnasab and Seif (2025) (trackkit.models.manoeuvring): the data
+tables, a hand-computed Euler step, Jacobians against central finite differences, the
+instability of the printed coefficients, kinematics, the reference vessel's stability and the
+augmented model in the EKF, UKF and CKF."""
 
 from __future__ import annotations
 
@@ -207,10 +207,10 @@ def test_batched_jacobians_have_the_batch_axes():
     np.testing.assert_array_equal(F[1, 2], one)
 
 
-# --- section 4.3: the printed coefficients are unstable ------------------------------------
+# --- the printed coefficients (Tables 3-5) are unstable ---------------------------------------
 
 
-def test_section_4_3_sway_yaw_eigenvalues_in_si():
+def test_printed_sway_yaw_eigenvalues_in_si():
     th = paper_coefficients().theta
     for u in (5.0, 8.74, 9.26):
         eig = np.linalg.eigvals(sway_yaw_block(u, th))

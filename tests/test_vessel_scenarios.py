@@ -1,5 +1,5 @@
-"""Vessel scenarios (seed 003, issue 15): the schema and its messages, the bundled files, the
-SI conversions, ``trackkit show``, and the Monte Carlo's claims on a short record."""
+"""Vessel scenarios (Zolfagharnasab and Seif 2025): the schema and its messages, the bundled files,
+the SI conversions, ``trackkit show``, and the Monte Carlo's claims on a short record."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 against one candidate at a time, the optimiser statistics, writing the tuned system into the
 scenario, the per-process cache and ``tune.on``.
 
-Cheap settings throughout: seed 000's chapter-3 benchmark cut to 100 steps, 2 optimiser runs
+Cheap settings throughout: Naseri Solhdar's chapter-3 benchmark cut to 100 steps, 2 optimiser runs
 of 3 iterations with populations of 10.
 """
 

@@ -1,9 +1,9 @@
 """Golden runs: a small fixed-seed run of every bundled scenario, with its numbers checked in.
 
-Each number is promised to a stated relative tolerance, the same on every CPU (DESIGN.md
-sections 5 and 7): 1e-12, or, for a quantity whose own conditioning amplifies rounding beyond
-that, 100 times its sensitivity to a one-ulp change of every input. The sensitivity is
-measured when the goldens are made: the same run again with the simulated truth, the
+Each number is promised to a stated relative tolerance, the same on every CPU
+(docs/architecture.md, Determinism): 1e-12, or, for a quantity whose own conditioning amplifies
+rounding beyond that, 100 times its sensitivity to a one-ulp change of every input. The sensitivity
+is measured when the goldens are made: the same run again with the simulated truth, the
 measurements and the prior draws each multiplied by (1 + 2^-52), and by (1 - 2^-52), the
 larger of the two (the goldens made before 2026-11-26 tried the first only, and pass on
 AVX2 and AVX-512 CPUs as they are; a mis-specified Doppler-bearing scenario made that day

@@ -169,8 +169,8 @@ np.savez({path!r}, **{{f"{{m}}_{{i}}": a for m, v in out.items() for i, a in enu
 def test_the_same_bits_when_compiled_for_another_cpu(cpu, tmp_path):
     # numba compiles for the host (AVX-512 here); compiled for plain x86-64 (no FMA, SSE2)
     # and for AVX2 the kernel must give the same bits: no contraction into FMA, no sum
-    # reordered by the vector width (DESIGN.md section 5 asks for 1e-12 across CPUs; this
-    # kernel promises bits)
+    # reordered by the vector width (docs/architecture.md, Determinism, promises 1e-12 across CPUs;
+    # this kernel promises bits)
     import os
     import subprocess
     import sys

@@ -1,5 +1,5 @@
-"""Seed 004's agent program (trackkit.network.agents) and the in-process network run
-(trackkit.network.inprocess)."""
+"""The agent program of Jalalipoor and Kardehi Moghaddam (2021) (trackkit.network.agents) and the
+in-process network run (trackkit.network.inprocess)."""
 
 from __future__ import annotations
 

@@ -223,10 +223,10 @@ def _ratios(mc):
 
 @pytest.mark.slow
 def test_every_agent_within_1_5x_of_centralised_fusion():
-    """Issue 14's comparison on this geometry (the numbers are printed): every agent holds
-    the three targets at the end in at least 95% of the (agent, run) cases, and each agent's
-    RMSE per target (RMS over runs) is within 1.5x of the centralised filter's (measured
-    1.31 / 1.23 / 1.23, 60 of 60 held). Before the agents deleted uncorroborated tracks
+    """The decentralised-against-centralised comparison on this geometry (the numbers are printed):
+    every agent holds the three targets at the end in at least 95% of the (agent, run) cases, and
+    each agent's RMSE per target (RMS over runs) is within 1.5x of the centralised filter's
+    (measured 1.31 / 1.23 / 1.23, 60 of 60 held). Before the agents deleted uncorroborated tracks
     (``AgentSettings.corroborate_s``), agent 0 was at 3.59x on target 0: in one run of twenty
     it held a ghost, a track at the wrong range on the true line of sight, which its own
     bearings kept alive (docs/network-comparison.md)."""

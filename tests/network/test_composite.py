@@ -1,4 +1,5 @@
-"""Composite measurement (seed 004, section 2.3): ML state at t_f from asynchronous bearings.
+"""Composite measurement (Jalalipoor and Kardehi Moghaddam 2021, eqs. 13-33): ML state at t_f from
+asynchronous bearings.
 
 The truth and the bearings are generated here with the library's own models, independently of
 the module under test: ``ConstantVelocity`` for X(t_k) = F(t_k - t_f) X(t_f) and ``Bearing``

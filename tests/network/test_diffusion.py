@@ -1,6 +1,6 @@
-"""Diffusion Kalman filter (seed 004 section 2.8): weight rules, the incremental update, the
-combination rules, ATC/CTA, batching, missing measurements, bad input, and the consistency
-of the covariance combinations (Monte Carlo, fixed seeds)."""
+"""Diffusion Kalman filter (Jalalipoor and Kardehi Moghaddam 2021, eqs. 44-50): weight rules, the
+incremental update, the combination rules, ATC/CTA, batching, missing measurements, bad input, and
+the consistency of the covariance combinations (Monte Carlo, fixed seeds)."""
 
 from __future__ import annotations
 
@@ -64,7 +64,8 @@ def test_combination_leaves_identical_inputs_unchanged(method, rule, num):
 
 @pytest.mark.parametrize("method", ["paper", "information"])
 def test_equal_covariances_give_the_average(method, num):
-    """Seed 004 section 5: uniform weights with equal P give the mean estimate, P unchanged."""
+    """Jalalipoor and Kardehi Moghaddam (2021): uniform weights with equal P give the mean estimate,
+    P unchanged."""
     rng = np.random.default_rng(2)
     x = rng.standard_normal((4, 3, 4)) * 100
     P = np.repeat(num.spd(rng, (4, 1), 4), 3, -3)
@@ -128,7 +129,7 @@ def _oracle_run(order: str, method: str, H_kind: str, steps: int = 25):
     that receives them all (stacked). Returns the largest relative differences."""
     rng = np.random.default_rng(7)
     runs, N = 6, 4
-    if H_kind == "composite":  # seed 004: H = I_4, R = J^-1 per agent
+    if H_kind == "composite":  # the paper's: H = I_4, R = J^-1 per agent
         H = np.broadcast_to(np.eye(4), (N, 4, 4))
     else:  # a general linear sensor, a different 2 x 4 matrix per agent
         H = rng.standard_normal((N, 2, 4))

@@ -1,7 +1,7 @@
-"""Seed 004's agents as operating-system processes over ZeroMQ (``network.processes``):
-the same tracks as the in-process run, the channel's counts, kill and restart, the schema
-check, clean shutdown, and ``trackkit network --agents processes``. Every test starts the
-processes it needs and checks that none is left."""
+"""The agents of Jalalipoor and Kardehi Moghaddam (2021) as operating-system processes over ZeroMQ
+(``network.processes``): the same tracks as the in-process run, the channel's counts, kill and
+restart, the schema check, clean shutdown, and ``trackkit network --agents processes``. Every test
+starts the processes it needs and checks that none is left."""
 
 from __future__ import annotations
 

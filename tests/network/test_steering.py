@@ -1,5 +1,5 @@
-"""Agent course control (seed 004 section 2.9, eqs. 52-64): the sub-objectives on simple
-geometries, the turn-rate limit (property test), the range constraints in closed loop (many
+"""Agent course control (Jalalipoor and Kardehi Moghaddam 2021, eqs. 52-64): the sub-objectives on
+simple geometries, the turn-rate limit (property test), the range constraints in closed loop (many
 runs batched, fixed seeds), the circular blend, the straight option, batching, bad input and
 the motion of :func:`move`."""
 
@@ -189,8 +189,8 @@ def test_closed_loop_keeps_every_distance_in_the_band_with_static_targets():
     assert dn.max() > 0.9
 
 
-def test_seed_one_step_check_alone_breaks_the_band():
-    """The seed's check at the predicted positions only (``safety="step"``) loses the band in
+def test_papers_one_step_check_alone_breaks_the_band():
+    """The paper's check at the predicted positions only (``safety="step"``) loses the band in
     the same closed loop: the agents need a quarter turn (45 s) to stop closing or opening,
     longer than one step looks ahead (measured: 11 of 40 runs leave it, down to 0.016 CR)."""
     dn, _, _, _ = _closed_loop(Steering(safety="step"), runs=40, seed=2, target_speed=0.0,
@@ -219,7 +219,7 @@ def test_band_cannot_hold_from_outside_the_safe_set():
 
 
 def test_blend_is_circular():
-    """359 deg and 1 deg blend to 0 (the seed's linear mean gives 180); zero weights on two
+    """359 deg and 1 deg blend to 0 (the paper's linear mean gives 180); zero weights on two
     objectives give the third's course; a blend across +-180 stays there."""
     assert blend_courses(np.deg2rad([359.0, 1.0, 200.0]), [1.0, 1.0, 0.0]) == \
         pytest.approx(0.0, abs=1e-15)

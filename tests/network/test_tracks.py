@@ -1,5 +1,6 @@
-"""Tracks across agents (trackkit.network.tracks, seed 004 section 2.7): similarity S_ij,
-track-to-track matching, duplicate pruning by (P11 + P22)(P33 + P44), the message memory."""
+"""Tracks across agents (trackkit.network.tracks, Jalalipoor and Kardehi Moghaddam
+2021, eqs. 39 and 51): similarity S_ij, track-to-track matching, duplicate pruning by
+(P11 + P22)(P33 + P44), the message memory."""
 
 from __future__ import annotations
 

@@ -2,10 +2,10 @@
 FilterPy's ``ExtendedKalmanFilter``, step by step.
 
 FilterPy gets only what is written here, independently of ``trackkit.models.manoeuvring``: the
-16-coefficient model of seed 003 (eq. 2) in the prime system (L = 19.6 m, U0 = 18 kn,
-n0 = 2000 rpm), its forward-Euler step with the mean input (eq. 4) or m Euler sub-steps
-with the input interpolated linearly between samples, the analytic Jacobians of the seed's
-section 2.4 (chained over the sub-steps), Q = T diag(q_body, q_theta), H = [I3 0] and
+16-coefficient model of Zolfagharnasab and Seif (2025, eq. 2) in the prime system (L = 19.6 m, U0 =
+18 kn, n0 = 2000 rpm), its forward-Euler step with the mean input (eq. 4) or m Euler sub-steps
+with the input interpolated linearly between samples, the analytic Jacobians written out
+here (chained over the sub-steps), Q = T diag(q_body, q_theta), H = [I3 0] and
 R = diag(sigma^2). ``ExtendedKalmanFilter.predict`` propagates ``x = F x``; its
 ``predict_x`` is overridden with the nonlinear step (the usual FilterPy idiom), and its
 update is the Joseph form, like trackkit's. At a trial join both re-initialise the body

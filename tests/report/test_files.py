@@ -22,7 +22,7 @@ FILTER_KEYS = {"rmse", "anees", "anis", "nees_in_bounds", "diverged"}
 
 
 def check_results_json(doc: dict) -> None:
-    """The results.json schema (issues 3 and 10; shared with the CLI tests): SI values whose
+    """The results.json schema (shared with the CLI tests): SI values whose
     units are named, the averaging window in seconds, no wall-clock timings."""
     assert set(doc) == {"scenario", "runs", "seed", "steps", "dt", "window", "units", "filters",
                         "pcrlb"}

@@ -1,6 +1,6 @@
-"""Seed 000's report sections: the J1-J4 tables (Monte Carlo mean and run 0), the tuning table,
-the covariance-matching, membership-function and convergence figures, their place in
-report.html and in the terminal, and their absence for a scenario without them."""
+"""The report sections of Naseri Solhdar's scenarios: the J1-J4 tables (Monte Carlo mean and run 0),
+the tuning table, the covariance-matching, membership-function and convergence figures, their place
+in report.html and in the terminal, and their absence for a scenario without them."""
 
 from __future__ import annotations
 

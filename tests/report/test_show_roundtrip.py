@@ -3,10 +3,10 @@
 
 Every scenario: the shown TOML validates to a Scenario equal to the bundled one. Scenarios
 without a tune block: both commands run through the real CLI (subprocesses, 3 runs) and their
-results.json are compared byte for byte. The seed-000 scenarios that tune fuzzy systems (about
-90 s of tuning each) run both in-process through ``compare`` at 2 runs: the tuning is cached
-per scenario content in the process (trackkit.experiments.tuning), so the second costs nothing and
-the shown scenario hits the bundled one's cache entry only if it is the same scenario.
+results.json are compared byte for byte. The underwater (Naseri Solhdar) scenarios that tune fuzzy
+systems (about 90 s of tuning each) run both in-process through ``compare`` at 2 runs: the tuning is
+cached per scenario content in the process (trackkit.experiments.tuning), so the second costs
+nothing and the shown scenario hits the bundled one's cache entry only if it is the same scenario.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""Asynchronous bearings of a network of agents (trackkit.sim.sensor_network; seed 004, 2.1, 2.2,
-2.10).
+"""Asynchronous bearings of a network of agents (trackkit.sim.sensor_network;
+Jalalipoor and Kardehi Moghaddam 2021, eqs. 1-4, 9-12 and 17-18).
 
 Statistical tests use fixed seeds (so they are deterministic) and each accepts at the 99%
 level: a two-sided p-value above 0.01.
@@ -31,7 +31,7 @@ DEG = math.pi / 180
 ALPHA = 0.01
 SIGMA = 2 * DEG
 
-# three targets and three agents, all at speeds up to 30 m/s (seed 004's invented geometry)
+# three targets and three agents, all at speeds up to 30 m/s (invented: the paper's Table 1 is lost)
 TARGETS = np.array([[0.0, 20e3, 10.0, -5.0], [5e3, 15e3, -20.0, 0.0], [-8e3, 18e3, 15.0, 10.0]])
 AGENTS = np.array([[-10e3, 0.0, 20.0, 0.0], [0.0, 0.0, 0.0, 25.0], [10e3, 0.0, -20.0, 0.0]])
 

@@ -1,7 +1,7 @@
-"""Sea-trial simulators of seed 003 (trackkit.sim.seatrials): the reference vessel's turning
-circle against the paper's D/L, port/starboard mirror images, per-run zig-zag switching,
-batches equal to single runs bit for bit, the discrete model at one sub-step, the rate limit
-and bad input."""
+"""Sea-trial simulators of Zolfagharnasab and Seif (2025) (trackkit.sim.seatrials): the reference
+vessel's turning circle against the paper's D/L, port/starboard mirror images, per-run zig-zag
+switching, batches equal to single runs bit for bit, the discrete model at one sub-step, the rate
+limit and bad input."""
 
 from __future__ import annotations
 

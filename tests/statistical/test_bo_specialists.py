@@ -1,4 +1,4 @@
-"""Issue 13, item 4: the bearings-only specialists on the bundled ``bo-cv`` (500 runs, its
+"""The bearings-only specialists on the bundled ``bo-cv`` (500 runs, its
 seed 2026), beside the EKF, IEKF, UKF and CKF.
 
 The claims: today's best filter, the CKF, has a position RMSE of 1.39 times the PCRLB (the

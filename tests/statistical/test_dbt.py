@@ -1,4 +1,4 @@
-"""Seed 002 paper (b): the Doppler-bearing comparison at the paper's 100 runs.
+"""Hashemi and Alfi (2019): the Doppler-bearing comparison at the paper's 100 runs.
 
 The three bundled scenarios are run once (fixed seeds, 100 runs, 2000 steps each); the tests
 check the paper's claims that our runs support, and record the one that does not.

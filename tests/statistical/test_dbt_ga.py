@@ -1,4 +1,5 @@
-"""The GA initialiser on the three bundled Doppler-bearing scenarios (seed 002 B.2.8, Fig. 17).
+"""The GA initialiser on the three bundled Doppler-bearing scenarios (Hashemi and Alfi
+2019, section 4-2, Fig. 17).
 
 Each scenario's own truth and measurements (its plan and seeded simulation, 20 runs) feed the
 GA (population 50, 200 generations, crossover 0.8, mutation 0.05) over the first 800 s,

@@ -1,4 +1,4 @@
-"""Seed 002 paper (b) on its premise: every filter starts from poor Q0 and R0.
+"""Hashemi and Alfi (2019) on its premise: every filter starts from poor Q0 and R0.
 
 The three bundled mis-specified DBT variants (`dbt-*-misspecified`: each filter's q ten
 times the well-tuned 1e-4, and its R at half the true variances; the same geometries, seeds,

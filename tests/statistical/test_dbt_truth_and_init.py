@@ -1,4 +1,4 @@
-"""Seed 002 paper (b) beside two premises of its own (issue 16): a truth with process noise,
+"""Hashemi and Alfi (2019) beside two premises of its own: a truth with process noise,
 and the GA initialiser offered beside the draw from the prior.
 
 Truth with process noise: the three well-specified DBT geometries with the truth's q raised

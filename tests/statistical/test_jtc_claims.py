@@ -1,5 +1,5 @@
-"""The claims of issue 13 about joint tracking and classification (seed 002 paper a), on the
-bundled jtc-fighter and jtc-airliner scenarios at their 100 runs and fixed seeds.
+"""The claims of Hosseini, Haeri and Khaloozadeh (2019) about joint tracking and classification, on
+the bundled jtc-fighter and jtc-airliner scenarios at their 100 runs and fixed seeds.
 
 The scenarios run the paper's 5 000 particles per class; these tests run 1 000 (the claims
 hold there too, and the two tests stay under 90 s on two cores); docs/jtc-comparison.md has the

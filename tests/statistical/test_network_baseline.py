@@ -1,4 +1,4 @@
-"""Issue 14's statistics on the bundled ``net-baseline`` at 100 runs (seed 2026), steered and
+"""The network's statistics on the bundled ``net-baseline`` at 100 runs (seed 2026), steered and
 on straight courses: the same runs (targets and bearing noise) both ways, as
 ``trackkit network net-baseline --compare-straight`` runs them.
 
@@ -93,7 +93,7 @@ def test_agents_against_centralised_fusion_and_the_bound():
 
 
 def test_every_agent_within_1_5x_of_centralised_fusion():
-    """Issue 14: each agent's position RMSE per target within 1.5x of centralised fusion."""
+    """Each agent's position RMSE per target within 1.5x of centralised fusion."""
     r = _ratios(_mc(True))
     print(f"ratios to centralised fusion\n{np.round(r, 2)}")
     assert np.all(r < 1.5)

@@ -1,4 +1,4 @@
-"""Issue 14's statistics on the bundled ``net-limited`` at 100 runs (seed 2026, steered):
+"""The network's statistics on the bundled ``net-limited`` at 100 runs (seed 2026, steered):
 agent 2 tracks target 3 from its neighbours' data alone, the agents keep their neighbour
 distances in the band, and 10% message loss against the lossless network (the same runs:
 targets and bearing noise equal; the loss stream is the run's own).

@@ -1,5 +1,5 @@
 """The multi-target trackers on the issue's bundled scenes, run as `trackkit run` runs them
-(the bundled files, 100 runs each at their seed; issue 11, item 2).
+(the bundled files, 100 runs each at their seed).
 
 radar-clutter: 10 aircraft (two 90 degree turns, three that leave early), a range-bearing
 surveillance radar with pd = 0.9 and 20 false plots per scan; 100 runs x 101 scans, so "at

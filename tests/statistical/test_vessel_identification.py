@@ -1,5 +1,5 @@
-"""Issue 15, seed 003: identification of the 16-coefficient manoeuvring model of the 19.6 m
-waterjet SAR boat by a Kalman filter on the augmented state, Monte Carlo claims.
+"""Zolfagharnasab and Seif (2025): identification of the 16-coefficient manoeuvring model of the
+19.6 m waterjet SAR boat by a Kalman filter on the augmented state, Monte Carlo claims.
 
 Data: ``trackkit.identify.programme`` (acceleration 1000 -> 2000 rpm, 20/20 zig-zag at
 2000 rpm, 20/20 zig-zag at 1500 rpm, port turn, deceleration 2000 -> 1200 rpm, 10/10

@@ -1,5 +1,6 @@
-"""Missing-measurement handling (seed 001, chapter 4): gap masks, the handlers B0, B1, B2,
-P and P' on small deterministic sequences, and the runner with trackkit's filters.
+"""Missing-measurement handling (the missing-measurements thesis, chapter 4): gap masks, the
+handlers B0, B1, B2, P and P' on small deterministic sequences, and the runner with trackkit's
+filters.
 
 Deterministic maths is checked to 1e-12 relative unless a reason is given beside the check;
 the handlers' batched rows must equal single rows bitwise (their reductions run slot by

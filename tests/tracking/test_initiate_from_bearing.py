@@ -1,4 +1,5 @@
-"""Randomised track initiation (trackkit.tracking.initiate, seed 004 section 2.5)."""
+"""Randomised track initiation (trackkit.tracking.initiate, Jalalipoor and Kardehi
+Moghaddam 2021, eqs. 7-8)."""
 
 from __future__ import annotations
 

@@ -390,7 +390,7 @@ def test_ids_default_start_and_bad_input():
 
 
 # --------------------------------------------------------------------------------------------
-# Seed 004's timer logic
+# The timer logic of Jalalipoor and Kardehi Moghaddam (2021)
 
 
 def test_timer_logic_walks_query_track_lost_deleted():

@@ -1,4 +1,5 @@
-"""Manoeuvre detectors and the responses to a detection (seed 001 sections 2.11-2.12, issue 12).
+"""Manoeuvre detectors and the responses to a detection (the missing-measurements
+thesis, sections 3-3-4-1 and 3-3-4-2).
 
 Thresholds against chi-square quantiles, closed forms and a large simulation of the
 fading-memory statistic; the detectors' false-alarm rates and detection delays on simulated

@@ -1,10 +1,10 @@
-"""The bundled scenarios of seed 001's chapter 2 (issue 12): S2, ``kf-cwpa`` (the toolbox's
-``kf_cwpa_demo``, a 2-D continuous Wiener-process acceleration target tracked by a KF) and S3,
-``sine-ekf-ukf`` (``ekf_sine_demo``, Table 2-1's random sine). Their models are the thesis's
+"""The bundled scenarios of the missing-measurements thesis's chapter 2: S2, ``kf-cwpa`` (the
+toolbox's ``kf_cwpa_demo``, a 2-D continuous Wiener-process acceleration target tracked by a KF) and
+S3, ``sine-ekf-ukf`` (``ekf_sine_demo``, Table 2-1's random sine). Their models are the thesis's
 equations written out here; S2's KF beats the raw measurements and its RTS smoother beats the
 KF; both scenarios go through ``trackkit show`` and ``trackkit run`` unchanged; and the schema
 fields they added (the ContinuousLinear motion model, the Sine sensor) refuse bad input by
-name. Table 2-1's statistics are in tests/statistical/test_seed001_sine.py."""
+name. Table 2-1's statistics are in tests/statistical/test_sine_ekf_ukf.py."""
 
 from __future__ import annotations
 

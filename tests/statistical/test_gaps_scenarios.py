@@ -1,4 +1,4 @@
-"""Seed 001's missing-measurement claims (001.md section 5) through the bundled scenarios, as
+"""The missing-measurements thesis's claims about gaps (chapter 4) through the bundled scenarios, as
 ``trackkit run`` runs them: gaps-ca (S5), gaps-sine (S6) and gaps-cv (S4), each at its own
 1 000 runs and seed.
 
@@ -69,7 +69,7 @@ def test_s5_matched_kf_coasting_beats_the_fit(ca):
     assert ca.gap_rmse("CA-B0", "x1", "both") < ca.gap_rmse("CA-P", "x1", "both")
 
 
-@pytest.mark.xfail(strict=True, reason="thesis claim (001.md s.5) with a filter whose model "
+@pytest.mark.xfail(strict=True, reason="thesis claim (chapter 4) with a filter whose model "
                    "matches the target: P beats B0 in >= 80% of runs; measured 29.8% (median "
                    "RMSE ratio 1.56) on gaps-ca's CA KF")
 def test_s5_thesis_claim_matched(ca):
@@ -96,7 +96,7 @@ def test_s6_p_beats_b1(sine):
 
 
 def test_s6_thesis_thresholds_within_monte_carlo_error(sine):
-    """The thesis's thresholds (001.md s.5): P beats B1 in >= 80% of runs and the median
+    """The thesis's thresholds (chapter 4): P beats B1 in >= 80% of runs and the median
     RMSE(P)/RMSE(B1) is below 0.5. Measured on gaps-sine's 1 000 runs: 79.7% and 0.49. The
     fraction is 0.2 standard errors short of 80%: our runs cannot tell it from the thesis's
     threshold, so the claim is tested as "not contradicted": the one-sided 99% upper

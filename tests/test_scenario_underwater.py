@@ -1,6 +1,6 @@
-"""Seed 000's scenario fields and bundled scenarios: validation errors that name the field,
-the six ``uw-*`` scenarios with the thesis's numbers, the linear-system truth and velocity
-legs.
+"""The scenario fields and bundled scenarios of Naseri Solhdar's thesis: validation errors that name
+the field, the six ``uw-*`` scenarios with the thesis's numbers, the linear-system truth and
+velocity legs.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from trackkit.scenario.simulate import simulate_block
 F3 = [[0.77, 0.20, 0.0], [0.22, 0.72, 0.22], [0.02, 0.0, 0.72]]
 KMH = 1 / 3.6
 DEG2 = (math.pi / 180) ** 2
-SEED000 = ["uw-ch3-r", "uw-ch3-q", "uw-ch4-delays", "uw-ch5-fixed", "uw-ch5-cv",
-           "uw-ch5-manoeuvre"]
+UNDERWATER = ["uw-ch3-r", "uw-ch3-q", "uw-ch4-delays", "uw-ch5-fixed", "uw-ch5-cv",
+              "uw-ch5-manoeuvre"]
 
 
 def base(name: str = "uw-ch3-r") -> dict:
@@ -188,7 +188,7 @@ def test_kinematic_groups_on_a_linear_system_name_the_group():
         groups_for(plan_of(S.parse(d)))
 
 
-def test_report_fields_of_seed_000():
+def test_report_fields_of_the_underwater_scenarios():
     d = base()
     d["report"]["dom_alpha"] = 0.0
     rejects(d, "report.dom_alpha")
@@ -210,7 +210,7 @@ def test_report_fields_of_seed_000():
 
 @pytest.fixture(scope="module")
 def plans():
-    return {name: compile_scenario(S.load(name)) for name in SEED000}
+    return {name: compile_scenario(S.load(name)) for name in UNDERWATER}
 
 
 def test_all_six_load_compile_and_share_the_thesis_settings(plans):

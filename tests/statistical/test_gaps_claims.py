@@ -1,4 +1,5 @@
-"""Seed 001's missing-measurement claims (001.md section 5, issue 12) on our Monte Carlo runs.
+"""The missing-measurements thesis's claims about gaps (chapter 4; docs/radar-comparison.md) on
+our Monte Carlo runs.
 
 The scenarios are built directly with trackkit's models. The thesis gives the time step,
 the gap and (S6) R; every other number is ours, marked "(ours)" in each docstring. Runs are
@@ -80,7 +81,7 @@ S5_DT, S5_STEPS = 0.1, 80
 
 @pytest.fixture(scope="module")
 def s5():
-    """S5 (001.md section 3): T = 0.1 s and the gap 2-5 s (30 samples, t = 2.0 .. 4.9 s) are
+    """S5 (the thesis's section 4-3): T = 0.1 s and the gap 2-5 s (30 samples, t = 2.0 .. 4.9 s) are
     the thesis's. Ours: 8 s of track; white-jerk density q = 0.1 m^2/s^5; position noise
     sigma = 0.5 m; x0 = (0 m, 5 m/s, 1 m/s^2) with P0 = diag(0.25, 1, 1); B2 averages the
     last 5; P is a degree-2 polynomial (the thesis's choice for CA) over the last 20 (all
@@ -122,7 +123,7 @@ def test_s5_coasting_on_the_true_model_beats_the_fit(s5):
     assert frac < 0.5 and ratio > 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="thesis claim (001.md s.5): P beats B0 in >= 80% of "
+@pytest.mark.xfail(strict=True, reason="thesis claim (chapter 4): P beats B0 in >= 80% of "
                    "runs; measured 33.3% (median RMSE ratio 1.50): coasting a matched KF is "
                    "the MMSE predictor (see the test above)")
 def test_s5_thesis_claim_p_beats_b0_and_b2(s5):
@@ -139,7 +140,7 @@ S6_DT, S6_STEPS = 0.1, 100
 
 @pytest.fixture(scope="module")
 def s6():
-    """S6 (001.md section 3): dt = 0.1 s, R = 1, Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]],
+    """S6 (the thesis's section 4-4): dt = 0.1 s, R = 1, Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]],
     H = (cos theta, 0) (``Sine(amplitude=False)``), EKF, and the gap from sample 50 to 90
     (counted from 1: indices 49 .. 89, t = 5.0 .. 9.0 s) are the thesis's. Ours: q = 0.01
     rad^2/s^3 (the thesis prints Q without a factor; q = 1 literally, see the report);
@@ -174,7 +175,7 @@ def test_s6_p_beats_b1(s6):
     assert ratio < 0.6
 
 
-@pytest.mark.xfail(strict=True, reason="thesis thresholds (001.md s.5): P beats B1 in >= 80% "
+@pytest.mark.xfail(strict=True, reason="thesis thresholds (chapter 4): P beats B1 in >= 80% "
                    "of runs and median RMSE(P)/RMSE(B1) < 0.5; measured 79.2% and 0.51")
 def test_s6_thesis_thresholds(s6):
     frac, ratio = summary(s6["P"], s6["B1"])
@@ -190,7 +191,7 @@ S4_DT, S4_STEPS = 1.0, 90
 
 @pytest.fixture(scope="module")
 def s4():
-    """S4 (001.md section 3): T = 1 s and the gap 20-25 s (t = 20 .. 24 s, 5 samples) are
+    """S4 (the thesis's section 4-2): T = 1 s and the gap 20-25 s (t = 20 .. 24 s, 5 samples) are
     the thesis's. Ours: 90 s of track; white-acceleration density q = 0.1 m^2/s^3; position
     noise sigma = 10 m; x0 = (0 m, 10 m/s), P0 = diag(100, 4); B2 averages the last 5; gaps
     of 10, 15 and 20 s from t = 20 s for the growth. Seed 4001, 1000 runs."""

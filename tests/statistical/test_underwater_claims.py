@@ -1,9 +1,9 @@
-"""Seed 000's claims on our Monte Carlo runs (000.md section 5), at the bundled scenarios'
+"""The claims of Naseri Solhdar's thesis on our Monte Carlo runs, at the bundled scenarios'
 fixed seeds and run counts (100 runs each; the thesis has one run).
 
-Each ratio is of Monte Carlo RMSEs over 100 runs and 500 steps. The thresholds are the ones of
-000.md section 5, which allow for the thesis's garbled inputs and single run; they are not
-tuned to our numbers. What the margins are on our runs is recorded in
+Each ratio is of Monte Carlo RMSEs over 100 runs and 500 steps. The thresholds are those of
+our reading of the thesis (docs/uw-comparison.md), which allow for the thesis's garbled inputs and
+single run; they are not tuned to our numbers. What the margins are on our runs is recorded in
 ``docs/uw-comparison.md``. ICA is not asserted to beat GA and PSO: the thesis's margin
 (under 1% on the mean cost) is within run-to-run noise.
 """

@@ -1,5 +1,5 @@
-"""Table 2-1 of seed 001 (S3, the bundled ``sine-ekf-ukf``): the MSE of theta, omega and a of
-the EKF and the UKF on the random sine y = a sin(theta) + r.
+"""Table 2-1 of the missing-measurements thesis (S3, the bundled ``sine-ekf-ukf``): the MSE of
+theta, omega and a of the EKF and the UKF on the random sine y = a sin(theta) + r.
 
 Table 2-1 is ONE noisy run (no seed, no run count): EKF 0.64, 0.53, 0.40 and UKF 0.59, 0.53,
 0.39. One run's MSE varies from run to run by more than a factor of ten (a run whose filter
@@ -9,7 +9,7 @@ asserted as they are: the median over runs within a factor of 3 of the table, an
 thesis's one ordering claim, the UKF's mean theta-MSE no worse than the EKF's.
 
 The runs are the bundled scenario's 1 000 (seed 2107), filtered as the Monte Carlo engine
-filters them (``tests.test_scenario_seed001.filtered``; that the engine's squared RMSE is the
+filters them (``tests.test_scenario_radar.filtered``; that the engine's squared RMSE is the
 mean of these per-run MSEs is checked there). Confidence: a median is asserted through its
 distribution-free 95.4 % interval over 1 000 runs, the order statistics 469 and 532, which
 must lie inside the band as a whole; the mean comparison gives the paired difference with its
@@ -29,7 +29,7 @@ from scipy.stats import binom
 
 import trackkit as tk
 import trackkit.scenario as S
-from tests.test_scenario_seed001 import filtered
+from tests.test_scenario_radar import filtered
 from trackkit.experiments.montecarlo import plan_of
 from trackkit.scenario.simulate import simulate_block
 

@@ -1,4 +1,4 @@
-"""Seed 001's S7 with missing plots (001.md sections 3-5, issue 12): the IMM (CV KF + CT EKF)
+"""S7 of the missing-measurements thesis with missing plots (section 4-5): the IMM (CV KF + CT EKF)
 on eimm_demo1's coordinated-turn target, 10 consecutive plots missing on a straight leg
 (Fig. 4-13) and at the turn onset (Figs. 4-14, 4-15), filled by B0 (coast), P (a line
 fitted to the last plots) or P' (the same fit over fewer plots while a manoeuvre detector
@@ -9,7 +9,7 @@ steps 1-40, omega = +1 rad/s on 41-90 (step 41 is the first step moved by the tu
 0.05 I, IMM of CV (q = 0.01) with a KF and CT (turn-rate density 0.15) with an EKF, p_ij =
 [[0.9, 0.1], [0.1, 0.9]], mu0 = (0.95, 0.05), each run's prior mean truth + N(0, P0). The
 IMM is updated with the plot of step 1, then ``run_with_gaps`` runs it over steps 2..; steps
-are counted from 1 as in 001.md. A gap is 10 plots (1 s); the error window is the gap and
+are counted from 1 as in the thesis. A gap is 10 plots (1 s); the error window is the gap and
 the 10 steps (1 s) after it. 1000 runs, seed 12012 (the choices below were made on a
 separate exploration seed, 12001, 400 runs).
 
@@ -228,7 +228,7 @@ def test_where_p_prime_acts_the_short_window_is_worse():
     assert -bootstrap_median_upper(-ratio) > 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="001.md s.5 / issue 12: median RMSE(P')/RMSE(P) < 1 at "
+@pytest.mark.xfail(strict=True, reason="the thesis's claim: median RMSE(P')/RMSE(P) < 1 at "
                    "the turn onset. Measured (seed 12012, 1000 runs, gap + 1 s): gap from "
                    "step 41: median 1.000, P' beats P in 0.4% of runs, detector on at the gap "
                    "start in 2.0%; from 45: median 1.000, 0.5%, on 1.7%; from 58: median "
