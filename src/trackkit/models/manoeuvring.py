@@ -27,7 +27,7 @@ so ``dx'/dt' = f(x', s', theta)`` and, in SI, ``dx/dt = D f(x', s', theta)`` wit
 model polynomial and linear in theta. ``Normalisation()`` (L = U0 = n0 = 1) is the identity:
 the coefficients read literally in SI. The public interface is SI throughout.
 
-Section 4.3 of the reconstruction, checked: no positive rescaling can make Tables 3-5 stable.
+Checked here: no positive rescaling can make the paper's Tables 3-5 stable.
 A positive rescaling of states and time maps the sway-yaw block
 ``A(u) = [[b1, b2 + b4 u], [c1, c2]]`` to ``c S A S^-1`` (S diagonal, c > 0): its eigenvalues
 are multiplied by c > 0, and ``tr A = b1 + c2 = +0.0467 > 0`` at every speed, so one

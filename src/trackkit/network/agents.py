@@ -2,7 +2,8 @@
 per execution (Jalalipoor and Kardehi Moghaddam 2021, Fig. 2), its tracks batched (arrays over
 tracks), and the versioned message it broadcasts.
 
-Per execution at time t (the order of Fig. 2, with the reconstruction's choices):
+Per execution at time t (the order of Fig. 2, with our choices where the paper
+leaves one open):
 
 1. **Neighbours.** Received messages live in a :class:`~trackkit.network.tracks.MessageMemory`
    (``memory_s`` seconds); the neighbours are its senders. The raw bearings of every received

@@ -74,7 +74,7 @@ def neighbourhood(adjacency: ArrayLike) -> NDArray[np.bool_]:
     self-loops set (k is always in ``N_k``).
 
     ``adjacency`` is ``(..., N, N)``, boolean or 0/1, symmetric (links are two-way, as in the
-    seed's disk graph); its diagonal is ignored.
+    paper's disk graph); its diagonal is ignored.
     """
     A = np.asarray(adjacency)
     if A.ndim < 2 or A.shape[-1] != A.shape[-2] or A.shape[-1] < 1:
