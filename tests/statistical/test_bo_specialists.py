@@ -53,7 +53,8 @@ pytestmark = pytest.mark.slow
 
 RUNS, BLOCK = 500, 50
 SPECIALISTS = ("RPEKF", "MPEKF", "PF")
-#: the issue's CKF efficiency (3 000 runs) and its target for the best specialist
+#: the CKF efficiency of an earlier measurement (3 000 runs) and our target for the best
+#: specialist
 CKF_ISSUE, TARGET = 1.39, 1.15
 
 

@@ -31,5 +31,5 @@ def test_ga_initial_position_error_below_1000_m(name):
     error = np.linalg.norm(result.best_x - data.truth[0][:, :2], axis=-1)
     print(name, "GA initial position error [m]: median", np.median(error).round(),
           "95th", np.percentile(error, 95).round(), "max", error.max().round())
-    # the paper's claim, at the 95% level the issue states
+    # the paper's claim, at the 95% level we set
     assert np.mean(error < 1000.0) >= 0.95

@@ -107,7 +107,7 @@ def test_results_cover_the_papers_runs(results):
 @pytest.mark.parametrize("window", list(WINDOWS))
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_amcekf_over_ekf_below_0_8_with_poor_q0_and_r0(results, name, window):
-    # the target, at 99% confidence (one-sided), in both windows and from 600 s.
+    # our target, at 99% confidence (one-sided), in both windows and from 600 s.
     # Measured: from 600 s 0.45, 0.35, 0.55 (paper 0.58, 0.47, 0.66); transient 0.42, 0.40,
     # 0.49; steady 0.51, 0.31, 0.63, each with a jackknife standard error of 0.01-0.03
     r, parts = results[name]

@@ -3,7 +3,7 @@ on straight courses: the same runs (targets and bearing noise) both ways, as
 ``trackkit network net-baseline --compare-straight`` runs them.
 
 Confidence. With 100 runs a fraction observed at p has a binomial standard error of at most
-0.05; the tests assert the issue's thresholds on the observed fractions and print the
+0.05; the tests assert our thresholds on the observed fractions and print the
 Clopper-Pearson 95% interval beside them. Comparisons of errors are paired over runs
 (``experiments.network_compare``: the t test on the per-run MSE, 95%).
 """

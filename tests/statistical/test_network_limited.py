@@ -3,7 +3,7 @@ agent 2 tracks target 3 from its neighbours' data alone, the agents keep their n
 distances in the band, and 10% message loss against the lossless network (the same runs:
 targets and bearing noise equal; the loss stream is the run's own).
 
-Confidence: the observed fractions are asserted against the issue's thresholds with the
+Confidence: the observed fractions are asserted against our thresholds with the
 Clopper-Pearson 95% interval printed beside them; the loss comparison is paired over runs
 (``experiments.network_compare``, 95%).
 """

@@ -1,4 +1,4 @@
-"""The multi-target trackers on the issue's bundled scenes, run as `trackkit run` runs them
+"""The multi-target trackers on the bundled scenes, run as `trackkit run` runs them
 (the bundled files, 100 runs each at their seed).
 
 radar-clutter: 10 aircraft (two 90 degree turns, three that leave early), a range-bearing

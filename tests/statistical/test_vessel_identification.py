@@ -20,7 +20,7 @@ surge) are weakly excited by the turns and zig-zags at this noise (median poster
 75-130% of the value on the realistic truth, 47-82% on the exact one), a4 (d^2) and a8 (u n)
 moderately (17% and 29%; 11% and 16%).
 
-Seeds are fixed, so every test is deterministic; the thresholds are those of the issue, and
+Seeds are fixed, so every test is deterministic; the thresholds are the ones we set, and
 the comments give the measured values and the confidence where a count of runs is tested.
 """
 
