@@ -603,3 +603,46 @@ def test_empty_batches_keep_dtypes():
     r = track_counts(ei, ei, 1.0)
     assert r.sq_error.dtype == r.purity.dtype == np.float64 and r.truths.tolist() == [0]
     assert math.isnan(track_summary(r)["rmse"])
+
+
+def test_pairs_within_equals_brute_force_on_small_and_large_steps():
+    """Steps below and above the broadcast size (80 x 80 points) in one batch: every pair
+    closer than c, sorted by truth row then estimate row, with its squared distance."""
+    rng = np.random.default_rng(4)
+    sizes = [(3, 4), (80, 80), (0, 5), (6, 0), (2, 9), (70, 90), (5, 5)]
+    X = frames([rng.uniform(0, 10, (n, 2)) for n, _ in sizes], dim=2)
+    Y = frames([rng.uniform(0, 10, (m, 2)) for _, m in sizes], dim=2)
+    I, J, d2 = mt.pairs_within(X, Y, 1.5)
+    want = []
+    for s in range(len(sizes)):
+        for i in range(X.offsets[s], X.offsets[s + 1]):
+            for j in range(Y.offsets[s], Y.offsets[s + 1]):
+                d = float(np.sum((X.x[i] - Y.x[j]) ** 2))
+                if d < 1.5**2:
+                    want.append((i, j, d))
+    assert list(zip(I.tolist(), J.tolist(), strict=True)) == [(i, j) for i, j, _ in want]
+    np.testing.assert_allclose(d2, [d for *_, d in want], rtol=1e-15)
+
+
+def test_solve_partial_maximum_cardinality_and_refusals():
+    """With cp above min(a, b) max(cost), two pairs beat one cheaper pair; with cp small the
+    cheaper single pair wins (the GOSPA trade-off); a cost at cp is refused."""
+    I, J, cost = np.array([0, 0, 1]), np.array([0, 1, 0]), np.array([0.1, 0.9, 0.9])
+    i, j, _ = mt.solve_partial(I, J, cost, 10.0)
+    assert sorted(zip(i.tolist(), j.tolist(), strict=True)) == [(0, 1), (1, 0)]
+    i, j, _ = mt.solve_partial(I, J, cost, 1.0)
+    assert list(zip(i.tolist(), j.tolist(), strict=True)) == [(0, 0)]
+    with pytest.raises(ValueError, match="cost has values >= cp"):
+        mt.solve_partial(I, J, cost, 0.9)
+    with pytest.raises(ValueError, match="expected one"):
+        mt.solve_partial(I, J[:2], cost, 10.0)
+
+
+def test_track_counts_with_a_given_assignment_are_the_same():
+    rng = np.random.default_rng(2)
+    X = frames([rng.uniform(0, 10, (5, 2)) for _ in range(20)], [rng.permutation(5)] * 20)
+    Y = frames([rng.uniform(0, 10, (6, 2)) for _ in range(20)], [rng.permutation(6)] * 20)
+    a = track_counts(X, Y, 3.0)
+    b = track_counts(X, Y, 3.0, assignment=assign(X, Y, 3.0))
+    for name in TrackCounts._fields:
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))

@@ -65,11 +65,14 @@ __all__ = [
     "SetDistance",
     "TrackCounts",
     "assign",
+    "checked_frames",
     "frames",
     "gospa",
     "gospa_steps",
     "ospa",
     "ospa_steps",
+    "pairs_within",
+    "solve_partial",
     "track_counts",
     "track_summary",
 ]
@@ -197,6 +200,12 @@ def _check_frames(name: str, f: Frames, need_ids: bool = False) -> Frames:
     elif need_ids:
         raise ValueError(f"{name}.ids is None; expected integer IDs ({len(x)},)")
     return Frames(offsets, x, ids)
+
+
+def checked_frames(name: str, f: Frames, need_ids: bool = False) -> Frames:
+    """``f`` with int64 offsets and IDs, float points, after checking its shape (errors name
+    the argument ``name``); ``need_ids``: IDs are required."""
+    return _check_frames(name, f, need_ids)
 
 
 def _check_params(c: float, p: float) -> tuple[float, float]:
@@ -466,6 +475,57 @@ def assign(
     return I, J
 
 
+def pairs_within(truth: Frames, estimates: Frames, c: float) -> tuple[IntArray, IntArray, Array]:
+    """Every pair of rows ``(i, j)`` of ``truth.x`` and ``estimates.x`` in the same step with
+    ``|x_i - y_j| < c``, and ``|x_i - y_j|^2``; sorted by ``i``, then ``j``. Small steps in
+    vectorised passes of about ``_PAIR_CHUNK`` candidate pairs, a large one by broadcasting
+    (as ``assign``)."""
+    c, _ = _check_params(c, 1.0)
+    X = _check_frames("truth", truth)
+    Y = _check_frames("estimates", estimates)
+    _check_pair(X, Y, "truth", "estimates")
+    xc, yc = np.ascontiguousarray(X.x.T), np.ascontiguousarray(Y.x.T)
+    work = X.sizes * Y.sizes
+    small = np.flatnonzero((work > 0) & (work < _BIG))
+    chunk = np.cumsum(work[small]) // _PAIR_CHUNK
+    cuts = np.flatnonzero(np.r_[True, chunk[1:] != chunk[:-1], True]) if small.size else []
+    parts = [_pairs_small(X, Y, xc, yc, small[lo:hi], c * c)
+             for lo, hi in zip(cuts[:-1], cuts[1:], strict=True)]
+    big = np.flatnonzero(work >= _BIG)
+    for s in big.tolist():
+        i0, j0 = X.offsets[s], Y.offsets[s]
+        d2 = _sqdist(xc[:, i0:X.offsets[s + 1], None], yc[:, None, j0:Y.offsets[s + 1]],
+                     slice(None), slice(None))
+        li, lj = np.nonzero(d2 < c * c)
+        parts.append((i0 + li, j0 + lj, d2[li, lj]))
+    if not parts:
+        return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
+    I, J, D = (np.concatenate(a) for a in zip(*parts, strict=True))
+    if small.size and big.size:  # large steps' pairs go after the small ones'
+        o = np.argsort(I, kind="stable")  # each part is sorted by (i, j) already
+        I, J, D = I[o], J[o], D[o]
+    return I, J, D
+
+
+def solve_partial(
+    I: ArrayLike, J: ArrayLike, cost: ArrayLike, cp: float
+) -> tuple[IntArray, IntArray, Array]:
+    """Optimal one-to-one partial assignment on the edges ``(I[e], J[e])`` (integer labels of
+    the two sides; any values) with ``cost[e] < cp``: minimises ``sum (cost - cp)`` over the
+    assigned edges, component by component of the edge graph (as ``assign`` does). With
+    ``cp`` above ``min(a, b) max(cost)`` in every component of a rows and b columns it is the
+    maximum-cardinality assignment of least total cost. Returns the assigned edges' labels
+    and costs."""
+    I, J = np.asarray(I, np.int64), np.asarray(J, np.int64)
+    cost = np.asarray(cost, float)
+    if not (I.shape == J.shape == cost.shape and I.ndim == 1):
+        raise ValueError(f"I, J and cost have shapes {I.shape}, {J.shape}, {cost.shape}; "
+                         "expected one (E,)")
+    if cost.size and not np.all(cost < cp):
+        raise ValueError(f"cost has values >= cp = {cp!r}; expected every edge below cp")
+    return _solve(I, J, cost, float(cp))
+
+
 def _core(
     truth: Frames, estimates: Frames, c: float, p: float
 ) -> tuple[IntArray, IntArray, Array, IntArray, float, float]:
@@ -571,6 +631,7 @@ def track_counts(
     times: ArrayLike | None = None,
     min_assigned: float = 0.5,
     within: float = math.inf,
+    assignment: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> TrackCounts:
     """Track-level counts per run, from truth and confirmed tracks with integer IDs.
 
@@ -598,6 +659,9 @@ def track_counts(
       ID moving from one truth to another; MATLAB's swap count);
     * ``sq_error`` sums |x_track - x_truth|^2 over assigned pairs (RMSE = sqrt(sq_error /
       assigned_steps)), and ``assigned_steps / truth_steps`` is SIAP's completeness.
+
+    ``assignment``: the rows ``(i, j)`` that ``assign(truth, tracks, c, p)`` returned, when the
+    caller has them (saves solving it again).
     """
     X, Y, c, p = _check_counts(truth, tracks, c, p, min_assigned, within)
     S = X.n_steps
@@ -612,7 +676,10 @@ def track_counts(
     tk_, truth_run = _keys(run_of_step[xs], X.ids)  # truth key of each truth row
     jk_, track_run = _keys(run_of_step[ys], Y.ids)
 
-    I, J, _ = _assign(X, Y, c, p)
+    if assignment is None:
+        I, J, _ = _assign(X, Y, c, p)
+    else:
+        I, J = (np.asarray(a, np.int64) for a in assignment)
     pstep, pt, pj = xs[I], tk_[I], jk_[J]
     prun = run_of_step[pstep]
 
