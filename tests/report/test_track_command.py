@@ -18,6 +18,7 @@ from typer.testing import CliRunner
 
 import trackkit as tk
 from trackkit import cli
+from trackkit.eval.clear_mot import score_run
 from trackkit.io import BadRecord, EnuFrame, ReadReport, read_ais_csv
 from trackkit.report.track_pages import (
     TRACK_FILES,
@@ -196,6 +197,24 @@ def test_metrics_parts_add_up(small):
     assert g["missed_per_scan"] * 500.0**2 / 2 == pytest.approx(g["missed"])
     assert m["tracks_confirmed"] == np.unique(h.ids[h.status == TrackStatus.CONFIRMED]).size
     assert track_metrics(h, None, 500.0).get("gospa") is None
+
+
+def test_metrics_hold_the_identity_scores_of_score_run(small):
+    """The report's identity figures are eval.clear_mot's, threshold and penalty c."""
+    _, run, h = small
+    m = track_metrics(h, run.truth, 500.0, site=(0.0, 0.0), sigma_bearing=math.radians(0.5))
+    i = m["identity"]
+    want = score_run(h.confirmed(), run.truth, (0.0, 0.0), math.radians(0.5), 500.0)
+    for key, ref in [("mota", "mota"), ("motp_m", "motp"), ("idf1", "idf1"),
+                     ("id_switches", "id_switches"), ("fragmentations", "fragmentations"),
+                     ("id_switches_resolvable", "id_switches_resolvable"),
+                     ("gospa_switching_mean", "gospa_switching")]:
+        assert i[key] == want[ref], key
+    steps = m["_identity_steps"]
+    assert steps["id_switches"].sum() == i["id_switches"] > 0
+    assert steps["id_switches_resolvable"].sum() == i["id_switches_resolvable"]
+    assert len(steps["mota"]) == h.times.size
+    assert track_metrics(h, run.truth, 500.0)["identity"]["id_switches_resolvable"] is None
 
 
 def test_rewrite_removes_stale_files_and_failure_leaves_nothing(small, tmp_path, monkeypatch):

@@ -168,6 +168,17 @@ def print_track_summary(read: Any, job: Any, paths: dict[str, Path]) -> None:
             f"{g['localisation']:.4g} m^2); {t['truths_confirmed']} of {t['truths']} objects "
             f"tracked, {t['breaks']} track breaks, position RMSE {rmse}"),
             soft_wrap=True)
+    i = res.get("identity")
+    if i is not None:
+        def num(v: float | None, fmt: str) -> str:  # nan (no object, no match) is null
+            return "n/a" if v is None else format(v, fmt)
+
+        console.print(Text(
+            f"MOTA {num(i['mota'], '.3f')}, MOTP {num(i['motp_m'], '.3g')} m, IDF1 "
+            f"{num(i['idf1'], '.3f')}; {i['id_switches']} ID switches ("
+            f"{num(i['id_switches_resolvable'], 'd')} between objects the radar resolves), "
+            f"{i['fragmentations']} fragmentations; mean GOSPA with switching "
+            f"{num(i['gospa_switching_mean'], '.4g')} m"), soft_wrap=True)
     html = paths.get("html")
     console.print(Text(f"wrote {len(paths)} files to {html.parent if html else ''}",
                        style="green"), soft_wrap=True)

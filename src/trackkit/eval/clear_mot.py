@@ -81,9 +81,9 @@ class ClearMot(NamedTuple):
     transfers: IntArray  #: a track matched to another truth than before (py-motmetrics)
     fragmentations: IntArray  #: at the step a fragment's miss starts
     distance: Array  #: sum over the matches of |x_track - x_truth| (m)
-    switch_step: IntArray  #: step of each ID switch, in step order
+    switch_step: IntArray  #: step of each ID switch, by step, then truth ID
     switch_truth: IntArray  #: truth ID of each ID switch
-    transfer_step: IntArray  #: step of each transfer, in step order
+    transfer_step: IntArray  #: step of each transfer, by step, then truth ID
     transfer_truth: IntArray  #: the truth ID each transfer moves its track to
 
 
@@ -120,9 +120,13 @@ class SwitchClasses(NamedTuple):
 
 
 def _keys(ids: IntArray) -> tuple[IntArray, int]:
-    """Dense keys 0..n-1 in ascending ID order, and n."""
-    u, k = np.unique(ids, return_inverse=True)
-    return k.reshape(-1).astype(np.int64), int(u.size)
+    """Dense keys 0..n-1 in ascending ID order, and n. By sorting: numpy's hashed unique
+    is slow on some integer patterns (steps x n + key among them)."""
+    o = np.argsort(ids, kind="stable")
+    new = np.r_[True, ids[o][1:] != ids[o][:-1]] if ids.size else np.zeros(0, bool)
+    k = np.empty(ids.size, np.int64)
+    k[o] = np.cumsum(new) - 1
+    return k, int(new.sum())
 
 
 def _checked(truth: Frames, tracks: Frames, c: float) -> tuple[Frames, Frames]:
@@ -137,8 +141,8 @@ def _checked(truth: Frames, tracks: Frames, c: float) -> tuple[Frames, Frames]:
 
 
 def _unique_per_step(name: str, keys: IntArray, steps: IntArray, n: int) -> None:
-    k = steps * max(n, 1) + keys
-    if np.unique(k).size != k.size:
+    k = np.sort(steps * max(n, 1) + keys)
+    if np.any(k[1:] == k[:-1]):
         raise ValueError(f"{name}.ids repeat an ID within a step; expected unique IDs")
 
 
@@ -183,10 +187,15 @@ def _clear_mot(r: _Run, pairs: tuple[IntArray, IntArray, Array], c: float) -> Cl
     n, m = np.diff(X.offsets), np.diff(Y.offsets)
     # a cost above min(a, b) c makes the least-cost assignment one of maximum cardinality
     big = c * (1.0 + float(np.minimum(n, m).max(initial=0)))
-    ms, mt, mj, md, sw, tr = _match(tk[I], r.jk[J], np.sqrt(d2), xs[I], S, r.nT, r.nJ, big)
+    mi, md, sw, tr = _match(I, J, tk, r.jk, np.sqrt(d2), xs[I], S, r.nT, r.nJ, big)
+    o = np.lexsort((tk[mi], xs[mi]))  # events by step, then truth ID
+    mi, md, sw, tr = mi[o], md[o], sw[o], tr[o]
+    ms, mt = xs[mi], tk[mi]
     matches = np.bincount(ms, minlength=S)
-    matched = np.isin(xs * r.nT + tk, ms * r.nT + mt)  # per truth row
-    tid = np.unique(np.asarray(X.ids, np.int64))
+    matched = np.zeros(X.x.shape[0], bool)  # per truth row
+    matched[mi] = True
+    tid = np.zeros(r.nT, np.int64)
+    tid[tk] = X.ids  # truth ID of each key
     return ClearMot(
         objects=n, predictions=m, matches=matches, misses=n - matches,
         false_positives=m - matches, switches=np.bincount(ms[sw], minlength=S),
@@ -197,41 +206,44 @@ def _clear_mot(r: _Run, pairs: tuple[IntArray, IntArray, Array], c: float) -> Cl
         transfer_truth=tid[mt[tr]])
 
 
-def _match(t: IntArray, j: IntArray, d: Array, es: IntArray, S: int, nT: int, nJ: int,
-           big: float) -> tuple[IntArray, ...]:
+def _match(I: IntArray, J: IntArray, tk: IntArray, jk: IntArray, d: Array, es: IntArray,
+           S: int, nT: int, nJ: int, big: float) -> tuple[IntArray, Array, NDArray[np.bool_],
+                                                           NDArray[np.bool_]]:
     """The CLEAR-MOT matches, step by step (each step needs the last one's), from the edges
-    (truth key ``t``, track key ``j``, distance ``d``, step ``es``, in step order) of the
-    pairs within the threshold. Returns the matches' steps, truth and track keys, distances,
-    and whether each is an ID switch (the truth's last track was another) and a transfer
-    (the track's last truth matched after a carry-over was another: py-motmetrics' rule)."""
+    (truth row ``I``, track row ``J``, distance ``d``, step ``es``, in step order) of the
+    pairs within the threshold; ``tk``, ``jk`` are the rows' ID keys. Returns the matched
+    truth rows, in step order, the distances, and whether each match is an ID switch (the
+    truth's last track was another) and a transfer (the track's last truth matched by
+    assignment rather than carried over was another: py-motmetrics' rule)."""
     eo = np.searchsorted(es, np.arange(S + 1))
     last = np.full(nT, -1, np.int64)  # the track each truth was last matched to
     owner = np.full(nJ, -1, np.int64)  # the truth each track was last given by assignment
     held_t, held_j = np.zeros(nT, bool), np.zeros(nJ, bool)
-    out: list[tuple[IntArray, ...]] = []
+    out: list[tuple[NDArray, ...]] = []
     for s in np.flatnonzero(eo[1:] > eo[:-1]).tolist():
         a, b = eo[s], eo[s + 1]
-        ts, js, ds = t[a:b], j[a:b], d[a:b]
+        ts, js = tk[I[a:b]], jk[J[a:b]]
         keep = np.flatnonzero(last[ts] == js)
         if keep.size > 1:  # two truths last matched to one track: the lower truth ID keeps it
             o = keep[np.lexsort((ts[keep], js[keep]))]
             keep = o[np.r_[True, js[o[1:]] != js[o[:-1]]]]
         held_t[ts[keep]], held_j[js[keep]] = True, True
-        rest = np.flatnonzero(~(held_t[ts] | held_j[js]))
+        rest = a + np.flatnonzero(~(held_t[ts] | held_j[js]))
         held_t[ts[keep]], held_j[js[keep]] = False, False
         no = np.zeros(keep.size, bool)
-        out.append((np.full(keep.size, s), ts[keep], js[keep], ds[keep], no, no))
-        if rest.size:
-            nt, nj, nd = solve_partial(ts[rest], js[rest], ds[rest], big)
+        out.append((I[a + keep], d[a + keep], no, no))
+        if rest.size:  # rows are unique labels within a step
+            ni, nj, nd = solve_partial(I[rest], J[rest], d[rest], big)
+            nt, nj = tk[ni], jk[nj]
             sw = (last[nt] >= 0) & (last[nt] != nj)
             tr = (owner[nj] >= 0) & (owner[nj] != nt)
-            out.append((np.full(nt.size, s), nt, nj, nd, sw, tr))
+            out.append((ni, nd, sw, tr))
             last[nt], owner[nj] = nj, nt
     if not out:
-        e, f = np.empty(0, np.int64), np.empty(0, bool)
-        return e, e, e, np.empty(0), f, f
-    ms, mt, mj, md, sw, tr = (np.concatenate(x) for x in zip(*out, strict=True))
-    return ms.astype(np.int64), mt, mj, md, sw, tr
+        f = np.empty(0, bool)
+        return np.empty(0, np.int64), np.empty(0), f, f
+    mi, md, sw, tr = (np.concatenate(x) for x in zip(*out, strict=True))
+    return mi.astype(np.int64), md, sw, tr
 
 
 def _fragmentations(tk: IntArray, xs: IntArray, matched: NDArray[np.bool_], nT: int,
@@ -265,8 +277,7 @@ def mota_steps(cm: ClearMot) -> Array:
     """MOTA of every step alone, ``(S,)``; nan at a step with no truth."""
     gt = cm.objects.astype(float)
     bad = (cm.misses + cm.false_positives + cm.switches).astype(float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(gt > 0, 1.0 - bad / np.maximum(gt, 1.0), np.nan)
+    return np.where(gt > 0, 1.0 - bad / np.maximum(gt, 1.0), np.nan)
 
 
 # --- the ID measures --------------------------------------------------------------------------
@@ -283,9 +294,14 @@ def _id_scores(r: _Run, pairs: tuple[IntArray, IntArray, Array]) -> IdScores:
     X, Y, xs, tk, jk, nJ = r.X, r.Y, r.xs, r.tk, r.jk, r.nJ
     I, J, _ = pairs
     combo = tk[I] * nJ + jk[J]
-    u, n = np.unique(combo, return_counts=True)
+    o = np.argsort(combo, kind="stable")
+    new = np.r_[True, combo[o][1:] != combo[o][:-1]] if combo.size else np.zeros(0, bool)
+    u, n = combo[o][new], np.diff(np.r_[np.flatnonzero(new), combo.size])
     at, aj, cost = solve_partial(u // nJ, u % nJ, -n.astype(float), 0.0)
-    chosen = np.isin(combo, at * nJ + aj)
+    pick = np.zeros(u.size, bool)
+    pick[np.searchsorted(u, at * nJ + aj)] = True
+    chosen = np.empty(combo.size, bool)
+    chosen[o] = np.repeat(pick, n)
     idtp = int(round(-math.fsum(cost.tolist())))
     gt, pr = int(X.x.shape[0]), int(Y.x.shape[0])
     return IdScores(idtp=idtp, idfp=pr - idtp, idfn=gt - idtp,

@@ -46,6 +46,14 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from trackkit import __version__
+from trackkit.eval.clear_mot import (
+    classify_switches,
+    clear_mot,
+    clear_mot_summary,
+    gospa_switching,
+    id_scores,
+    mota_steps,
+)
 from trackkit.eval.track_metrics import Frames, gospa_steps, track_counts, track_summary
 from trackkit.io.frames import EnuFrame, ground_geodetic
 from trackkit.io.records import ReadReport
@@ -231,10 +239,13 @@ def write_tracks_geojson(doc: dict, path: str | Path) -> Path:
 # --- metrics ----------------------------------------------------------------------------------
 
 
-def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: float = 2.0
+def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: float = 2.0, *,
+                  site: tuple[float, float] | None = None, sigma_bearing: float | None = None
                   ) -> dict[str, Any]:
     """Counts of the tracks and, with a truth, GOSPA (cut-off ``c`` m, order ``p``) of the
-    confirmed positions per scan and the track-level counts of ``track_counts``.
+    confirmed positions per scan, the track-level counts of ``track_counts`` and the
+    identity scores of ``eval.clear_mot`` (``identity``; ID switches between objects the
+    radar resolves need its ``site`` and bearing noise ``sigma_bearing``, rad).
 
     ``gospa.mean`` is the mean over scans of GOSPA (m); ``localisation``, ``missed`` and
     ``false`` are the means over scans of its additive parts (p-th powers, m^p), so that
@@ -268,7 +279,38 @@ def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: floa
     out["tracks"] = {k: (v if isinstance(v, int) else float(v)) for k, v in summary.items()}
     out["tracks"]["confirmed_within_s"] = 5 * period
     out["_gospa_steps"] = g  # for the figure; not written
+    out.update(_identity(truth, conf, c, p, site, sigma_bearing))
     return out
+
+
+def _identity(truth: Frames, conf: Frames, c: float, p: float,
+              site: tuple[float, float] | None, sigma_bearing: float | None
+              ) -> dict[str, Any]:
+    """CLEAR-MOT, IDF1 and GOSPA with switching (``identity``) and their per-scan series
+    (``_identity_steps``, not written). The CLEAR-MOT and IDF1 threshold is the GOSPA
+    cut-off c: a track farther than c from an object is neither assigned to it by GOSPA
+    nor matched to it here. The switching penalty is c too (gospa_switching: a full switch
+    then costs as much as a missed object plus a false track)."""
+    cm = clear_mot(truth, conf, c)
+    s = clear_mot_summary(cm)
+    ids = id_scores(truth, conf, c)
+    gs = gospa_switching(truth, conf, c, p, switching_penalty=c)
+    resolvable: int | None = None
+    res_steps = None
+    if site is not None and sigma_bearing is not None:
+        sw = classify_switches(cm.switch_step, cm.switch_truth, truth, site, sigma_bearing)
+        resolvable = sw.resolvable
+        res_steps = np.bincount(cm.switch_step[sw.mask], minlength=truth.n_steps)
+    ident = {"threshold_m": float(c), "mota": s["mota"], "motp_m": s["motp"],
+             "id_switches": s["switches"], "id_switches_resolvable": resolvable,
+             "track_transfers": s["transfers"], "fragmentations": s["fragmentations"],
+             "idf1": ids.idf1, "idp": ids.idp, "idr": ids.idr,
+             "gospa_switching_mean": float(np.mean(gs.distance)) if gs.distance.size else None,
+             "switching_penalty_m": float(c), "switches": float(np.sum(gs.switches))}
+    steps = {"mota": mota_steps(cm), "id_switches": cm.switches,
+             "id_switches_resolvable": res_steps, "fragmentations": cm.fragmentations,
+             "idtp": ids.idtp_steps, "gospa_switching": gs.distance, "switches": gs.switches}
+    return {"identity": ident, "_identity_steps": steps}
 
 
 # --- figures ----------------------------------------------------------------------------------
@@ -531,7 +573,9 @@ def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
 
 
 def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
-    metrics = track_metrics(rep.history, rep.truth, rep.gospa_c)
+    sigma_deg = rep.config.get("virtual radar", {}).get("sigma_bearing_deg")
+    metrics = track_metrics(rep.history, rep.truth, rep.gospa_c, site=rep.site,
+                            sigma_bearing=None if sigma_deg is None else math.radians(sigma_deg))
     table = history_table(rep.history, epoch=rep.epoch, frame=rep.frame)
     out = {"parquet": write_tracks_parquet(table, folder / TRACKS_PARQUET),
            "csv": write_tracks_csv(table, folder / TRACKS_CSV)}
