@@ -11,20 +11,22 @@ for the KF and EKF; Rauch, Tung and Striebel 1965; Sarkka 2013, section 8.2):
     xs_k = x_k + G_k (xs_{k+1} - x-_{k+1})
     Ps_k = P_k + G_k (Ps_{k+1} - P-_{k+1}) G_k^T
 
-(:func:`trackkit.filters.smoothers.rts_step`). The backward pass runs once per scan over all
-the tracks that live on to the next scan together, so its cost is that of the filter's
-prediction per scan, however many tracks there are.
+(:func:`trackkit.filters.smoothers.rts_step`). The backward pass takes one batched step per
+scan, over all the tracks that live on to the next scan together.
 
-The equations are exact for a Kalman filter whose every update is that of one plot (GNN);
+With a linear motion model and every update that of one plot (GNN) the backward pass is
+exact given the filtered Gaussians (a range-bearing EKF's are themselves approximate);
 after a JPDA update (a moment-matched mixture of hypotheses) or an IMM's (a moment-matched
-mixture of models) they are the usual approximation that treats the filtered Gaussian as the
+mixture of models) it is the usual approximation that treats the filtered Gaussian as the
 posterior. For an IMM tracker (:func:`smoothing_model`) the moment-matched estimates are
 smoothed with one of the mixture's models, the one with the largest process noise in
 position and velocity (the CV model of CV with a near-constant-position model, or of CV
 with CT when the CT model's noise is no larger): a model with less noise than the mixture
-allows for would pull the smoothed track straight through turns and starts; the largest
-trusts the filtered estimates most where they move most. This is not the IMM smoother of
-Helmick, Blair and Hoffman (1995), which would need every model's estimate at every scan.
+allows for would pull the smoothed track straight through turns and starts (on the Solent
+sample, CV + near-constant position smoothed with the latter is 68-85 m from the reported
+positions, with CV 11-18 m); the largest trusts the filtered estimates most. This is not
+the IMM smoother of Helmick, Blair and Hoffman (1995), which would need every model's
+estimate at every scan.
 """
 
 from __future__ import annotations
