@@ -30,7 +30,8 @@ def test_track_recording_gives_the_tracks_trackkit_track_writes(tmp_path):
     assert len(result.scans) == 20 and stages[0] == "reading" and stages[-1] == "tracking"
     h = result.history
     assert np.unique(h.ids).size > 0, "no track: the comparison would prove nothing"
-    mine = write_tracks_parquet(history_table(h, epoch=result.read.epoch, frame=result.frame),
+    mine = write_tracks_parquet(history_table(h, epoch=result.read.epoch, frame=result.frame,
+                                              smoothed=result.smoothed),
                                 tmp_path / "mine.parquet")
     written, ours = pq.read_table(out / TRACKS_PARQUET), pq.read_table(mine)
     assert written.equals(ours, check_metadata=True)

@@ -190,6 +190,7 @@ def _write(result: TrackingResult, out: Path) -> dict[str, Path]:
                       read=read, epoch=read.epoch, frame=result.frame, truth=result.truth,
                       gospa_c=rec.settings.gospa_c, config=result.config,
                       background=result.background, background_label=result.background_label,
-                      site=result.site, max_range=result.max_range, notes=result.notes)
+                      site=result.site, max_range=result.max_range, notes=result.notes,
+                      smoothed=result.smoothed)
     with stderr().status("writing the tracks and the report"):
         return write_track_report(rep, out)

@@ -21,7 +21,7 @@ from trackkit.filters.base import Filter, check_belief, register
 from trackkit.linalg import solve_psd, symmetrize
 from trackkit.models.protocols import MotionModel
 
-__all__ = ["smooth"]
+__all__ = ["rts_step", "smooth"]
 
 
 def smooth(f: Filter, filtered: Gaussian, motion: MotionModel | Sequence[MotionModel],
@@ -45,10 +45,18 @@ def smooth(f: Filter, filtered: Gaussian, motion: MotionModel | Sequence[MotionM
     xs, Ps = np.empty_like(x), np.empty_like(P)
     xs[-1], Ps[-1] = x[-1], P[-1]
     for k in range(T - 2, -1, -1):
-        pred, C = f.predict_with_cross(Gaussian._make((x[k], register(P[k]))), motions[k],
-                                        dts[k])
-        G = np.swapaxes(solve_psd(pred.cov, np.swapaxes(C, -1, -2), "predicted covariance"),
-                        -1, -2)
-        xs[k] = x[k] + (G @ (xs[k + 1] - pred.mean)[..., None])[..., 0]
-        Ps[k] = symmetrize(P[k] + G @ (Ps[k + 1] - pred.cov) @ np.swapaxes(G, -1, -2))
+        xs[k], Ps[k] = rts_step(f, x[k], P[k], xs[k + 1], Ps[k + 1], motions[k], dts[k])
     return Gaussian._make((xs, register(Ps)))
+
+
+def rts_step(f: Filter, x: np.ndarray, P: np.ndarray, xs_next: np.ndarray,
+             Ps_next: np.ndarray, motion: MotionModel, dt: ArrayLike
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """One backward step (module docstring), batched: the filtered ``x_k (..., n)``,
+    ``P_k (..., n, n)`` and the smoothed ``xs_{k+1}``, ``Ps_{k+1}`` give ``(xs_k, Ps_k)``."""
+    pred, C = f.predict_with_cross(Gaussian._make((x, register(P))), motion, dt)
+    G = np.swapaxes(solve_psd(pred.cov, np.swapaxes(C, -1, -2), "predicted covariance"),
+                    -1, -2)
+    xs = x + (G @ (xs_next - pred.mean)[..., None])[..., 0]
+    Ps = symmetrize(P + G @ (Ps_next - pred.cov) @ np.swapaxes(G, -1, -2))
+    return xs, Ps

@@ -15,15 +15,20 @@ covariance diagonal ``var_x, var_y, var_vx, var_vy`` (m^2, m^2/s^2), ``status``
 ("tentative" or "confirmed") and ``lat, lon`` (deg, WGS-84, when the frame is known: the
 ground point of the 2-D track, see :func:`ground_geodetic`; an aircraft's x, y far from the
 frame's origin are those of the point under it only to altitude x distance / earth radius,
-600 m for 10 km up at 400 km, so its lat, lon are off by as much). Floats
+600 m for 10 km up at 400 km, so its lat, lon are off by as much). With the smoothed
+tracks (:mod:`trackkit.tracking.smoothing`, a Rauch-Tung-Striebel smoother over each track's
+whole life), after those: ``x_smooth, y_smooth, vx_smooth, vy_smooth``, their variances
+``var_x_smooth ...`` and ``lat_smooth, lon_smooth``, row for row. Floats
 round-trip exactly in both files (Parquet is binary, the CSV writer prints the shortest
 decimal that reads back as the same double).
 
 ``tracks.geojson`` (RFC 7946; needs the frame): a FeatureCollection with one LineString per
 confirmed track (a Point for a track confirmed at a single scan), coordinates
 ``[lon, lat]`` of its confirmed positions in time order, properties ``id``, ``kind``
-("track"), ``start_s``, ``end_s``, ``start_utc``, ``end_utc``, ``points`` and ``times_s``; and
-a Point for the radar site (``kind`` "radar site") when there is one.
+("track"), ``smoothed`` (false), ``start_s``, ``end_s``, ``start_utc``, ``end_utc``, ``points``
+and ``times_s``; with the smoothed tracks, one more such feature per track of its smoothed
+positions at the same times (``kind`` "smoothed track", ``smoothed`` true); and a Point for
+the radar site (``kind`` "radar site") when there is one.
 """
 
 from __future__ import annotations
@@ -61,6 +66,7 @@ from trackkit.report.files import REPORT_HTML, RESULTS_JSON, write_atomically
 from trackkit.report.html import CSS, notes_and_figures
 from trackkit.tracking.history import TrackHistory
 from trackkit.tracking.logic import TrackStatus
+from trackkit.tracking.smoothing import SmoothedTracks
 
 __all__ = [
     "TRACK_FILES", "TrackReport", "history_table", "write_tracks_parquet", "write_tracks_csv",
@@ -105,9 +111,11 @@ def _iso(t: NDArray[np.datetime64]) -> NDArray[np.str_]:
 
 
 def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
-                  frame: EnuFrame | None = None) -> pa.Table:
-    """The history as one row per track per scan (see the module docstring); the schema
-    metadata ``trackkit`` (JSON) holds the epoch and the frame's reference point."""
+                  frame: EnuFrame | None = None,
+                  smoothed: SmoothedTracks | None = None) -> pa.Table:
+    """The history as one row per track per scan, with the ``smoothed`` tracks' columns
+    when given (see the module docstring); the schema metadata ``trackkit`` (JSON) holds the
+    epoch and the frame's reference point."""
     h = history
     per_scan = np.diff(h.offsets)
     scan = np.repeat(np.arange(h.times.size, dtype=np.int64), per_scan)
@@ -125,13 +133,42 @@ def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
                               pa.string())
     if frame is not None:
         cols["lat"], cols["lon"] = ground_geodetic(frame, h.mean[:, 0], h.mean[:, 1])
+    if smoothed is not None:
+        cols.update(_smoothed_columns(smoothed, h.ids.size, frame))
     meta = {"epoch": None if epoch is None else str(epoch.astype("datetime64[ns]")),
             "frame": None if frame is None else [frame.lat0, frame.lon0, frame.alt0],
             "units": {"time": "s from epoch", "x": "m east", "y": "m north", "vx": "m/s",
                       "vy": "m/s", "var_x": "m^2", "var_y": "m^2", "var_vx": "m^2/s^2",
                       "var_vy": "m^2/s^2", "lat": "deg", "lon": "deg"}}
+    if smoothed is not None:
+        meta["units"].update({f"{k}_smooth": u for k, u in list(meta["units"].items())
+                              if k != "time"})
     table = pa.table({k: v if isinstance(v, pa.Array) else pa.array(v) for k, v in cols.items()})
     return table.replace_schema_metadata({"trackkit": json.dumps(meta)})
+
+
+def _smoothed_columns(sm: SmoothedTracks, rows: int, frame: EnuFrame | None
+                      ) -> dict[str, Array]:
+    """``x_smooth ...``, ``var_x_smooth ...`` and ``lat_smooth, lon_smooth`` of the smoothed
+    components."""
+    if sm.mean.shape[0] != rows:
+        raise ValueError(f"smoothed tracks have {sm.mean.shape[0]} rows; the history has "
+                         f"{rows}: expected the smoothed tracks of this history")
+    names = [_STATE_NAMES[k] if k < 4 else f"state_{k}" for k in sm.dims.tolist()]
+    cols = {f"{name}_smooth": np.asarray(sm.mean[:, i], float) for i, name in enumerate(names)}
+    var = np.diagonal(sm.cov, axis1=-2, axis2=-1)
+    cols.update({f"var_{name}_smooth": np.asarray(var[:, i], float)
+                 for i, name in enumerate(names)})
+    xy = _smoothed_xy(sm)
+    if frame is not None and xy is not None:
+        cols["lat_smooth"], cols["lon_smooth"] = ground_geodetic(frame, xy[:, 0], xy[:, 1])
+    return cols
+
+
+def _smoothed_xy(sm: SmoothedTracks) -> Array | None:
+    """The smoothed positions (N, 2), if the smoothed components include them."""
+    at = {k: i for i, k in enumerate(sm.dims.tolist())}
+    return sm.mean[:, [at[0], at[1]]] if 0 in at and 1 in at else None
 
 
 def write_tracks_parquet(table: pa.Table, path: str | Path) -> Path:
@@ -190,43 +227,65 @@ def write_skipped_csv(read: ReadReport, path: str | Path) -> Path:
 # --- GeoJSON ----------------------------------------------------------------------------------
 
 
-def _confirmed_rows(history: TrackHistory) -> tuple[NDArray[np.int64], Array, Array]:
-    """Ids, times and positions of the confirmed rows, sorted by id then time."""
+def _confirmed_rows(history: TrackHistory, xy: Array | None = None
+                    ) -> tuple[NDArray[np.int64], Array, Array]:
+    """Ids, times and positions (``xy (N, 2)`` per row, default the filtered ones) of the
+    confirmed rows, sorted by id then time."""
     keep = history.status == TrackStatus.CONFIRMED
     scan = np.repeat(np.arange(history.times.size), np.diff(history.offsets))[keep]
     ids = history.ids[keep]
     o = np.lexsort((scan, ids))
-    return ids[o], history.times[scan[o]], history.mean[keep][o][:, :2]
+    xy = history.mean[:, :2] if xy is None else xy
+    return ids[o], history.times[scan[o]], xy[keep][o]
 
 
 def tracks_geojson(history: TrackHistory, frame: EnuFrame, *,
                    epoch: np.datetime64 | None = None,
-                   site: tuple[float, float] | None = None, digits: int = 7) -> dict:
-    """The confirmed tracks as a GeoJSON FeatureCollection (module docstring); coordinates
-    rounded to ``digits`` decimals of a degree (7: about a centimetre)."""
-    ids, t, p = _confirmed_rows(history)
-    lat, lon = ground_geodetic(frame, p[:, 0], p[:, 1])
-    lon, lat = np.round(lon, digits), np.round(lat, digits)
+                   site: tuple[float, float] | None = None, digits: int = 7,
+                   smoothed: SmoothedTracks | None = None) -> dict:
+    """The confirmed tracks, and the ``smoothed`` ones when given, as a GeoJSON
+    FeatureCollection (module docstring); coordinates rounded to ``digits`` decimals of a
+    degree (7: about a centimetre)."""
     features = []
     if site is not None:
         slat, slon = ground_geodetic(frame, np.array([site[0]]), np.array([site[1]]))
         features.append({"type": "Feature", "properties": {"kind": "radar site"},
                          "geometry": {"type": "Point", "coordinates": [
                              round(float(slon[0]), digits), round(float(slat[0]), digits)]}})
+    features += _track_features(history, frame, epoch, digits, None)
+    xy = None if smoothed is None else _smoothed_xy(smoothed)
+    if xy is not None:
+        if xy.shape[0] != history.ids.size:
+            raise ValueError(f"smoothed tracks have {xy.shape[0]} rows; the history has "
+                             f"{history.ids.size}: expected the smoothed tracks of this history")
+        features += _track_features(history, frame, epoch, digits, xy)
+    return {"type": "FeatureCollection", "features": features}
+
+
+def _track_features(history: TrackHistory, frame: EnuFrame, epoch: np.datetime64 | None,
+                    digits: int, xy: Array | None) -> list[dict]:
+    """One feature per confirmed track: of its filtered positions, or of ``xy`` (the
+    smoothed ones, per history row)."""
+    ids, t, p = _confirmed_rows(history, xy)
+    lat, lon = ground_geodetic(frame, p[:, 0], p[:, 1])
+    lon, lat = np.round(lon, digits), np.round(lat, digits)
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]]) if ids.size else np.zeros(0, int)
     ends = np.r_[starts[1:], ids.size] if ids.size else starts
+    features = []
     for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
         coords = np.stack([lon[a:b], lat[a:b]], axis=1).tolist()
         geometry = ({"type": "LineString", "coordinates": coords} if b - a > 1 else
                     {"type": "Point", "coordinates": coords[0]})
-        props: dict[str, Any] = {"id": int(ids[a]), "kind": "track", "start_s": float(t[a]),
+        props: dict[str, Any] = {"id": int(ids[a]),
+                                 "kind": "track" if xy is None else "smoothed track",
+                                 "smoothed": xy is not None, "start_s": float(t[a]),
                                  "end_s": float(t[b - 1]), "points": b - a}
         if epoch is not None:
             s0, e = _iso(_utc(epoch, np.array([t[a], t[b - 1]])))
             props["start_utc"], props["end_utc"] = str(s0), str(e)
         props["times_s"] = [float(x) for x in t[a:b]]
         features.append({"type": "Feature", "properties": props, "geometry": geometry})
-    return {"type": "FeatureCollection", "features": features}
+    return features
 
 
 def write_tracks_geojson(doc: dict, path: str | Path) -> Path:
@@ -418,7 +477,7 @@ class TrackReport:
     """Everything the track report shows. ``config`` maps a section title ("virtual radar",
     "tracker") to label -> value (text or numbers, shown as given); ``background`` are the
     points drawn under the tracks (``background_label`` names them); ``notes`` are printed
-    in the page."""
+    in the page; ``smoothed`` tracks go beside the filtered ones in the track files."""
 
     history: TrackHistory
     title: str
@@ -435,6 +494,7 @@ class TrackReport:
     site: tuple[float, float] | None = None
     max_range: float | None = None
     notes: Sequence[str] = ()
+    smoothed: SmoothedTracks | None = None
 
 
 def _input_document(read: ReadReport | None, source: str, fmt: str) -> dict[str, Any]:
@@ -576,12 +636,14 @@ def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
     sigma_deg = rep.config.get("virtual radar", {}).get("sigma_bearing_deg")
     metrics = track_metrics(rep.history, rep.truth, rep.gospa_c, site=rep.site,
                             sigma_bearing=None if sigma_deg is None else math.radians(sigma_deg))
-    table = history_table(rep.history, epoch=rep.epoch, frame=rep.frame)
+    table = history_table(rep.history, epoch=rep.epoch, frame=rep.frame,
+                          smoothed=rep.smoothed)
     out = {"parquet": write_tracks_parquet(table, folder / TRACKS_PARQUET),
            "csv": write_tracks_csv(table, folder / TRACKS_CSV)}
     if rep.frame is not None:
         out["geojson"] = write_tracks_geojson(
-            tracks_geojson(rep.history, rep.frame, epoch=rep.epoch, site=rep.site),
+            tracks_geojson(rep.history, rep.frame, epoch=rep.epoch, site=rep.site,
+                           smoothed=rep.smoothed),
             folder / TRACKS_GEOJSON)
     if rep.read is not None and (rep.read.n_skipped or rep.read.bad):
         out["skipped"] = write_skipped_csv(rep.read, folder / SKIPPED_CSV)

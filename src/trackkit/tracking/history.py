@@ -24,7 +24,8 @@ class TrackHistory(NamedTuple):
     """Scan s holds rows ``offsets[s]:offsets[s + 1]``: the tracks alive after it, with
     their ``ids``, ``status`` (``TrackStatus``), state ``mean (N, n)`` and covariance
     diagonal ``var (N, n)``. Per scan: ``times``, gated ``pairs``, tracks ``started`` and
-    ``deleted``, and the JPDA clusters whose marginals were ``approximated``."""
+    ``deleted``, and the JPDA clusters whose marginals were ``approximated``. ``cov (N, n,
+    n)`` is the full covariance (what a smoother needs; None in a history made without it)."""
 
     times: Array
     offsets: NDArray[np.int64]
@@ -36,6 +37,7 @@ class TrackHistory(NamedTuple):
     started: NDArray[np.int64]
     deleted: NDArray[np.int64]
     approximated: NDArray[np.int64]
+    cov: Array | None = None
 
     def confirmed(self, dims: tuple[int, ...] = (0, 1)) -> Frames:
         """The confirmed tracks per scan as ``Frames`` of the state components ``dims``
@@ -60,7 +62,7 @@ def run_tracker(tracker: Tracker, scans: Iterable[Scan], tracks: Tracks | None =
         info = tracks.info
         rows.append((float(scan.time), tracks.ids, tracks.state.status, est.mean,
                      np.diagonal(est.cov, axis1=-2, axis2=-1), info.pairs, info.started.size,
-                     info.deleted.size, info.approximated))
+                     info.deleted.size, info.approximated, est.cov))
         if progress is not None:
             progress(s + 1)
     if tracks is None:
@@ -78,5 +80,6 @@ def run_tracker(tracker: Tracker, scans: Iterable[Scan], tracks: Tracks | None =
         started=np.array([r[6] for r in rows], np.int64),
         deleted=np.array([r[7] for r in rows], np.int64),
         approximated=np.array([r[8] for r in rows], np.int64),
+        cov=np.concatenate([r[9] for r in rows]).reshape(-1, n, n),
     )
     return history, tracks

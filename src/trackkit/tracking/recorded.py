@@ -10,6 +10,7 @@ tracked as they are::
     result = track_recording(samples.path("solent-ais"),
                              TrackOptions(as_radar=True, max_scans=20))
     result.history  # the tracker's history, as trackkit track writes it to tracks.parquet
+    result.smoothed  # the tracks RTS-smoothed (tracking.smoothing), written beside them
 
 The tracker is a constant-velocity EKF or UKF with GNN or JPDA association and an SPRT track
 score (Blackman and Popoli 1999), one per input kind's profile (``TRACK_PROFILES``).
@@ -122,6 +123,7 @@ class TrackingResult:
     plots: int
     objects: int | None = None
     seen: int | None = None
+    smoothed: Any = None  # tracking.smoothing.SmoothedTracks, row for row with the history
 
 
 def resolve_input(file: Path) -> Path:
@@ -194,7 +196,21 @@ def track_recording(source: Path | str | Recording, options: TrackOptions | None
     report("tracking", 0, n)
     history, _ = run_tracker(tracker, job["scans"],
                              progress=lambda done: report("tracking", done, n))
-    return TrackingResult(recording=rec, history=history, read=read, **job)
+    smoothed = _smooth(tracker, history, desc)
+    return TrackingResult(recording=rec, history=history, read=read, smoothed=smoothed, **job)
+
+
+def _smooth(tracker: Any, history: Any, desc: dict[str, Any]) -> Any:
+    """The tracks RTS-smoothed (``tracking.smoothing``), the smoother described in ``desc``."""
+    import numpy as np
+
+    from trackkit.tracking.smoothing import smooth_tracks, smoothing_model
+
+    period = float(np.median(np.diff(history.times))) if history.times.size > 1 else 1.0
+    motion, filt, dims = smoothing_model(tracker, period)
+    desc["smoother"] = (f"Rauch-Tung-Striebel over each track's life, "
+                        f"{type(motion).__name__} model")
+    return smooth_tracks(history, motion, filt, dims)
 
 
 def _mapping(text: str | None, option: str, allowed: tuple[str, ...]) -> dict[str, str | None]:
