@@ -359,7 +359,9 @@ def _check_outputs(out: Path, ran) -> dict:
     page = (out / "report.html").read_text()
     assert "mean GOSPA (m)" in page and f"{g['mean']:.6g}" in page
     geo = json.loads((out / "tracks.geojson").read_text())
-    assert len(geo["features"]) == doc["results"]["tracks_confirmed"] + 1
+    kinds = [f["properties"]["kind"] for f in geo["features"]]
+    n = doc["results"]["tracks_confirmed"]
+    assert (kinds.count("track"), kinds.count("smoothed track"), len(kinds)) == (n, n, 2 * n + 1)
     return doc
 
 
