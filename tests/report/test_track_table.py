@@ -163,7 +163,7 @@ def test_settings_in_words_with_units():
                  "range noise 20 m", "bearing noise 0.5 deg", "from 50 m to 40 km",
                  "1,691 scans", "88 of the 91 objects"):
         assert part in radar_text, part
-    for part in ("EKF filter on a constant velocity model (process noise q 0.05 m^2/s^3)",
+    for part in ("EKF on a constant velocity model (process noise q 0.05 m^2/s^3)",
                  "initial velocity std 10 m/s", "cut-off 500 m", "new thing 2.5 m/s"):
         assert part in tracker_text, part
     assert "site_lat_deg" not in radar_text and "_" not in tracker_text

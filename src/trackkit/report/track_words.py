@@ -64,7 +64,7 @@ def headline_figures(metrics: Mapping[str, Any], times: Sequence[float] | np.nda
         ("mean GOSPA", f"{_num(g['mean'])} m",
          f"per scan, cut-off {g['c']:g} m: position error, missed {many} and false tracks"),
         ("position RMSE", "n/a" if tr.get("rmse") is None else f"{_num(tr['rmse'])} m",
-         f"of the tracks paired with a {one} (within {g['c']:g} m)"),
+         f"of the tracks paired with {many} (within {g['c']:g} m)"),
     ]
 
 
@@ -122,7 +122,7 @@ def _tracker(c: Mapping[str, Any]) -> tuple[str, set[str]]:
 
     if take("filter", "motion"):
         q = f" (process noise q {c['q_m2_s3']:g} m^2/s^3)" if take("q_m2_s3") else ""
-        parts.append(f"{c['filter']} filter on a {c['motion']} model{q}")
+        parts.append(f"{c['filter']} on a {c['motion']} model{q}")
     if take("associator"):
         parts.append(f"{c['associator']} association")
     if take("initiator"):
