@@ -182,6 +182,14 @@ def test_pngs_html_and_results(small, tmp_path):
                                      "<h2>Settings</h2>", "<h2>Results in full</h2>",
                                      "<h2>Figures</h2>", "period_s")]
     assert order == sorted(order)
+    head = page[page.index('class="headline"'):page.index('id="tk-map"')]
+    tr = json.loads(paths["results"].read_text(encoding="utf-8"))["results"]
+    doc_tracks = tr["tracks"]
+    for text in ("vessels held", f"{doc_tracks['truths_confirmed']} of {doc_tracks['truths']}",
+                 "tracks per vessel", "ID switches per vessel-hour",
+                 f"mean GOSPA</div><div class=\"value\">{tr['gospa']['mean']:.3g} m",
+                 f"{doc_tracks['rmse']:.3g} m"):
+        assert text in head, text
     summary = pacsv.read_csv(paths["summary"])
     n_conf = np.unique(small[2].ids[small[2].status == TrackStatus.CONFIRMED]).size
     assert summary.num_rows == n_conf and page.count("<tr><td>") >= n_conf

@@ -176,6 +176,11 @@ def _script() -> str:
     return text
 
 
+def _legend(data: Mapping[str, Any]) -> str:
+    site = "; triangle: the radar" if data.get("site") is not None else ""
+    return site + (", dashed: its range" if site and data.get("max_range") else "")
+
+
 def map_html(data: Mapping[str, Any]) -> str:
     """The map section: canvas, controls, the data and the script, all inline."""
     return "\n".join([
@@ -196,7 +201,7 @@ def map_html(data: Mapping[str, Any]) -> str:
         '<div id="tk-readout" class="tk-readout"></div></div>',
         '<p class="tk-help">Drag to pan, scroll (or the + and - keys) to zoom, double-click '
         "to reset; hover a track for its id, identity and times. Grey: the "
-        '<span id="tk-bg-label"></span>; triangle: the radar, dashed: its range.</p>',
+        f'<span id="tk-bg-label"></span>{_legend(data)}.</p>',
         f'<script type="application/json" id="tk-map-data">{_json_for_script(data)}</script>',
         f"<script>{_script()}</script>",
         "</section>",

@@ -631,9 +631,10 @@ def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
         parts.append(f"<p>{esc(NO_TRACK_CONFIRMED)}</p>")
     parts += _map_section(rep, table)
     if table is not None:
+        who = ("; the identity is the reporting identity of the object the track was paired "
+               "with on most of its scans" if any(table["identity"].to_pylist()) else "")
         parts += [f"<h2>Tracks</h2>\n<p>One row per confirmed track (also in "
-                  f"{TRACKS_SUMMARY_CSV}, in SI units); the identity is the reporting "
-                  "identity of the object the track was paired with on most of its scans.</p>",
+                  f"{TRACKS_SUMMARY_CSV}, in SI units){who}.</p>",
                   track_table_html(table, rep.fmt)]
     parts.append("<h2>Settings</h2>")
     parts += [f"<h3>{esc(title)}</h3>\n<p>{esc(text)}</p>"
