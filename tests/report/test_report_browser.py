@@ -41,7 +41,7 @@ def open_in_chromium(page: Path, tmp: Path) -> tuple[str, list[str], Path]:
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, cwd=tmp)
     try:
-        out, err = proc.communicate(timeout=25)
+        out, err = proc.communicate(timeout=60)  # a guard; it takes 2-5 s
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
