@@ -210,3 +210,19 @@ def test_map_data_decodes_and_escapes(small):  # noqa: F811
     back = json.loads(script)
     assert back["tracks"][0][1] == "</script><b>x</b>&"
     assert back["background_label"] == "<reported>"
+
+
+def test_page_shows_further_metrics(small):  # noqa: F811
+    """Figures that track_metrics may add (CLEAR-MOT, IDF1) appear on the page without a
+    change to it; series stay in results.json."""
+    from trackkit.report.track_pages import render_track_html, track_metrics
+
+    from .test_track_command import report_of
+
+    _, run, h = small
+    m = track_metrics(h, run.truth, 500.0)
+    m["clear_mot"] = {"mota": 0.8125, "motp_m": 21.5, "per_scan": [0.1, 0.2]}
+    m["idf1"] = 0.9375
+    page = render_track_html(report_of(small), m, {})
+    assert "<th>mota</th><td>0.8125</td>" in page and "<th>motp m</th><td>21.5</td>" in page
+    assert "<th>idf1</th><td>0.9375</td>" in page and "<th>per scan</th>" not in page

@@ -578,6 +578,29 @@ def _results_html(metrics: Mapping[str, Any]) -> list[str]:
     parts.append(_table([(label, tr[k]) for k, label in _TRACK_LABELS if k in tr],
                         caption=f"Track-level counts: objects and confirmed tracks paired "
                                 f"per scan by the GOSPA assignment (within {c:g} m)."))
+    return parts + _other_metrics(metrics)
+
+
+_SHOWN = {"scans", "tracks_started", "tracks_confirmed", "mean_confirmed_per_scan", "gospa",
+          "tracks"}
+
+
+def _other_metrics(metrics: Mapping[str, Any]) -> list[str]:
+    """Any further figure of ``track_metrics`` (a number or text, alone or in a section);
+    series (lists) are in results.json only."""
+    def plain(v: Any) -> bool:
+        return v is None or isinstance(v, int | float | str | np.generic)
+
+    extra = {k: v for k, v in metrics.items() if k not in _SHOWN and not k.startswith("_")}
+    parts = []
+    alone = [(k.replace("_", " "), v) for k, v in extra.items() if plain(v)]
+    if alone:
+        parts.append(_table(alone))
+    for k, v in extra.items():
+        rows = ([(a.replace("_", " "), b) for a, b in v.items() if plain(b)]
+                if isinstance(v, Mapping) else [])
+        if rows:
+            parts.append(_table(rows, caption=k.replace("_", " ")))
     return parts
 
 
