@@ -110,14 +110,26 @@ PROBE = """<script>
   var mode = document.getElementById("tk-mode");
   mode.value = "all"; mode.dispatchEvent(new Event("change")); drawn.push(root.dataset.tracksDrawn);
   root.dataset.probeDrawn = drawn.join(",");
+  // zoom in at the canvas' centre by a wheel step, then drag 50 px right and 20 px down
+  var cx = r.left + r.width / 2, cy = r.top + r.height / 2, a = m.toScreen(tr.x[k], tr.y[k]);
+  cv.dispatchEvent(new WheelEvent("wheel", {clientX: cx, clientY: cy, deltaY: -200,
+                                            bubbles: true, cancelable: true}));
+  var b = m.toScreen(tr.x[k], tr.y[k]);
+  var at = function (type, x, y) {
+    cv.dispatchEvent(new PointerEvent(type, {clientX: x, clientY: y, bubbles: true}));
+  };
+  at("pointerdown", cx, cy); at("pointermove", cx + 50, cy + 20); at("pointerup", cx + 50, cy + 20);
+  var c = m.toScreen(tr.x[k], tr.y[k]);
+  root.dataset.probeZoom = ((b[0] - r.width / 2) / (a[0] - r.width / 2)).toFixed(4);
+  root.dataset.probePan = (c[0] - b[0]).toFixed(2) + "," + (c[1] - b[1]).toFixed(2);
 })();
 </script>"""
 
 
 def test_report_map_hover_and_slider(tmp_path):
-    """A probe appended to the page hovers the middle of a track and moves the slider: the
-    tip names a track with its MMSI and start time as the track table has them, and the
-    map draws the tracks confirmed by the slider's time."""
+    """A probe appended to the page hovers the middle of a track, moves the slider, zooms and
+    drags: the tip names a track with its MMSI and start time as the track table has them,
+    the map draws the tracks confirmed by the slider's time, and zoom and pan move it."""
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
@@ -144,3 +156,7 @@ def test_report_map_hover_and_slider(tmp_path):
     assert expected[0] < expected[1] < expected[2]
     assert re.search(r'data-probe-drawn="([^"]*)"', root).group(1) == ",".join(
         map(str, expected))
+    # a wheel step of 200 zooms by exp(200 x 0.0015) about the cursor; a drag moves the map
+    zoom = float(re.search(r'data-probe-zoom="([^"]*)"', root).group(1))
+    assert zoom == pytest.approx(np.exp(0.3), abs=2e-4)
+    assert re.search(r'data-probe-pan="([^"]*)"', root).group(1) == "50.00,20.00"

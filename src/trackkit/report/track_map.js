@@ -119,7 +119,10 @@ function zoom(f, mx, my) {
 }
 function pos(e) { var r = cv.getBoundingClientRect(); return [e.clientX - r.left, e.clientY - r.top]; }
 cv.addEventListener("wheel", function (e) { e.preventDefault(); var p = pos(e); zoom(Math.exp(-e.deltaY * 0.0015), p[0], p[1]); }, {passive: false});
-cv.addEventListener("pointerdown", function (e) { drag = pos(e); cv.setPointerCapture(e.pointerId); cv.style.cursor = "grabbing"; tip.hidden = true; });
+cv.addEventListener("pointerdown", function (e) {
+  drag = pos(e); cv.style.cursor = "grabbing"; tip.hidden = true;
+  try { cv.setPointerCapture(e.pointerId); } catch (err) { /* a pointer that is gone */ }
+});
 cv.addEventListener("pointerup", function () { drag = null; cv.style.cursor = "grab"; });
 cv.addEventListener("pointermove", function (e) {
   var p = pos(e);
