@@ -167,14 +167,33 @@ def test_pngs_html_and_results(small, tmp_path):
     for key in ("tracks_png", "gospa_png"):
         assert paths[key].read_bytes().startswith(PNG)
     page = paths["html"].read_text(encoding="utf-8")
-    # self-contained: no scripts, every image inline, no link to anything outside
-    assert "<script" not in page.lower()
+    # self-contained: scripts inline, every image inline, no link to anything outside
+    assert re.findall(r"<script[^>]*>", page) == [
+        '<script type="application/json" id="tk-map-data">', "<script>"]
     assert not re.findall(r'(?:src|href)="(?!data:)', page)
+    assert not re.findall(r"(?:https?:)?//[a-z0-9.-]+\.[a-z]{2,}/", page, re.I)
     assert page.count('src="data:image/png;base64,') == 2
     for text in ("mean GOSPA (m)", "Virtual radar", "Tracker", "track breaks", "a note",
                  "records read", "synthetic.csv:7:x: not a number", "sorted by time",
-                 "exact duplicates dropped"):
+                 "exact duplicates dropped", "period 3 s", "q 0.05 m^2/s^3"):
         assert text in page
+    # what a person looks for first: the headline figures, then the map, then the tracks,
+    # the settings in words; the raw keys last
+    order = [page.index(t) for t in ('class="headline"', 'id="tk-map"', "<h2>Tracks</h2>",
+                                     "<h2>Settings</h2>", "<h2>Results in full</h2>",
+                                     "<h2>Figures</h2>", "period_s")]
+    assert order == sorted(order)
+    head = page[page.index('class="headline"'):page.index('id="tk-map"')]
+    tr = json.loads(paths["results"].read_text(encoding="utf-8"))["results"]
+    doc_tracks = tr["tracks"]
+    for text in ("vessels held", f"{doc_tracks['truths_confirmed']} of {doc_tracks['truths']}",
+                 "tracks per vessel", "ID switches per vessel-hour",
+                 f"mean GOSPA</div><div class=\"value\">{tr['gospa']['mean']:.3g} m",
+                 f"{doc_tracks['rmse']:.3g} m"):
+        assert text in head, text
+    summary = pacsv.read_csv(paths["summary"])
+    n_conf = np.unique(small[2].ids[small[2].status == TrackStatus.CONFIRMED]).size
+    assert summary.num_rows == n_conf and page.count("<tr><td>") >= n_conf
     assert paths["skipped"].read_text().splitlines() == [
         "line,column,reason,value,expected", '7,"x","not a number","abc","a decimal x"',
         '9,"y","missing value","","a decimal y"']
@@ -186,7 +205,7 @@ def test_pngs_html_and_results(small, tmp_path):
     # no leftovers: only the report files
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == sorted(
         {"tracks.parquet", "tracks.csv", "tracks.geojson", "tracks.png", "gospa.png",
-         "report.html", "results.json", "skipped.csv"})
+         "report.html", "results.json", "skipped.csv", "tracks_summary.csv"})
     assert doc["input"]["records_skipped"] == 2 and doc["input"]["out_of_order_sorted"] == 4
 
 
@@ -227,7 +246,7 @@ def test_rewrite_removes_stale_files_and_failure_leaves_nothing(small, tmp_path,
     names = {p.name for p in out.iterdir()}
     assert "gospa.png" not in names and "tracks.geojson" not in names and "mine.txt" in names
     assert "skipped.csv" not in names
-    assert set(paths) == {"parquet", "csv", "tracks_png", "html", "results"}
+    assert set(paths) == {"parquet", "csv", "summary", "tracks_png", "html", "results"}
     assert "time_utc" not in pq.read_schema(paths["parquet"]).names
     assert set(TRACK_FILES) >= names - {"mine.txt"}
     before = sorted((p.name, p.stat().st_mtime_ns) for p in out.iterdir())
@@ -296,6 +315,22 @@ def test_input_errors_name_the_file_and_what_to_do(tmp_path, monkeypatch):
 
 
 # --- the command end to end (subprocess) ------------------------------------------------------
+
+
+def test_no_file_tracks_the_bundled_sample_and_says_so(tmp_path):
+    ran = trackkit("track", "--max-scans", "8", cwd=tmp_path)
+    assert ran.code == 0, ran.text
+    first = ran.out.splitlines()[0]
+    assert first.startswith("No file given: tracking the sample shipped with trackkit, "
+                            "solent-ais: AIS: 77 vessels"), first
+    assert "trackkit track solent-ais --as-radar" in first
+    out = tmp_path / "trackkit-out" / "track-solent-ais"
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["input"]["file"].endswith("solent-ais.csv") and doc["input"]["format"] == "ais"
+    assert doc["config"]["virtual radar"]["scans"] == 8
+    summary = pacsv.read_csv(out / "tracks_summary.csv").to_pydict()
+    mmsi = [str(s) for s in summary["identity"] if s is not None]
+    assert len(mmsi) > 20 and all(s.isdigit() and len(s) == 9 for s in mmsi)
 
 
 def _detections(path: Path, bad: bool = True) -> None:

@@ -19,7 +19,7 @@ AIS_HEADER = "Time,MMSI,Latitude_degrees,Longitude_degrees,COG_degrees,SOG_knots
 TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "var_x", "var_y",
                  "var_vx", "var_vy", "status", "lat", "lon"]
 RADAR_FILES = {"tracks.parquet", "tracks.csv", "tracks.geojson", "tracks.png", "gospa.png",
-               "report.html", "results.json", "manifest.json"}
+               "tracks_summary.csv", "report.html", "results.json", "manifest.json"}
 
 
 def _ais_lines(n_vessels: int = 4, minutes: float = 3.0) -> list[str]:
@@ -168,7 +168,8 @@ def test_absurd_detections_are_bad_records(tmp_path):
                       f"{f}:31:time: time out of range", "skipped 3")
     assert "overflow" not in ran.text and "warning" not in ran.text.lower()
     assert _names(out) == {"tracks.parquet", "tracks.csv", "tracks.png", "report.html",
-                           "results.json", "skipped.csv", "manifest.json"}
+                           "results.json", "skipped.csv", "manifest.json",
+                           "tracks_summary.csv"}
     assert [row.split(",")[:2] for row in (out / "skipped.csv").read_text().splitlines()[1:]] \
         == [["11", '"x"'], ["21", '"y"'], ["31", '"time"']]
     doc = json.loads((out / "results.json").read_text())

@@ -8,6 +8,8 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from rich.console import Console
+from rich.text import Text
 
 from trackkit.cli.entry import app
 from trackkit.cli.option_types import OnBad, at_least, number
@@ -21,11 +23,13 @@ from trackkit.cli.output import (
 )
 from trackkit.cli.summaries import print_track_summary
 from trackkit.tracking.recorded import (
+    DEFAULT_SAMPLE,
     TRACK_PROFILES,
     TrackingResult,
     TrackOptions,
     TrackProfile,
     open_recording,
+    sample_sentence,
     track_recording,
 )
 
@@ -57,9 +61,10 @@ def _profile_default(key: str, unit: str = "") -> str:
 
 @app.command()
 def track(
-    file: Annotated[Path, typer.Argument(
+    file: Annotated[Path | None, typer.Argument(
         help="Detections (CSV or Parquet), AIS CSV or OpenSky state-vector CSV, or a bundled "
-        "sample: solent-ais, opensky-adsb (see trackkit list).")],
+        "sample: solent-ais, opensky-adsb (see trackkit list).",
+        show_default=f"the bundled sample {DEFAULT_SAMPLE}, as radar plots")] = None,
     fmt: Annotated[TrackFormat | None, typer.Option(
         "--format", "-f", help="What the file holds.",
         show_default="guessed from the columns")] = None,
@@ -140,8 +145,12 @@ def track(
     """Track recorded data; write tracks (Parquet, CSV, GeoJSON), pictures, results.json and
     report.html. AIS and ADS-B need --as-radar: a virtual radar makes plots of the reported
     positions, and the tracks are scored against those positions with GOSPA. Try it on a
-    bundled sample: trackkit track solent-ais --as-radar."""
+    bundled sample: trackkit track solent-ais --as-radar (what trackkit track with no file
+    does)."""
     with user_errors() as state:
+        if file is None:
+            file, as_radar = Path(DEFAULT_SAMPLE), True
+            Console().print(Text(sample_sentence(DEFAULT_SAMPLE)), soft_wrap=True)
         profile = TrackProfile(period=period, sigma_range=sigma_range,
                                sigma_bearing_deg=sigma_bearing_deg, sigma_pos=sigma_pos, pd=pd,
                                clutter=clutter, max_range=max_range, min_range=min_range, q=q,
@@ -183,14 +192,7 @@ def _bars(bar: Any) -> Any:
 
 def _write(result: TrackingResult, out: Path) -> dict[str, Path]:
     """The tracks and the report of ``result`` written into ``out``."""
-    from trackkit.report.track_pages import TrackReport, write_track_report
+    from trackkit.report.track_pages import track_report, write_track_report
 
-    rec, read = result.recording, result.read
-    rep = TrackReport(result.history, title=rec.path.name, source=str(rec.path), fmt=rec.kind,
-                      read=read, epoch=read.epoch, frame=result.frame, truth=result.truth,
-                      gospa_c=rec.settings.gospa_c, config=result.config,
-                      background=result.background, background_label=result.background_label,
-                      site=result.site, max_range=result.max_range, notes=result.notes,
-                      smoothed=result.smoothed)
     with stderr().status("writing the tracks and the report"):
-        return write_track_report(rep, out)
+        return write_track_report(track_report(result), out)

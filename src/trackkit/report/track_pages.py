@@ -1,5 +1,7 @@
-"""The outputs of ``trackkit track``: tracks as Parquet, CSV and GeoJSON, the track picture,
-GOSPA against time, ``results.json`` and one self-contained ``report.html``.
+"""The outputs of ``trackkit track``: tracks as Parquet, CSV and GeoJSON, the track table
+(``tracks_summary.csv``, see ``report.track_table``), the track picture, GOSPA against time,
+``results.json`` and one self-contained ``report.html`` that leads with the headline figures
+(``report.track_words``) and an interactive map (``report.track_map``).
 
     rep = TrackReport(history, title="SolentAIS...", read=read_report, frame=reports.frame,
                       epoch=reports.epoch, truth=run.truth, gospa_c=500.0,
@@ -64,15 +66,19 @@ from trackkit.io.frames import EnuFrame, ground_geodetic
 from trackkit.io.records import ReadReport
 from trackkit.report.files import REPORT_HTML, RESULTS_JSON, write_atomically
 from trackkit.report.html import CSS, notes_and_figures
+from trackkit.report.track_map import MAP_CSS, map_data, map_html
+from trackkit.report.track_table import track_table
+from trackkit.report.track_words import headline_figures, settings_in_words
 from trackkit.tracking.history import TrackHistory
 from trackkit.tracking.logic import TrackStatus
+from trackkit.tracking.recorded import TrackingResult
 from trackkit.tracking.smoothing import SmoothedTracks
 
 __all__ = [
     "TRACK_FILES", "TrackReport", "history_table", "write_tracks_parquet", "write_tracks_csv",
     "tracks_geojson", "write_tracks_geojson", "track_figure", "gospa_figure",
     "track_metrics", "results_document", "render_track_html", "write_track_report",
-    "write_skipped_csv",
+    "write_skipped_csv", "track_table_html", "track_report",
 ]
 
 Array = NDArray[np.float64]
@@ -83,10 +89,11 @@ TRACKS_GEOJSON = "tracks.geojson"
 TRACKS_PNG = "tracks.png"
 GOSPA_PNG = "gospa.png"
 SKIPPED_CSV = "skipped.csv"
+TRACKS_SUMMARY_CSV = "tracks_summary.csv"
 #: every file a track report may write; one of an earlier run that this run does not write
 #: (no truth: no gospa.png) is removed, so the directory holds one consistent result
 TRACK_FILES = (TRACKS_PARQUET, TRACKS_CSV, TRACKS_GEOJSON, TRACKS_PNG, GOSPA_PNG, SKIPPED_CSV,
-               REPORT_HTML, RESULTS_JSON)
+               TRACKS_SUMMARY_CSV, REPORT_HTML, RESULTS_JSON)
 #: what the report and the command say when no track reached confirmation
 NO_TRACK_CONFIRMED = (
     "No track was confirmed: the track files hold no confirmed state (tentative ones only, "
@@ -495,6 +502,19 @@ class TrackReport:
     max_range: float | None = None
     notes: Sequence[str] = ()
     smoothed: SmoothedTracks | None = None
+    #: the reporting identity (MMSI, ICAO address) of each object code of ``truth.ids``
+    object_ids: Sequence[str] | None = None
+
+
+def track_report(result: TrackingResult) -> TrackReport:
+    """The report of a ``track_recording`` result, as ``trackkit track`` writes it."""
+    rec, read = result.recording, result.read
+    return TrackReport(result.history, title=rec.path.name, source=str(rec.path), fmt=rec.kind,
+                       read=read, epoch=read.epoch, frame=result.frame, truth=result.truth,
+                       gospa_c=rec.settings.gospa_c, config=result.config,
+                       background=result.background, background_label=result.background_label,
+                       site=result.site, max_range=result.max_range, notes=result.notes,
+                       object_ids=result.object_ids, smoothed=result.smoothed)
 
 
 def _input_document(read: ReadReport | None, source: str, fmt: str) -> dict[str, Any]:
@@ -563,16 +583,131 @@ _TRACK_LABELS = (
 )
 
 
-def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
-                      images: Mapping[str, Path | bytes]) -> str:
-    """The self-contained report page (inline CSS, PNGs as data URIs, no scripts)."""
+_PAGE_CSS = """
+.lead { font-size: 1.05em; }
+.headline { display: flex; flex-wrap: wrap; gap: 0.8em; margin: 1em 0; }
+.headline > div { flex: 1 1 170px; border: 1px solid #ddd; border-radius: 4px;
+                padding: 0.5em 0.8em; background: #fafafa; }
+.headline .value { font-size: 1.6em; font-weight: 600; font-variant-numeric: tabular-nums; }
+.headline .label { font-weight: 600; }
+.headline .what { color: #555; font-size: 0.8em; }
+.track-table-wrap { max-height: 32em; overflow: auto; border: 1px solid #eee; }
+table.tracks { border-collapse: collapse; font-size: 0.85em; width: 100%; }
+table.tracks th { position: sticky; top: 0; background: #f4f4f4; text-align: left; }
+table.tracks th, table.tracks td { border-bottom: 1px solid #eee; padding: 0.2em 0.6em; }
+table.tracks td { white-space: nowrap; }
+table.tracks td.num { text-align: right; font-variant-numeric: tabular-nums; }
+@media print { .tk-map, .track-table-wrap { max-height: none; overflow: visible; }
+               .tk-map { display: none; } }
+"""
+
+#: the track table's columns on the page: (column, heading, scale, digits)
+_TABLE_COLUMNS = (("id", "track", None, 0), ("identity", "identity", None, 0),
+                  ("start_utc", "start (UTC)", None, 0), ("end_utc", "end (UTC)", None, 0),
+                  ("duration_s", "duration (min)", 1 / 60, 1),
+                  ("distance_m", "distance (km)", 1e-3, 2),
+                  ("mean_speed_m_s", "mean speed (kn)", 3600 / 1852, 1),
+                  ("max_speed_m_s", "max speed (kn)", 3600 / 1852, 1),
+                  ("longest_coast_s", "longest coast (s)", 1.0, 0), ("status", "status", None, 0))
+_IDENTITY = {"ais": "MMSI", "opensky": "ICAO"}
+
+
+def _headline_html(rep: TrackReport, metrics: Mapping[str, Any]) -> list[str]:
     esc = html.escape
-    parts = ["<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
-             '<meta name="viewport" content="width=device-width, initial-scale=1">',
-             f"<title>trackkit track: {esc(rep.title)}</title>",
-             f"<style>{CSS}</style></head>", "<body>", f"<h1>{esc(rep.title)}</h1>",
-             f'<p class="meta">Tracks from {esc(rep.source)} ({esc(rep.fmt)}). Generated by '
-             f"trackkit {__version__}.</p>"]
+    cards = [f'<div><div class="label">{esc(label)}</div><div class="value">{esc(value)}</div>'
+             f'<div class="what">{esc(what)}</div></div>'
+             for label, value, what in headline_figures(metrics, rep.history.times, rep.fmt)]
+    return ['<div class="headline">', *cards, "</div>"]
+
+
+def _lead(rep: TrackReport, metrics: Mapping[str, Any]) -> str:
+    t = rep.history.times
+    minutes = (t[-1] - t[0]) / 60 if t.size > 1 else 0.0
+    start = ""
+    if rep.epoch is not None and t.size:
+        start = " from " + str(np.datetime_as_string(_utc(rep.epoch, t[:1])[0], unit="s")) + " UTC"
+    how = (f"through a virtual radar; scored against the {rep.background_label}"
+           if rep.truth is not None else f"from its {rep.background_label}")
+    return (f'<p class="lead">{metrics["tracks_confirmed"]:,} confirmed tracks in '
+            f"{metrics['scans']:,} scans ({minutes:.1f} min{html.escape(start)}) of "
+            f"{html.escape(Path(rep.source).name or rep.title)}, {html.escape(how)}.</p>")
+
+
+def _cell(v: Any, scale: float | None, digits: int) -> str:
+    if scale is None:
+        return f"<td>{html.escape('' if v is None else str(v))}</td>"
+    ok = v is not None and math.isfinite(v)
+    return f'<td class="num">{f"{v * scale:,.{digits}f}" if ok else "n/a"}</td>'
+
+
+def track_table_html(table: pa.Table, kind: str = "") -> str:
+    """The track table (``track_table``) as an HTML table, every text escaped."""
+    esc = html.escape
+    cols = [c for c in _TABLE_COLUMNS if c[0] in table.column_names]
+    if table.num_rows and not any(table["identity"].to_pylist()):
+        cols = [c for c in cols if c[0] != "identity"]
+    label = _IDENTITY.get(kind, "identity")
+    head = "".join(f"<th>{esc(label if c[0] == 'identity' else c[1])}</th>" for c in cols)
+    data = {c[0]: table[c[0]].to_pylist() for c in cols}
+    rows = ["<tr>" + "".join(_cell(data[c][i], s, d) for c, _, s, d in cols) + "</tr>"
+            for i in range(table.num_rows)]
+    return "\n".join(['<div class="track-table-wrap"><table class="tracks">',
+                      f"<thead><tr>{head}</tr></thead><tbody>", *rows,
+                      "</tbody></table></div>"])
+
+
+def _results_html(metrics: Mapping[str, Any]) -> list[str]:
+    """The run's counts, GOSPA and the track-level counts in full."""
+    parts = [_table([("scans", metrics["scans"]), ("tracks started", metrics["tracks_started"]),
+                     ("tracks confirmed", metrics["tracks_confirmed"]),
+                     ("mean confirmed tracks per scan", metrics["mean_confirmed_per_scan"])])]
+    g = metrics.get("gospa")
+    if g is None:
+        return parts + ["<p>No truth: GOSPA and the track-level counts need reported "
+                        "positions (AIS or ADS-B with --as-radar).</p>"]
+    c = g["c"]
+    parts.append(_table([
+        ("mean GOSPA (m)", g["mean"]), ("RMS GOSPA (m)", g["rms"]),
+        ("localisation part, mean (m^2)", g["localisation"]),
+        ("missed part, mean (m^2)", g["missed"]), ("false part, mean (m^2)", g["false"]),
+        ("objects in range per scan", g["objects_per_scan"]),
+        ("missed objects per scan", g["missed_per_scan"]),
+        ("false tracks per scan", g["false_per_scan"]),
+    ], caption=f"GOSPA of the confirmed tracks against the reported positions, per scan, "
+               f"c = {c:g} m, p = 2, alpha = 2: GOSPA^2 = localisation + missed + false, "
+               f"a missed object or a false track costing c^2/2."))
+    tr = metrics.get("tracks", {})
+    parts.append(_table([(label, tr[k]) for k, label in _TRACK_LABELS if k in tr],
+                        caption=f"Track-level counts: objects and confirmed tracks paired "
+                                f"per scan by the GOSPA assignment (within {c:g} m)."))
+    return parts + _other_metrics(metrics)
+
+
+_SHOWN = {"scans", "tracks_started", "tracks_confirmed", "mean_confirmed_per_scan", "gospa",
+          "tracks"}
+
+
+def _other_metrics(metrics: Mapping[str, Any]) -> list[str]:
+    """Any further figure of ``track_metrics`` (a number or text, alone or in a section);
+    series (lists) are in results.json only."""
+    def plain(v: Any) -> bool:
+        return v is None or isinstance(v, int | float | str | np.generic)
+
+    extra = {k: v for k, v in metrics.items() if k not in _SHOWN and not k.startswith("_")}
+    parts = []
+    alone = [(k.replace("_", " "), v) for k, v in extra.items() if plain(v)]
+    if alone:
+        parts.append(_table(alone))
+    for k, v in extra.items():
+        rows = ([(a.replace("_", " "), b) for a, b in v.items() if plain(b)]
+                if isinstance(v, Mapping) else [])
+        if rows:
+            parts.append(_table(rows, caption=k.replace("_", " ")))
+    return parts
+
+
+def _input_html(rep: TrackReport) -> list[str]:
+    esc = html.escape
     inp = _input_document(rep.read, rep.source, rep.fmt)
     labels = {"file": "file", "format": "format", "records_read": "records read",
               "records_kept": "records kept", "records_skipped": "records skipped",
@@ -580,8 +715,8 @@ def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
               "duplicates_dropped": "exact duplicates dropped",
               "out_of_order_sorted": "records out of time order (sorted)",
               "not_given": "optional fields not given (kept as nan)", "epoch_utc": "t = 0 at"}
-    parts += ["<h2>Input</h2>", _table([(labels[k], v) for k, v in inp.items()
-                                       if v is not None])]
+    parts = ["<h2>Input</h2>", _table([(labels.get(k, k), v) for k, v in inp.items()
+                                      if v is not None])]
     if rep.read is not None and rep.read.out_of_order:
         parts.append(f"<p>{rep.read.out_of_order} records were out of time order in the file; "
                      "they were sorted by time before tracking.</p>")
@@ -591,43 +726,54 @@ def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
                      f"(all in {SKIPPED_CSV}):</p>\n<ul>")
         parts += [f"<li><code>{esc(str(b))}</code></li>" for b in shown]
         parts.append("</ul>")
-    for section, values in rep.config.items():
-        parts += [f"<h2>{esc(section[:1].upper() + section[1:])}</h2>",
-                  _table(list(values.items()))]
-    parts.append("<h2>Results</h2>")
-    rows = [("scans", metrics["scans"]), ("tracks started", metrics["tracks_started"]),
-            ("tracks confirmed", metrics["tracks_confirmed"]),
-            ("mean confirmed tracks per scan", metrics["mean_confirmed_per_scan"])]
-    parts.append(_table(rows))
+    return parts
+
+
+def _map_section(rep: TrackReport, table: pa.Table | None) -> list[str]:
+    data = map_data(rep.history, table=table, background=rep.background, site=rep.site,
+                    max_range=rep.max_range, frame=rep.frame, epoch=rep.epoch,
+                    identity_label=_IDENTITY.get(rep.fmt, "identity"),
+                    background_label=rep.background_label)
+    return ["<h2>Map</h2>", map_html(data)]
+
+
+def render_track_html(rep: TrackReport, metrics: Mapping[str, Any],
+                      images: Mapping[str, Path | bytes], table: pa.Table | None = None) -> str:
+    """The self-contained report page: the headline figures and the interactive map first,
+    then the track table (``table``, from ``track_table``), the settings in words, the
+    results in full, the input, the pictures for print and the settings as raw keys. CSS,
+    script, data and PNGs are inline: it opens with no network."""
+    esc = html.escape
+    parts = ["<!DOCTYPE html>", '<html lang="en">', '<head><meta charset="utf-8">',
+             '<meta name="viewport" content="width=device-width, initial-scale=1">',
+             f"<title>trackkit track: {esc(rep.title)}</title>",
+             f"<style>{CSS}{_PAGE_CSS}{MAP_CSS}</style></head>", "<body>",
+             f"<h1>{esc(rep.title)}</h1>",
+             f'<p class="meta">Tracks from {esc(rep.source)} ({esc(rep.fmt)}). Generated by '
+             f"trackkit {__version__}.</p>", _lead(rep, metrics)]
+    parts += _headline_html(rep, metrics)
     if metrics["tracks_confirmed"] == 0:
-        parts.append(f"<p>{html.escape(NO_TRACK_CONFIRMED)}</p>")
-    g = metrics.get("gospa")
-    if g is not None:
-        c = g["c"]
-        parts.append(_table([
-            ("mean GOSPA (m)", g["mean"]),
-            ("RMS GOSPA (m)", g["rms"]),
-            ("localisation part, mean (m^2)", g["localisation"]),
-            ("missed part, mean (m^2)", g["missed"]),
-            ("false part, mean (m^2)", g["false"]),
-            ("objects in range per scan", g["objects_per_scan"]),
-            ("missed objects per scan", g["missed_per_scan"]),
-            ("false tracks per scan", g["false_per_scan"]),
-        ], caption=f"GOSPA of the confirmed tracks against the reported positions, per scan, "
-                   f"c = {c:g} m, p = 2, alpha = 2: GOSPA^2 = localisation + missed + false, "
-                   f"a missed object or a false track costing c^2/2."))
-        tr = metrics.get("tracks", {})
-        parts.append(_table([(label, tr[k]) for k, label in _TRACK_LABELS if k in tr],
-                            caption=f"Track-level counts: objects and confirmed tracks paired "
-                                    f"per scan by the GOSPA assignment (within {c:g} m)."))
-    else:
-        parts.append("<p>No truth: GOSPA and the track-level counts need reported positions "
-                     "(AIS or ADS-B with --as-radar).</p>")
+        parts.append(f"<p>{esc(NO_TRACK_CONFIRMED)}</p>")
+    parts += _map_section(rep, table)
+    if table is not None:
+        who = ("; the identity is the reporting identity of the object the track was paired "
+               "with on most of its scans" if any(table["identity"].to_pylist()) else "")
+        parts += [f"<h2>Tracks</h2>\n<p>One row per confirmed track (also in "
+                  f"{TRACKS_SUMMARY_CSV}, in SI units){who}.</p>",
+                  track_table_html(table, rep.fmt)]
+    parts.append("<h2>Settings</h2>")
+    parts += [f"<h3>{esc(title)}</h3>\n<p>{esc(text)}</p>"
+              for title, text in settings_in_words(rep.config)]
+    parts += ["<h2>Results in full</h2>", *_results_html(metrics), *_input_html(rep)]
     captions = {"tracks": "Confirmed tracks (coloured) over the "
                           f"{rep.background_label} (grey), east and north in km.",
                 "gospa": "GOSPA against time; below, the objects in range, the confirmed "
                          "tracks and the pairs within the cut-off."}
-    parts += notes_and_figures(rep.notes, images, captions)
+    parts += notes_and_figures(list(rep.notes), images, captions)
+    if rep.config:
+        parts.append("<h2>Settings as in results.json</h2>")
+        parts += [_table(list(values.items()), caption=section)
+                  for section, values in rep.config.items()]
     parts += ["</body>", "</html>", ""]
     return "\n".join(parts)
 
@@ -638,8 +784,12 @@ def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
                             sigma_bearing=None if sigma_deg is None else math.radians(sigma_deg))
     table = history_table(rep.history, epoch=rep.epoch, frame=rep.frame,
                           smoothed=rep.smoothed)
+    summary = track_table(rep.history, truth=rep.truth, c=rep.gospa_c,
+                          object_ids=rep.object_ids, epoch=rep.epoch)
     out = {"parquet": write_tracks_parquet(table, folder / TRACKS_PARQUET),
            "csv": write_tracks_csv(table, folder / TRACKS_CSV)}
+    out["summary"] = folder / TRACKS_SUMMARY_CSV
+    _write_csv(summary, out["summary"])
     if rep.frame is not None:
         out["geojson"] = write_tracks_geojson(
             tracks_geojson(rep.history, rep.frame, epoch=rep.epoch, site=rep.site,
@@ -659,7 +809,7 @@ def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
                                              epoch=rep.epoch), folder / GOSPA_PNG)
     out.update({f"{k}_png": v for k, v in images.items()})
     out["html"] = folder / REPORT_HTML
-    out["html"].write_text(render_track_html(rep, metrics, images), encoding="utf-8")
+    out["html"].write_text(render_track_html(rep, metrics, images, summary), encoding="utf-8")
     doc = results_document(rep, metrics)
     out["results"] = folder / RESULTS_JSON
     out["results"].write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n",

@@ -25,7 +25,9 @@ class TrackHistory(NamedTuple):
     their ``ids``, ``status`` (``TrackStatus``), state ``mean (N, n)`` and covariance
     diagonal ``var (N, n)``. Per scan: ``times``, gated ``pairs``, tracks ``started`` and
     ``deleted``, and the JPDA clusters whose marginals were ``approximated``. ``cov (N, n,
-    n)`` is the full covariance (what a smoother needs; None in a history made without it)."""
+    n)`` is the full covariance (what a smoother needs); ``hit (N,)`` whether the row's track
+    was updated with a plot at that scan (a new track is, by its plot); either None in a
+    history made without it."""
 
     times: Array
     offsets: NDArray[np.int64]
@@ -38,6 +40,7 @@ class TrackHistory(NamedTuple):
     deleted: NDArray[np.int64]
     approximated: NDArray[np.int64]
     cov: Array | None = None
+    hit: NDArray[np.bool_] | None = None
 
     def confirmed(self, dims: tuple[int, ...] = (0, 1)) -> Frames:
         """The confirmed tracks per scan as ``Frames`` of the state components ``dims``
@@ -57,12 +60,14 @@ def run_tracker(tracker: Tracker, scans: Iterable[Scan], tracks: Tracks | None =
     for s, scan in enumerate(scans):
         if tracks is None:
             tracks = tracker.init(float(scan.time))
+        before = tracks.ids
         tracks = tracker.step(tracks, scan)
         est = tracker.estimate(tracks.belief)
         info = tracks.info
         rows.append((float(scan.time), tracks.ids, tracks.state.status, est.mean,
                      np.diagonal(est.cov, axis1=-2, axis2=-1), info.pairs, info.started.size,
-                     info.deleted.size, info.approximated, est.cov))
+                     info.deleted.size, info.approximated, est.cov,
+                     _hits_now(before, info.hit, tracks.ids)))
         if progress is not None:
             progress(s + 1)
     if tracks is None:
@@ -81,5 +86,20 @@ def run_tracker(tracker: Tracker, scans: Iterable[Scan], tracks: Tracks | None =
         deleted=np.array([r[7] for r in rows], np.int64),
         approximated=np.array([r[8] for r in rows], np.int64),
         cov=np.concatenate([r[9] for r in rows]).reshape(-1, n, n),
+        hit=np.concatenate([r[10] for r in rows]).astype(bool),
     )
     return history, tracks
+
+
+def _hits_now(before: NDArray[np.int64], hit: NDArray[np.bool_],
+              after: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """The step's hits (over the tracks ``before`` it) for the tracks ``after`` it: a
+    surviving track keeps its hit, a new one was started by a plot."""
+    out = np.ones(after.size, bool)
+    if before.size:
+        sorter = np.argsort(before, kind="stable")
+        pos = np.minimum(np.searchsorted(before, after, sorter=sorter), before.size - 1)
+        idx = sorter[pos]
+        old = before[idx] == after
+        out[old] = np.asarray(hit, bool)[idx[old]]
+    return out

@@ -26,8 +26,8 @@ from typing import Any, Literal
 
 from trackkit.io import read_header
 
-__all__ = ["TRACK_PROFILES", "Recording", "TrackOptions", "TrackProfile", "TrackingResult",
-           "open_recording", "track_recording"]
+__all__ = ["DEFAULT_SAMPLE", "TRACK_PROFILES", "Recording", "TrackOptions", "TrackProfile",
+           "TrackingResult", "open_recording", "sample_sentence", "track_recording"]
 
 Kind = Literal["ais", "opensky", "detections"]
 #: ``progress(stage, done, total)``: stage "reading" (bytes) or "tracking" (scans)
@@ -124,6 +124,20 @@ class TrackingResult:
     objects: int | None = None
     seen: int | None = None
     smoothed: Any = None  # tracking.smoothing.SmoothedTracks, row for row with the history
+    object_ids: Any = None  # the MMSI or icao24 of each object code of truth.ids
+
+
+#: what ``trackkit track`` tracks when given no file (as radar plots)
+DEFAULT_SAMPLE = "solent-ais"
+
+
+def sample_sentence(name: str) -> str:
+    """What ``trackkit track`` says first when it runs on a bundled sample by default."""
+    from trackkit.io import samples
+
+    return (f"No file given: tracking the sample shipped with trackkit, {name}: "
+            f"{samples.SAMPLES[name][1]}. Its positions go through a virtual radar, as with "
+            f"trackkit track {name} --as-radar.")
 
 
 def resolve_input(file: Path) -> Path:
@@ -370,7 +384,7 @@ def _radar_job(rec: Recording, reports: Any, read: Any) -> dict[str, Any]:
         / radar.volume, truth=run.truth, frame=frame, site=site, max_range=radar.max_range,
         background=reports.position[near], background_label="reported positions",
         config=config, notes=notes, objects=len(reports.ids), seen=run.objects_seen,
-        plots=n_plots)
+        plots=n_plots, object_ids=run.ids)
 
 
 def _detections_job(rec: Recording, scans: Any, read: Any, polar: bool) -> dict[str, Any]:
