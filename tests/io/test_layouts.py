@@ -259,3 +259,21 @@ def test_layout_names_and_profiles():
     assert kinds == {"solent": "ais", "noaa": "ais", "dma": "ais", "opensky": "opensky",
                      "nmea-ais": "ais", "sbs1": "opensky"}
     assert DMA_COLUMNS[0] == "# Timestamp"
+
+
+def test_nmea_without_receiver_times_is_timed_by_base_stations(tmp_path):
+    reps = fleet(2, 3, dt=10.0)  # UTC seconds 0 to 20 of the minute
+    base = sentences({"type": 4, "mmsi": 2_190_000, "year": 2024, "month": 1, "day": 5,
+                      "hour": 11, "minute": 59, "second": 58, "lat": 50.8, "lon": -1.1})[0]
+    lines = [sentences(position(reps[0]))[0], base]        # before the clock: no time
+    lines += [sentences(position(r))[0] for r in reps[1:]]
+    p = tmp_path / "plain.nmea"
+    p.write_text("\n".join(lines) + "\n")
+    r, rep = read_recording(p)
+    assert dict(rep.skipped) == {"no time": 1, "not a position report (type 4)": 1}
+    # each message at its own UTC second, in the minute nearest the base station's time
+    want = [np.datetime64("2024-01-05T12:00:00") + np.timedelta64(int(x.t) % 60, "s")
+            for x in reps[1:]]
+    got = sorted(zip(r.line.tolist(), r.absolute_time().astype("datetime64[s]").tolist(),
+                     strict=True))
+    assert [g[1] for g in got] == [w.astype(object) for w in want]

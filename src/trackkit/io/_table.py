@@ -600,13 +600,15 @@ class Accumulator:
         self.whole_rows = []
         cols = {}
         for f in self.fields:
-            parts = self.values[f.role]
+            # each column's blocks are let go as it is joined: the peak is one column twice
+            parts = self.values.pop(f.role)
             if f.kind == "text":
                 cols[f.role] = pa.concat_arrays([p.cast(pa.string()) for p in parts]) if parts \
                     else pa.array([], pa.string())
             else:
                 cols[f.role] = np.concatenate(parts) if parts else np.zeros(0)
         lines = np.concatenate(self.lines) if self.lines else np.zeros(0, np.int64)
+        self.lines = []
         bl = np.sort(np.concatenate(self.bad_lines)) if self.bad_lines else np.zeros(0, np.int64)
         self.bad.sort(key=lambda r: r.line)
         return Table(self.path, cols, lines.astype(np.int64), self.rows, self.skipped,

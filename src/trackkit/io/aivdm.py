@@ -8,8 +8,11 @@ block before it (``\\s:rx1,c:1704456000*hh\\!AIVDM,...``; ``c`` is unix seconds,
 milliseconds when it has more than ten digits), or a unix time or an ISO 8601 time before the
 sentence or after its checksum (``1704456000.25 !AIVDM,...``, ``2024-01-05T12:00:00Z;!AIVDM,...``,
 ``!AIVDM,...*hh,1704456000``). A line with no time takes the time of the last timed line above
-it in the file (receivers that time only some lines); before any timed line, a message has no
-time and is skipped ("no time").
+it in the file (receivers that time only some lines). A file with no receiver times is timed
+by its base stations: the UTC date and time of the last type 4 (or 11) report above, put at
+the message's own UTC second (the one nearest that time, within half a minute either way;
+at the base station's time when the message gives no second). A message before any of these
+has no time and is skipped ("no time").
 
 Multi-part messages (types 5, 19, 24 in two sentences) are reassembled by their sequential
 message id and channel; a part missing (a broken pair) makes the message skipped as
@@ -166,6 +169,31 @@ class _Chunk:
         return cols
 
 
+def _utc(msg) -> int | None:
+    """A base station report's UTC time (ns), None when it gives none."""
+    try:
+        when = np.datetime64(f"{msg.year:04d}-{msg.month:02d}-{msg.day:02d}T{msg.hour:02d}:"
+                             f"{msg.minute:02d}:{msg.second:02d}", "ns")
+    except ValueError:
+        return None
+    ns = int(when.astype(np.int64))
+    return ns if msg.year >= 1900 and msg.second < 60 else None
+
+
+def _at_second(clock: int, second: int) -> int:
+    """The time at UTC second ``second`` nearest ``clock`` (ns); ``clock`` for 60 and above
+    (not available)."""
+    if not 0 <= second < 60:
+        return clock
+    minute = 60_000_000_000
+    t = clock - clock % minute + second * 1_000_000_000
+    if t - clock > minute // 2:
+        t -= minute
+    elif clock - t > minute // 2:
+        t += minute
+    return t
+
+
 def _decode(sentences: list[str]):
     """The message of a sentence or of the parts of a multi-part one, else the error."""
     import pyais
@@ -185,6 +213,7 @@ class _Reader:
         self.acc, self.chunk = acc, _Chunk()
         self.pending: dict[tuple[str, str], tuple[int, int | None, list[str], int]] = {}
         self.last_time: int | None = None
+        self.clock: int | None = None  # the last base station's UTC time (ns)
 
     def incomplete(self, line: int, sentences: list[str], count: int) -> None:
         self.acc.bad_row(line, "*", "incomplete multi-part message", sentences[0],
@@ -227,6 +256,10 @@ class _Reader:
 
     def message(self, number: int, t: int | None, sentences: list[str]) -> None:
         msg, error = _decode(sentences)
+        if msg is not None and msg.msg_type in (4, 11):
+            self.clock = _utc(msg) or self.clock
+        if msg is not None and t is None and self.clock is not None:
+            t = _at_second(self.clock, getattr(msg, "second", 60))
         if msg is None:
             self.acc.bad_row(number, "*", "malformed", " ".join(sentences),
                              f"a payload pyais decodes ({error})")

@@ -161,9 +161,10 @@ def open_recording(path: Path | str, options: TrackOptions) -> Recording:
     from trackkit.io import recognise
 
     file = resolve_input(Path(path))
-    header = read_header(file)
     parquet = file.suffix.lower() in (".parquet", ".pq")
     layout = None if options.columns or parquet else recognise(file)
+    # NMEA and SBS-1 lines have no header
+    header = [] if layout is not None and not layout.columns else read_header(file)
     if layout is not None and options.fmt not in (None, layout.kind):
         layout = None  # the kind the user names wins; read as that kind with --columns
     kind = options.fmt or (layout.kind if layout is not None else
