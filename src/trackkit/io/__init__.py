@@ -11,6 +11,9 @@
 Every reader validates with array operations, names a bad record's file, line and column,
 and with ``on_bad="skip"`` (the default) skips and counts it (``on_bad="stop"`` raises at the
 first). ``report.rows_read == report.rows_kept + report.n_skipped + report.duplicates``.
+The AIS and ADS-B readers need only a record's time, identity and position: an optional field
+(course, speed, heading, altitude) that is bad or "not available" is set missing, the record
+kept, and counted by field and reason in ``report.set_missing``.
 Positions are converted once to a local east-north-up frame (:class:`EnuFrame`, x east,
 y north, z up, metres) at the data's median position or a given reference; times are float
 seconds from ``report.epoch``.
