@@ -13,8 +13,9 @@ are read to tell. The layouts:
 * ``solent``: ``Time, MMSI, Latitude_degrees, Longitude_degrees, COG_degrees, SOG_knots``
   (the Solent recording of Stone Soup's demo data);
 * ``noaa``: NOAA MarineCadastre (``MMSI, BaseDateTime, LAT, LON, SOG, COG, Heading, ...``;
-  releases differ in column order and extra columns). COG -49.6 is "not available" there
-  (360 as a 12-bit field read as signed), as 360 is;
+  releases differ in column order, the spelling ``TranscieverClass`` and extra columns such
+  as ``ETA``). COG -49.6 is "not available" there (360 as a 12-bit field read as signed), as
+  360 is; any other negative course is set missing as "outside [0, 360]";
 * ``dma``: the Danish Maritime Authority (``# Timestamp, Type of mobile, MMSI, Latitude,
   Longitude, ..., ROT, SOG, COG, Heading, ...``), times ``dd/mm/yyyy HH:MM:SS``;
 * ``opensky``: OpenSky state vectors (``time, icao24, lat, lon, ...``);
