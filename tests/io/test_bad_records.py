@@ -23,7 +23,8 @@ GARBAGE = ("abc", "1.2.3", "--5", "0x10", "5e", "1_0", ".", "e5", "12a")
 BAD_TIMES = ("2016-13-01 00:00:00", "yesterday", "2016-01-12 25:00:00", "12/01/2016 13:00:00",
              "2016-01-12 13:02", "2016-01-12T13:02:11.1234567891", "1452603731")
 
-# one corruption of one field of a good row: (kind, column index, reason)
+# one corruption of one field of a good row: (kind, column index, reason); a bad course or
+# speed (columns 4, 5: optional) is set missing, the record kept, counted under the reason
 BAD_KINDS = [
     ("garbage", 2, "not a number"), ("garbage", 3, "not a number"),
     ("garbage", 4, "not a number"), ("garbage", 5, "not a number"),
@@ -33,10 +34,22 @@ BAD_KINDS = [
     ("lon_range", 3, "longitude outside [-180, 180]"),
     ("nonfinite", 2, "not finite"), ("nonfinite", 3, "not finite"),
     ("nonfinite", 4, "not finite"), ("nonfinite", 5, "not finite"),
-    ("neg_speed", 5, "negative speed"), ("course_range", 4, "course outside [0, 360]"),
+    ("neg_speed", 5, "negative"), ("course_range", 4, "outside [0, 360]"),
     ("bad_time", 0, "bad time"), ("extra", None, "wrong number of fields"),
     ("missing", None, "wrong number of fields"), ("blank", None, "blank line"),
 ]
+OPTIONAL = {4: "course", 5: "speed"}
+
+
+def _value(text: str, lo: float, hi: float, code: str) -> float:
+    """A course or speed as the reader keeps it: nan when blank, the code, or bad."""
+    try:
+        v = float(text)
+    except ValueError:
+        return np.nan
+    if "_" in text:  # Python's float reads 1_0 as 10; a file's number has no underscores
+        return np.nan
+    return v if text != code and lo <= v <= hi else np.nan
 
 
 @st.composite
@@ -76,10 +89,12 @@ def files(draw):
             f[c] = draw(st.sampled_from(GARBAGE))
         elif kind == "empty":
             f[c] = draw(st.sampled_from(["", "  "]))
-        elif kind == "lat_range":
-            f[c] = repr(draw(st.floats(90.001, 1e4)) * draw(st.sampled_from([-1, 1])))
+        elif kind == "lat_range":  # 91 is "not available", counted apart
+            f[c] = repr(draw(st.floats(90.001, 1e4).filter(lambda v: v != 91.0))
+                        * draw(st.sampled_from([-1, 1])))
         elif kind == "lon_range":
-            f[c] = repr(draw(st.floats(180.001, 1e4)) * draw(st.sampled_from([-1, 1])))
+            f[c] = repr(draw(st.floats(180.001, 1e4).filter(lambda v: v != 181.0))
+                        * draw(st.sampled_from([-1, 1])))
         elif kind == "nonfinite":
             f[c] = draw(st.sampled_from(["nan", "inf", "-inf", "NaN", "1e999"]))
         elif kind == "neg_speed":
@@ -92,6 +107,11 @@ def files(draw):
             f = f + ["junk"]
         elif kind == "missing":
             f = f[:draw(st.integers(1, 5))]
+        if c in OPTIONAL:  # kept, the value set missing
+            row = {**row, "fields": f, "set_missing": (OPTIONAL[c], reason)}
+            rows.append(row)
+            goods.append(row)
+            continue
         rows.append({"fields": f, "bad": (None if c is None else COLS[c], reason),
                      "blank": kind == "blank"})
     return rows
@@ -134,6 +154,14 @@ def test_every_bad_record_is_named_and_no_good_record_lost(rows, block_size):
         for _, reason in bad.values():
             counts[reason] = counts.get(reason, 0) + 1
         assert dict(rep.skipped) == counts
+        # a bad course or speed is counted by field and reason, its record kept (an exact
+        # duplicate's too: the values are counted before duplicates are dropped)
+        soft = {}
+        for ln in list(good) + dups:
+            if "set_missing" in lines[ln]:
+                soft[lines[ln]["set_missing"]] = soft.get(lines[ln]["set_missing"], 0) + 1
+        for (label, reason), k in soft.items():
+            assert rep.set_missing[label][reason] == k
 
         # the kept records are exactly the good ones (duplicates: the first copy kept)
         assert sorted(r.line.tolist()) == sorted(good)
@@ -152,8 +180,8 @@ def test_every_bad_record_is_named_and_no_good_record_lost(rows, block_size):
         dlon = (lon - f[:, 3].astype(float) + 180) % 360 - 180  # +-180 are one meridian
         assert np.max(np.abs(dlon)) < 1e-9 * max(1.0, 1 / max(np.cos(np.deg2rad(
             np.abs(lat).max())), 1e-12))
-        sog = np.array([float(s) if s else np.nan for s in f[:, 5]])
-        cog = np.array([float(c) if c not in ("", "360") else np.nan for c in f[:, 4]])
+        sog = np.array([_value(s, 0, 1000 / KNOT, "102.3") for s in f[:, 5]])
+        cog = np.array([_value(c, 0, 360, "360") for c in f[:, 4]])
         cog = np.where((sog == 0) & np.isnan(cog), 0.0, cog)
         np.testing.assert_allclose(r.vx, sog * KNOT * np.sin(np.deg2rad(cog)), atol=1e-12)
         np.testing.assert_allclose(r.vy, sog * KNOT * np.cos(np.deg2rad(cog)), atol=1e-12)
@@ -310,12 +338,16 @@ def test_finite_but_absurd_values_are_bad_records(tmp_path):
         warnings.simplefilter("error")
         r, rep = read_opensky_csv(p)
     assert [(b.line, b.column, b.reason, b.value) for b in rep.bad] == [
-        (3, "velocity", "|speed| above 1000", "1e300"),
-        (4, "vertrate", "|vertrate| above 1000", "-1500"),
-        (5, "geoaltitude", "geoaltitude outside [-1000, 100000]", "2e5"),
         (6, "lat", "latitude outside [-90, 90]", "91"),
         (7, "lon", "longitude outside [-180, 180]", "-1e300")]
-    assert r.line.tolist() == [2, 8]
+    # an absurd optional value is set missing, its record kept
+    assert r.line.tolist() == [2, 3, 4, 5, 8]
+    assert {k: dict(v) for k, v in rep.set_missing.items()} == {
+        "speed": {"magnitude above 1000": 1},
+        "vertrate": {"magnitude above 1000": 1},
+        "geoaltitude": {"outside [-1000, 100000]": 1}}
+    assert np.isnan(r.vx[r.line == 3]).all() and np.isnan(r.vz[r.line == 4]).all()
+    assert not r.extra["has_altitude"][r.line == 5].any()
     # detections: the limit of 1e8 m in the file's units, bearings within a turn either way
     p = tmp_path / "d.csv"
     p.write_text("time,r,b\n0,99999,-359\n1,100001,2\n2,5,361\n3,5,-360\n1e11,5,5\n")

@@ -67,7 +67,7 @@ def _same(a: np.ndarray) -> np.ndarray:
 
 def finish(table: Table, *, time_format: str, epoch, reference: Reference,
            alt: np.ndarray | None, vel: tuple[np.ndarray, np.ndarray, np.ndarray],
-           extra: dict[str, np.ndarray]) -> tuple[Reports, ReadReport]:
+           extra: dict[str, np.ndarray], layout: str = "") -> tuple[Reports, ReadReport]:
     c = table.columns
     t, ep = relative_times(c["time"], time_format, epoch)
     lat, lon = c["lat"], c["lon"]
@@ -102,5 +102,5 @@ def finish(table: Table, *, time_format: str, epoch, reference: Reference,
         path=table.path, rows_read=table.rows_read, rows_kept=len(order),
         skipped=dict(table.skipped), bad=tuple(table.bad), skipped_lines=table.skipped_lines,
         out_of_order=out_of_order, duplicates=duplicates, not_given=dict(table.not_given),
-        epoch=ep)
+        epoch=ep, set_missing=table.set_missing, layout=layout)
     return reports, report

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import codecs
 import csv
+import dataclasses
 import os
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -36,6 +37,7 @@ __all__ = ["Field", "Table", "read_csv_table", "read_parquet_table", "parse_epoc
 
 Progress = Callable[[int, int], None]
 RowCheck = Callable[[dict], list]
+Prepare = Callable[[dict], dict]
 
 # What pyarrow's string-to-double cast accepts (checked against it in the tests), so that the
 # cast of the matching strings cannot fail; everything else is "not a number".
@@ -84,10 +86,13 @@ class Field:
     of a ``required`` field makes the record bad (reason ``missing``, which is soft, i.e.
     skipped even with ``on_bad="stop"``, when ``missing_soft``); of an optional field it is
     "not given": nan (numbers), False (bool), counted in ``not_given``. ``unavailable`` is a
-    code that the source uses for "not available" (AIS COG 360): read as not given. ``lo,
-    hi`` bound valid numbers (inclusive); ``limit`` bounds their magnitude (in the file's
-    units; ``limit_why`` says what it is in words), a physical limit such as
-    :data:`MAX_DISTANCE`.
+    code, or a tuple of codes, that the source uses for "not available" (AIS COG 360): an
+    optional field's is read as not given; a required field's makes the record skipped, softly
+    (reason ``"<unavailable_reason> (<what> <code>)"``). ``lo, hi`` bound valid numbers
+    (inclusive); ``limit`` bounds their magnitude (in the file's units; ``limit_why`` says what
+    it is in words), a physical limit such as :data:`MAX_DISTANCE`. With ``bad_is_missing`` an
+    optional number that is not a number, not finite, out of range or beyond the limit is set
+    missing (the record kept), counted by field and reason, instead of making the record bad.
     """
 
     role: str
@@ -103,10 +108,21 @@ class Field:
     missing_soft: bool = False
     limit: float | None = None
     limit_why: str = ""
+    bad_is_missing: bool = False
+    unavailable_reason: str = "not available"
 
     @property
     def label(self) -> str:
         return self.what or self.role
+
+    @property
+    def codes(self) -> tuple[float, ...]:
+        """The "not available" codes."""
+        u = self.unavailable
+        return () if u is None else tuple(u) if isinstance(u, tuple) else (u,)
+
+    def unavailable_text(self, code: float) -> str:
+        return f"{self.unavailable_reason} ({self.label} {code:g})"
 
     def range_text(self) -> str:
         lo = "-inf" if self.lo is None else f"{self.lo:g}"
@@ -127,6 +143,7 @@ class Table:
     bad: list
     skipped_lines: np.ndarray
     not_given: Counter
+    set_missing: dict = dataclasses.field(default_factory=dict)  # {label: Counter(reason)}
 
 
 # -- value conversion -------------------------------------------------------------------------
@@ -338,42 +355,21 @@ def _undecodable(arr: pa.Array) -> list:
 
 
 def convert(field: Field, raw: pa.Array):
-    """Convert one column of a block. Returns ``(values, entries, not_given)`` where
+    """Convert one column of a block. Returns ``(values, entries, missing)`` where
     entries is a list of ``(row indices, reason, expected)`` for the bad values and
-    not_given masks the optional values left blank (or "not available")."""
+    missing a list of ``(mask, reason)`` for the optional values set missing (blank, "not
+    available", or bad with ``bad_is_missing``)."""
     arr = pc.utf8_trim_whitespace(raw) if _is_text(raw) else raw
     blank = _blank(arr)
     entries = []
     if field.required and blank.any():
         entries.append((np.flatnonzero(blank), field.missing, f"a {field.label}"))
     kind = field.kind
-    ng = blank if not field.required else np.zeros(len(blank), dtype=bool)
+    missing = [] if field.required else [(blank, "blank")]
     if kind == "text":
-        return arr, entries, ng
+        return arr, entries, missing
     if kind == "number":
-        v, nan_ = _numbers(arr)
-        notnum = nan_ & ~blank
-        entries.append((np.flatnonzero(notnum), "not a number", f"a decimal {field.label}"))
-        nonfin = ~blank & ~notnum & ~np.isfinite(v)
-        entries.append((np.flatnonzero(nonfin), "not finite", f"a finite {field.label}"))
-        given = ~blank & ~notnum & ~nonfin
-        unavail = np.zeros_like(given)
-        if field.unavailable is not None:
-            unavail = given & (v == field.unavailable)
-            given &= ~unavail
-        if field.lo is not None or field.hi is not None:
-            lo = -np.inf if field.lo is None else field.lo
-            hi = np.inf if field.hi is None else field.hi
-            out = given & ((v < lo) | (v > hi))
-            reason = (f"negative {field.label}" if lo == 0 and hi == np.inf
-                      else f"{field.label} outside {field.range_text()}")
-            entries.append((np.flatnonzero(out), reason,
-                            f"a {field.label} in {field.range_text()}"))
-        if field.limit is not None:
-            big = given & (np.abs(v) > field.limit)
-            entries.append((np.flatnonzero(big), f"|{field.label}| above {field.limit:g}",
-                            f"|{field.label}| at most {field.limit:g} ({field.limit_why})"))
-        return np.where(given, v, np.nan), entries, ng | unavail
+        return _convert_number(field, arr, blank, entries, missing)
     if kind == "time":
         v, bad = _times(arr, field.time_format)
         bad &= ~blank
@@ -385,37 +381,90 @@ def convert(field: Field, raw: pa.Array):
         entries.append((np.flatnonzero(far), "time out of range", (
             f"|time| at most {MAX_SECONDS:g} s" if field.time_format == "seconds" else
             "a time from 1900 to 2200 UTC")))
-        return v, entries, ng
+        return v, entries, missing
     if kind == "int":
         v, bad = _ints(arr)
         bad &= ~blank
         entries.append((np.flatnonzero(bad), f"bad {field.label}",
                         f"a non-negative integer {field.label}"))
-        return v, entries, ng
+        return v, entries, missing
     if kind == "bool":
         v, bad = _bools(arr)
         bad &= ~blank
         entries.append((np.flatnonzero(bad), "not a boolean", "True or False"))
-        return v & ~blank, entries, ng
+        return v & ~blank, entries, missing
     raise ValueError(f"Field {field.role!r}: kind {kind!r} is not known")
+
+
+def _convert_number(field: Field, arr: pa.Array, blank: np.ndarray, entries: list,
+                    missing: list):
+    """The number branch of :func:`convert`: each check gives a mask of the values it
+    rejects, which makes the record bad, or (optional, ``bad_is_missing``) the value missing."""
+    v, nan_ = _numbers(arr)
+    soft = field.bad_is_missing and not field.required
+
+    def reject(mask: np.ndarray, reason: str, expected: str) -> None:
+        if soft:
+            missing.append((mask, reason))
+        else:
+            entries.append((np.flatnonzero(mask), reason, expected))
+
+    notnum = nan_ & ~blank
+    reject(notnum, "not a number", f"a decimal {field.label}")
+    nonfin = ~blank & ~notnum & ~np.isfinite(v)
+    reject(nonfin, "not finite", f"a finite {field.label}")
+    given = ~blank & ~notnum & ~nonfin
+    for code in field.codes:
+        # codes are written with at most a few decimals, so compare as written
+        unavail = given & (np.abs(v - code) <= 1e-9 * max(1.0, abs(code)))
+        given &= ~unavail
+        if field.required:
+            entries.append((np.flatnonzero(unavail), field.unavailable_text(code),
+                            f"a {field.label} ({code:g} means not available)"))
+        else:
+            missing.append((unavail, f"not available ({code:g})"))
+    if field.lo is not None or field.hi is not None:
+        lo = -np.inf if field.lo is None else field.lo
+        hi = np.inf if field.hi is None else field.hi
+        out = given & ((v < lo) | (v > hi))
+        if soft:  # else the record is bad and its value stays, for the row checks
+            given &= ~out
+        negative = lo == 0 and hi == np.inf
+        if soft:
+            reject(out, "negative" if negative else f"outside {field.range_text()}", "")
+        else:
+            reject(out, f"negative {field.label}" if negative
+                   else f"{field.label} outside {field.range_text()}",
+                   f"a {field.label} in {field.range_text()}")
+    if field.limit is not None:
+        big = given & (np.abs(v) > field.limit)
+        if soft:
+            given &= ~big
+        reject(big, f"magnitude above {field.limit:g}" if soft else
+               f"|{field.label}| above {field.limit:g}",
+               f"|{field.label}| at most {field.limit:g} ({field.limit_why})")
+    return np.where(given, v, np.nan), entries, missing
 
 
 # -- the accumulator --------------------------------------------------------------------------
 
 
-class _Accumulator:
+class Accumulator:
     def __init__(self, path: str, fields: Sequence[Field], order: dict[str, int], on_bad: str,
                  soft: frozenset[str], max_listed: int, row_check: RowCheck | None,
                  unit: str):
         if on_bad not in ("skip", "stop"):
             raise ValueError(f"on_bad = {on_bad!r}; expected 'skip' or 'stop'")
         self.path, self.fields, self.order, self.on_bad = path, fields, order, on_bad
+        # a required field's "not available" code is the source saying so, not an error
+        soft = soft | {f.unavailable_text(c) for f in fields if f.required for c in f.codes}
         self.soft, self.max_listed, self.row_check, self.unit = soft, max_listed, row_check, unit
         self.values: dict[str, list] = {f.role: [] for f in fields}
         self.lines: list[np.ndarray] = []
         self.rows = 0
         self.skipped: Counter = Counter()
         self.not_given: Counter = Counter()
+        self.set_missing: dict[str, Counter] = {}
         self.bad: list[BadRecord] = []
         self.bad_lines: list[np.ndarray] = []
         self.whole_rows: list[BadRecord] = []  # wrong field counts, from the CSV parser
@@ -500,14 +549,42 @@ class _Accumulator:
                     break
         for r in sorted(recs, key=lambda r: r.line):
             self._record(r)
-        for label, ng in ngs.items():
-            if (k := int((ng & keep).sum())):
-                self.not_given[label] += k
+        for label, missing in ngs.items():
+            self._count_missing(label, missing, keep)
         for f in self.fields:
             v = values[f.role]
             self.values[f.role].append(v.filter(pa.array(keep)) if isinstance(v, pa.Array)
                                        else v[keep])
         self.lines.append(lines[keep])
+
+    def _count_missing(self, label: str, missing: list, keep: np.ndarray) -> None:
+        """Count the kept records' values set missing, by field (``not_given``) and by field
+        and reason (``set_missing``)."""
+        if not missing:
+            return
+        any_ = np.zeros(len(keep), dtype=bool)
+        for mask, reason in missing:
+            if (k := int((mask & keep).sum())):
+                self.set_missing.setdefault(label, Counter())[reason] += k
+            any_ |= mask
+        if (k := int((any_ & keep).sum())):
+            self.not_given[label] += k
+
+    def bad_row(self, line: int, column: str, reason: str, value: str, expected: str) -> None:
+        """A record skipped before its fields were read (a line that is not a sentence, a
+        message with no position): counted and listed in line order with the others."""
+        self.rows += 1
+        self.skipped[reason] += 1
+        self.bad_lines.append(np.array([line], dtype=np.int64))
+        self.whole_rows.append(BadRecord(self.path, line, column, reason, shown(value[:200]),
+                                         expected, self.unit))
+
+    def flush(self, last: int) -> None:
+        """Record the queued rows up to line ``last`` (a reader that calls :meth:`bad_row`
+        for lines with no record in :meth:`add` after them)."""
+        for r in [r for r in self.whole_rows if r.line <= last]:
+            self._record(r)
+        self.whole_rows = [r for r in self.whole_rows if r.line > last]
 
     def whole_row(self, line: int, expected: int, actual: int, text: str) -> None:
         """A record the CSV parser could not split into the header's fields."""
@@ -523,17 +600,20 @@ class _Accumulator:
         self.whole_rows = []
         cols = {}
         for f in self.fields:
-            parts = self.values[f.role]
+            # each column's blocks are let go as it is joined: the peak is one column twice
+            parts = self.values.pop(f.role)
             if f.kind == "text":
                 cols[f.role] = pa.concat_arrays([p.cast(pa.string()) for p in parts]) if parts \
                     else pa.array([], pa.string())
             else:
                 cols[f.role] = np.concatenate(parts) if parts else np.zeros(0)
         lines = np.concatenate(self.lines) if self.lines else np.zeros(0, np.int64)
+        self.lines = []
         bl = np.sort(np.concatenate(self.bad_lines)) if self.bad_lines else np.zeros(0, np.int64)
         self.bad.sort(key=lambda r: r.line)
         return Table(self.path, cols, lines.astype(np.int64), self.rows, self.skipped,
-                     self.bad[: self.max_listed], bl.astype(np.int64), self.not_given)
+                     self.bad[: self.max_listed], bl.astype(np.int64), self.not_given,
+                     self.set_missing)
 
 
 # -- readers ----------------------------------------------------------------------------------
@@ -565,28 +645,41 @@ def _check_columns(path: str, have: Sequence[str], fields: Sequence[Field], wher
 def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str = "skip",
                    progress: Progress | None = None, soft: frozenset[str] = frozenset(),
                    max_listed: int = 100, row_check: RowCheck | None = None,
-                   block_size: int | None = None) -> Table:
+                   block_size: int | None = None, *, names: Sequence[str] | None = None,
+                   prepare: Prepare | None = None,
+                   row_reason: Callable[[str], tuple[str, str] | None] | None = None
+                   ) -> Table:
     """Stream a CSV file through the fields, ``block_size`` bytes at a time (default
-    :data:`BLOCK_SIZE`); see the module docstring."""
+    :data:`BLOCK_SIZE`); see the module docstring. A file with no header gives its column
+    ``names`` (line 1 is then the first record). ``prepare(columns)`` may derive the fields'
+    columns of each block from the file's (by role; e.g. a time from a date and a time
+    column). ``row_reason(text)`` may name a record that has the wrong number of fields
+    ``(reason, expected)`` (a line of another kind, skipped under that reason)."""
     import pyarrow.csv as pacsv
 
     path = os.fspath(path)
-    header = csv_header(path)
-    _check_columns(path, header, fields, ":1")
+    header = list(names) if names is not None else csv_header(path)
+    _check_columns(path, header, fields, ":1" if names is None else "")
     order = {f.role: header.index(f.column) for f in fields}
-    acc = _Accumulator(path, fields, order, on_bad, soft, max_listed, row_check, "line")
+    acc = Accumulator(path, fields, order, on_bad, soft, max_listed, row_check, "line")
 
     rejected: list[int] = []  # lines the parser rejected (it may do so before a block is read)
+    first = 1 if names is not None else 2
 
     def invalid(row) -> str:
-        # row.number counts records from the header (line 1) on, blank lines included
-        rejected.append(int(row.number))
-        acc.whole_row(int(row.number), row.expected_columns, row.actual_columns, row.text)
+        # row.number is the physical line (the header, if any, is line 1), blank lines included
+        line = int(row.number)
+        rejected.append(line)
+        other = row_reason(row.text) if row_reason is not None else None
+        if other is not None:
+            acc.bad_row(line, "*", other[0], row.text, other[1])
+        else:
+            acc.whole_row(line, row.expected_columns, row.actual_columns, row.text)
         return "skip"
 
     wanted = sorted({f.column for f in fields}, key=header.index)
     size = os.path.getsize(path)
-    next_line = 2
+    next_line = first
     with open(path, "rb") as fh:
         text = _MarkedUtf8(fh)
         reader = pacsv.open_csv(
@@ -594,7 +687,8 @@ def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str
             # single-threaded: the parser then knows the line of a bad row, and memory stays
             # one block
             read_options=pacsv.ReadOptions(use_threads=False,
-                                           block_size=block_size or BLOCK_SIZE),
+                                           block_size=block_size or BLOCK_SIZE,
+                                           column_names=None if names is None else header),
             parse_options=pacsv.ParseOptions(invalid_row_handler=invalid,
                                              ignore_empty_lines=False),
             convert_options=pacsv.ConvertOptions(
@@ -611,6 +705,8 @@ def read_csv_table(path: str | os.PathLike, fields: Sequence[Field], on_bad: str
             if n:
                 next_line = int(lines[-1]) + 1
             cols = {f.role: batch.column(f.column) for f in fields}
+            if prepare is not None:
+                cols = prepare(cols)
             bad_bytes = {r: e for r, c in cols.items() if (e := _undecodable(c))} \
                 if text.marked else None
             acc.add(cols, lines, bad_bytes)
@@ -676,7 +772,7 @@ def read_parquet_table(path: str | os.PathLike, fields: Sequence[Field], on_bad:
     names = pf.schema_arrow.names
     _check_columns(path, names, fields, "")
     order = {f.role: names.index(f.column) for f in fields}
-    acc = _Accumulator(path, fields, order, on_bad, soft, max_listed, row_check, "row")
+    acc = Accumulator(path, fields, order, on_bad, soft, max_listed, row_check, "row")
     total = pf.metadata.num_rows
     size = os.path.getsize(path)
     done = 0

@@ -11,8 +11,10 @@ Altitudes are metres (``geoaltitude``, GNSS height, by default, else ``baroaltit
 other fills in where one is blank); velocity (m/s over ground) and heading (deg clockwise
 from north, true track) give vx, vy, and vertrate vz. ``onground`` and ``callsign`` are kept
 in ``reports.extra``. A record beyond physical limits is bad: latitude outside [-90, 90],
-longitude outside [-180, 180], speed or vertical rate above 1000 m/s (Mach 3) in magnitude,
-an altitude outside [-1 km, 100 km], a time outside 1900 to 2200 UTC.
+longitude outside [-180, 180], a time outside 1900 to 2200 UTC. An optional value beyond them
+(speed or vertical rate above 1000 m/s, Mach 3, in magnitude, an altitude outside [-1 km,
+100 km], a heading outside [0, 360]) or not a number is set missing, the record kept, and
+counted by field and reason (``report.set_missing``).
 """
 
 from __future__ import annotations
@@ -59,17 +61,17 @@ def read_opensky_csv(path: str | os.PathLike, on_bad: str = "skip", *,
               missing_soft=True),
     ]
     fast = dict(limit=MAX_SPEED, limit_why=f"in m/s; {MAX_SPEED:g} m/s, Mach 3")
+    opt = dict(required=False, bad_is_missing=True)  # a bad value is set missing, not the record
     optional = {
         "lastposupdate": Field("pos_time", "lastposupdate", "time", required=False,
                                time_format="unix", what="lastposupdate"),
-        "velocity": Field("speed", "velocity", required=False, lo=0.0, what="speed", **fast),
-        "heading": Field("heading", "heading", required=False, lo=0.0, hi=360.0,
-                         what="heading"),
-        "vertrate": Field("vertrate", "vertrate", required=False, what="vertrate", **fast),
-        "geoaltitude": Field("geo", "geoaltitude", required=False, lo=ALTITUDE[0],
-                             hi=ALTITUDE[1], what="geoaltitude"),
-        "baroaltitude": Field("baro", "baroaltitude", required=False, lo=ALTITUDE[0],
-                              hi=ALTITUDE[1], what="baroaltitude"),
+        "velocity": Field("speed", "velocity", lo=0.0, what="speed", **fast, **opt),
+        "heading": Field("heading", "heading", lo=0.0, hi=360.0, what="heading", **opt),
+        "vertrate": Field("vertrate", "vertrate", what="vertrate", **fast, **opt),
+        "geoaltitude": Field("geo", "geoaltitude", lo=ALTITUDE[0], hi=ALTITUDE[1],
+                             what="geoaltitude", **opt),
+        "baroaltitude": Field("baro", "baroaltitude", lo=ALTITUDE[0], hi=ALTITUDE[1],
+                              what="baroaltitude", **opt),
         "onground": Field("onground", "onground", "bool", required=False, what="onground"),
         "callsign": Field("callsign", "callsign", "text", required=False, what="callsign"),
     }

@@ -66,7 +66,10 @@ class ReadReport:
     * ``duplicates``: exact repeats (same id, time and position) dropped, the first kept;
     * ``not_given``: optional fields left blank (or holding a "not available" code), by field:
       the record is kept with nan there;
-    * ``epoch``: the absolute time of t = 0 (None when the file's times are already relative).
+    * ``set_missing``: the same values by field and reason (``{"course": {"not available
+      (360)": 12, "outside [0, 360]": 3}}``; "blank" for an empty field);
+    * ``epoch``: the absolute time of t = 0 (None when the file's times are already relative);
+    * ``layout``: the name of the file's layout (``trackkit.io.LAYOUTS``), "" when not known.
     """
 
     path: str
@@ -79,10 +82,14 @@ class ReadReport:
     duplicates: int = 0
     not_given: Mapping[str, int] = field(default_factory=dict)
     epoch: np.datetime64 | None = None
+    set_missing: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
+    layout: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "skipped", MappingProxyType(dict(self.skipped)))
         object.__setattr__(self, "not_given", MappingProxyType(dict(self.not_given)))
+        object.__setattr__(self, "set_missing", MappingProxyType(
+            {k: MappingProxyType(dict(v)) for k, v in self.set_missing.items()}))
         if self.rows_read != self.rows_kept + self.n_skipped + self.duplicates:
             raise AssertionError(
                 f"{self.path}: {self.rows_read} rows read but {self.rows_kept} kept + "
@@ -93,9 +100,18 @@ class ReadReport:
     def n_skipped(self) -> int:
         return int(sum(self.skipped.values()))
 
+    def _why(self, label: str) -> str:
+        """`` (12 not available (360), 3 outside [0, 360])``: why a field was set missing."""
+        why = self.set_missing.get(label)
+        if not why:
+            return ""
+        return " (" + ", ".join(f"{n} {r}" for r, n in sorted(why.items(),
+                                                               key=lambda kv: -kv[1])) + ")"
+
     def summary(self) -> str:
         """A few lines for a log or the CLI."""
-        lines = [f"{self.path}: {self.rows_read} records read, {self.rows_kept} kept"]
+        layout = f" ({self.layout} layout)" if self.layout else ""
+        lines = [f"{self.path}{layout}: {self.rows_read} records read, {self.rows_kept} kept"]
         if self.skipped:
             lines.append(f"  skipped {self.n_skipped}: " + ", ".join(
                 f"{n} {r}" for r, n in sorted(self.skipped.items(), key=lambda kv: -kv[1])))
@@ -108,7 +124,7 @@ class ReadReport:
             lines.append(f"  {self.out_of_order} records were out of time order and were sorted")
         if self.not_given:
             lines.append("  not given (kept as nan): " + ", ".join(
-                f"{f} {n}" for f, n in self.not_given.items()))
+                f"{f} {n}" + self._why(f) for f, n in self.not_given.items()))
         if self.epoch is not None:
             lines.append(f"  t = 0 at {self.epoch} UTC")
         return "\n".join(lines)

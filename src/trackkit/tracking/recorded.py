@@ -101,6 +101,7 @@ class Recording:
     header: list[str]
     options: TrackOptions
     settings: TrackProfile
+    layout: str = ""  # the recognised layout (trackkit.io.LAYOUTS), "" for --columns
 
 
 @dataclass
@@ -153,26 +154,37 @@ def resolve_input(file: Path) -> Path:
     return file
 
 
-def guess_format(path: Path, header: list[str]) -> Kind:
-    """The input's kind from its columns: AIS (MMSI), OpenSky (icao24) or detections."""
+def guess_format(path: Path, header: list[str], columns: bool = True) -> Kind:
+    """The input's kind from its columns: AIS (MMSI), OpenSky (icao24) or detections; an AIS
+    or OpenSky file in no known layout only with a column mapping (``columns``)."""
+    from trackkit.io.layouts import expected_layouts
+
     names = {h.strip().lower() for h in header}
-    if "mmsi" in names:
+    if columns and "mmsi" in names:
         return "ais"
-    if "icao24" in names:
+    if columns and "icao24" in names:
         return "opensky"
     if "time" in names and ({"x", "y"} <= names or {"range", "bearing"} <= names):
         return "detections"
-    raise ValueError(f"{path}: cannot tell the format from the columns "
-                     f"{', '.join(map(repr, header))}; expected an MMSI column (AIS), icao24 "
-                     "(OpenSky) or time with x, y or range, bearing (detections); pass "
-                     "--format ais|opensky|detections (and --columns for other names)")
+    raise ValueError(f"{path}: not a layout trackkit knows (first line: columns "
+                     f"{', '.join(map(repr, header[:12]))}); expected {expected_layouts()}; or "
+                     "detections (time with x, y or range, bearing); for other columns pass "
+                     "--format ais|opensky|detections with --columns")
 
 
 def open_recording(path: Path | str, options: TrackOptions) -> Recording:
     """``path`` (or a bundled sample's name) with its kind, checked against the options."""
+    from trackkit.io import recognise
+
     file = resolve_input(Path(path))
-    header = read_header(file)
-    kind = options.fmt or guess_format(file, header)
+    parquet = file.suffix.lower() in (".parquet", ".pq")
+    layout = None if options.columns or parquet else recognise(file)
+    # NMEA and SBS-1 lines have no header
+    header = [] if layout is not None and not layout.columns else read_header(file)
+    if layout is not None and options.fmt not in (None, layout.kind):
+        layout = None  # the kind the user names wins; read as that kind with --columns
+    kind = options.fmt or (layout.kind if layout is not None else
+                           guess_format(file, header, columns=bool(options.columns)))
     if kind != "detections" and not options.as_radar:
         raise ValueError(f"{file}: {kind} position reports are tracked through a "
                          "virtual radar; add --as-radar (trackkit track --help lists the "
@@ -185,7 +197,8 @@ def open_recording(path: Path | str, options: TrackOptions) -> Recording:
         raise ValueError("--site-lat and --site-lon: give both or neither")
     if options.units and kind != "detections":
         raise ValueError(f"--units is for detections files; {file} is {kind}")
-    return Recording(file, kind, header, options, options.settings(kind))
+    return Recording(file, kind, header, options, options.settings(kind),
+                     layout.name if layout is not None else "")
 
 
 def track_recording(source: Path | str | Recording, options: TrackOptions | None = None,
@@ -252,6 +265,8 @@ def _read_input(rec: Recording, progress: Callable[[float, float], None]
 
     path, columns, o = rec.path, rec.options.columns, rec.options
     kw = dict(on_bad=o.on_bad, progress=progress, max_listed=100_000)
+    if rec.layout:
+        return (*tio.read_recording(path, rec.layout, **kw), False)
     if rec.kind == "ais":
         keys = tuple(f.name for f in fields(tio.AisColumns))
         cols = tio.AisColumns(**_mapping(columns, "--columns", keys))
