@@ -16,8 +16,9 @@ import pyarrow.parquet as pq
 from ..cli_helpers import assert_user_error, trackkit
 
 AIS_HEADER = "Time,MMSI,Latitude_degrees,Longitude_degrees,COG_degrees,SOG_knots"
-TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "var_x", "var_y",
-                 "var_vx", "var_vy", "status", "lat", "lon"]
+# the AIS tracker's IMM carries the turn rate (rad/s) as a fifth state component
+TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "state_4", "var_x",
+                 "var_y", "var_vx", "var_vy", "var_state_4", "status", "lat", "lon"]
 RADAR_FILES = {"tracks.parquet", "tracks.csv", "tracks.geojson", "tracks.png", "gospa.png",
                "tracks_summary.csv", "report.html", "results.json", "manifest.json"}
 

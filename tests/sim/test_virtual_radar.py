@@ -239,6 +239,22 @@ def test_seeded_and_deterministic(stats_run):
     assert vr.clutter_density == pytest.approx(6.0 / ((20e3 - 100.0) * 2 * np.pi))
 
 
+def test_first_scans_are_the_same_whatever_the_run_length(stats_run):
+    """Scan k draws from its own stream: a run cut short by max_scans or until is the start
+    of the full run, plot for plot (and so is the truth)."""
+    reps, vr, run = stats_run
+    t0 = float(run.scans.times[0])
+    for kw in (dict(max_scans=3), dict(max_scans=60), dict(until=t0 + 100 * vr.period + 1.0)):
+        short = virtual_radar(reps, vr, seed=11, **kw)
+        n = len(short.scans)
+        assert 3 <= n < len(run.scans)
+        end = int(run.scans.offsets[n])
+        assert np.array_equal(short.scans.offsets, run.scans.offsets[:n + 1])
+        assert np.array_equal(short.scans.z, run.scans.z[:end])
+        assert np.array_equal(short.origin, run.origin[:end])
+        assert np.array_equal(short.truth.x, run.truth.x[:int(run.truth.offsets[n])])
+
+
 # --- bad input --------------------------------------------------------------------------------
 
 

@@ -3,6 +3,8 @@ every core filter, stable IDs, one batched filter call per stage, bad input."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -229,6 +231,46 @@ def test_two_point_initiation_starts_with_the_velocity():
     v = tracks.belief.mean[order, 2:]
     vt = truth[np.argsort(truth[:, 0]), 2:]
     np.testing.assert_allclose(v, vt, atol=40.0)  # two 20 m plots, 2 s apart
+
+
+def _two_scans(trk: Tracker, first, second):
+    tracks = trk.step(trk.init(), Scan(0.0, 0, np.array(first, float)))
+    return trk.step(tracks, Scan(2.0, 0, np.array(second, float)))
+
+
+def test_two_point_sigmas_allow_for_each_pairs_plot_errors():
+    """Range-bearing plots 5 km out (cross-range std 44 m) and 30 km out (262 m): a 400 m
+    step in 2 s is beyond v_max dt = 40 m, within 3 sqrt(tr(R1 + R2)) only far out."""
+    far, near = 30e3, 5e3
+    first = [[near, 0.0], [far, 1.0]]
+    second = [[near, 400.0 / near], [far, 1.0 + 400.0 / far]]
+    plain = tracker("EKF", RADAR, initiator=TwoPoint(v_max=20.0))
+    assert len(_two_scans(plain, first, second)) == 0
+    wide = tracker("EKF", RADAR, initiator=TwoPoint(v_max=20.0, sigmas=3.0))
+    tracks = _two_scans(wide, first, second)
+    assert len(tracks) == 1
+    assert np.hypot(*tracks.belief.mean[0, :2]) > 20e3  # the far pair, not the near one
+    with pytest.raises(ValueError, match="TwoPoint sigmas = -1.0"):
+        TwoPoint(sigmas=-1.0)
+
+
+def test_two_point_both_plots_scores_the_second_plot():
+    """Born from two plots, a track's score is L_1 plus the second plot's hit, its
+    likelihood that of a plot uniform over the pair's disc (1 / (pi rho^2) per m^2); the
+    M-of-N history has two hits."""
+    lam = density(POS)
+    logic = ScoreLogic(pd=0.9, clutter_density=lam, new_target_density=lam / 100)
+    init = TwoPoint(v_max=30.0, margin=40.0, both_plots=True)
+    tracks = _two_scans(tracker("EKF", POS, logic=logic, initiator=init),
+                        [[0.0, 0.0]], [[50.0, 0.0]])
+    rho = 30.0 * 2.0 + 40.0
+    want = (logic.initial_score + np.log(0.9) - np.log(lam) - np.log(np.pi * rho**2))
+    np.testing.assert_allclose(tracks.state.score, [want], rtol=1e-12)
+    history = _two_scans(tracker("EKF", POS, initiator=init), [[0.0, 0.0]], [[50.0, 0.0]])
+    assert history.state.age.tolist() == [2] and history.state.history.tolist() == [3]
+    one = _two_scans(tracker("EKF", POS, initiator=replace(init, both_plots=False)),
+                     [[0.0, 0.0]], [[50.0, 0.0]])
+    assert one.state.age.tolist() == [1]
 
 
 def test_score_logic_confirms_and_deletes():

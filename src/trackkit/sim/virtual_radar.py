@@ -44,10 +44,12 @@ spatial density the tracker needs is ``clutter_density = clutter / ((max_range -
 2 pi)`` per metre radian, as ``sim.scene.Radar.clutter_density``). Within a scan the
 plots are in bearing order, as a rotating radar delivers them.
 
-Determinism. Everything is drawn from ``run_rng(seed, 0)`` (``sim.streams``), in this order:
-detection uniforms ``(P,)`` and measurement noise ``(P, 2)`` for the P (scan, object) pairs in
-range (scan-major, then object code), clutter counts ``(S,)``, clutter uniforms ``(C, 2)``
-(scan after scan). The same reports, radar and seed give the same plots, bit for bit.
+Determinism. Scan k draws from its own stream, ``run_rng(seed, k)`` (``sim.streams``), in
+this order: its clutter count, the detection uniforms ``(P_k,)`` of its P_k objects in range
+(by object code) with its clutter uniforms ``(C_k, 2)`` in one block, and the measurement noise
+``(P_k, 2)``. So scan k's plots depend on the seed, k and the reports alone: the first N scans
+are the same plots whatever ``until`` or ``max_scans`` (a short trial is the start of the full
+run), and the same reports, radar and seed give the same plots, bit for bit.
 """
 
 from __future__ import annotations
@@ -262,6 +264,29 @@ def interpolate_positions(time: ArrayLike, code: ArrayLike, x: ArrayLike, y: Arr
             p[keep][order], v[keep][order])
 
 
+def _draws(seed: int, offsets: IntArray, clutter: float
+           ) -> tuple[Array, Array, IntArray, Array]:
+    """The random numbers of every scan, scan k from ``run_rng(seed, k)`` alone (module doc):
+    detection uniforms ``(P,)`` and noise ``(P, 2)`` of the pairs in range (scan k's are rows
+    ``offsets[k]:offsets[k+1]``), clutter counts ``(S,)`` and clutter uniforms ``(C, 2)``."""
+    S = offsets.size - 1
+    P = int(offsets[-1])
+    u = np.empty(P)
+    e = np.empty((P, 2))
+    counts = np.empty(S, np.int64)
+    uc = []
+    for k in range(S):
+        a, b = int(offsets[k]), int(offsets[k + 1])
+        g = run_rng(seed, k)
+        n = int(g.poisson(clutter))
+        block = g.random(b - a + 2 * n)
+        u[a:b] = block[:b - a]
+        uc.append(block[b - a:])
+        e[a:b] = g.standard_normal((b - a, 2))
+        counts[k] = n
+    return u, e, counts, np.concatenate(uc).reshape(-1, 2)
+
+
 def virtual_radar(reports: Reports, radar: VirtualRadar, seed: int = 0, *,
                   start: float | None = None, until: float | None = None,
                   max_scans: int | None = None) -> VirtualRadarRun:
@@ -293,13 +318,8 @@ def virtual_radar(reports: Reports, radar: VirtualRadar, seed: int = 0, *,
     scan, obj, p, v, d, rng_true = (a[inside] for a in (scan, obj, p, v, d, rng_true))
     brg_true = np.arctan2(d[:, 0], d[:, 1])  # nautical: clockwise from north
 
-    g = run_rng(seed, 0)
-    P = scan.size
-    u = g.random(P)
-    e = g.standard_normal((P, 2))
-    counts = g.poisson(radar.clutter, S).astype(np.int64)
-    uc = g.random((int(counts.sum()), 2))
-
+    t_off = np.concatenate([[0], np.cumsum(np.bincount(scan, minlength=S))]).astype(np.int64)
+    u, e, counts, uc = _draws(seed, t_off, radar.clutter)
     det = u < radar.pd
     zt = np.stack([rng_true + radar.sigma_range * e[:, 0],
                    wrap(brg_true + radar.sigma_bearing * e[:, 1])], axis=-1)[det]
@@ -313,6 +333,5 @@ def virtual_radar(reports: Reports, radar: VirtualRadar, seed: int = 0, *,
     offsets = np.concatenate([[0], np.cumsum(np.bincount(scan_of, minlength=S))])
     scans = Scans(z, offsets.astype(np.int64), times, np.zeros(S, np.int64))
 
-    t_off = np.concatenate([[0], np.cumsum(np.bincount(scan, minlength=S))]).astype(np.int64)
     truth = Frames(t_off, p, obj)
     return VirtualRadarRun(scans, origin.astype(np.int64), truth, v, radar, reports.ids)

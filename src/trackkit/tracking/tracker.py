@@ -145,17 +145,26 @@ class SinglePoint:
 @dataclass(frozen=True)
 class TwoPoint:
     """A tentative track from two unassigned plots of consecutive scans within
-    ``v_max * dt + margin`` of each other (two-point differencing); a plot that pairs with
-    none waits one scan for a partner."""
+    ``v_max * dt + margin + sigmas sqrt(tr(R_1 + R_2))`` of each other (two-point
+    differencing; ``R_1``, ``R_2`` the plots' Cartesian covariances, so that the allowance
+    for plot errors grows with range for range-bearing plots); a plot that pairs with none
+    waits one scan for a partner."""
 
     v_max: float = 300.0
     margin: float = 0.0
+    sigmas: float = 0.0
+    #: the new track's logic counts both plots (else only the second): a second hit whose
+    #: likelihood is that of a plot uniform over the pair's disc of reach rho, ``1 / (pi
+    #: rho^2)`` per m^2 (times the range for range-bearing plots, per m rad)
+    both_plots: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.v_max) and self.v_max > 0):
             raise ValueError(f"TwoPoint v_max = {self.v_max!r}; expected a positive number")
         if not (np.isfinite(self.margin) and self.margin >= 0):
             raise ValueError(f"TwoPoint margin = {self.margin!r}; expected a number >= 0")
+        if not (np.isfinite(self.sigmas) and self.sigmas >= 0):
+            raise ValueError(f"TwoPoint sigmas = {self.sigmas!r}; expected a number >= 0")
 
 
 # --- what the tracker carries -------------------------------------------------------------
@@ -335,14 +344,15 @@ class Tracker:
         deleted = tracks.ids[~keep]
         belief, state = _take(belief, np.flatnonzero(keep)), select(state, keep)
         ids, born = tracks.ids[keep], tracks.born[keep]
-        new, waiting = self._initiate(z[~claimed], sensor, float(scan.time), tracks.waiting)
+        new, waiting, second = self._initiate(z[~claimed], sensor, float(scan.time),
+                                              tracks.waiting)
         counter = tracks.counter
         started = np.zeros(0, np.int64)
         if new is not None:
             k = new.mean.shape[0]
             started, counter = counter.issue(k)
             belief = _join(belief, self._new_beliefs(new))
-            state = concatenate(state, self.logic.init(k))
+            state = concatenate(state, self._born(k, second))
             ids = np.concatenate([ids, started])
             born = np.concatenate([born, np.full(k, float(scan.time))])
         step_info = StepInfo(info["pairs"], hit, info["clusters"], info["approximated"],
@@ -423,25 +433,54 @@ class Tracker:
         ll[g.track[top]] = g.loglik[top]
         return hit, ll, claim >= self.associator.claim
 
+    def _born(self, k: int, second: Array | None) -> HistoryState | ScoreState:
+        """The logic of ``k`` new tracks: born from one plot, or from two (``second``, the
+        second plot's log-likelihood, ``TwoPoint.both_plots``)."""
+        state = self.logic.init(k)
+        if second is None:
+            return state
+        hit = np.ones(k, dtype=bool)
+        if isinstance(self.logic, ScoreLogic):
+            return self.logic.step(state, hit, second)
+        return self.logic.step(state, hit)
+
+    def _pairs(self, zw: Array, Rw: Array, tw: float, p: Array, R: Array, t: float):
+        """``two_point`` on the waiting and the new plots, each pair within its own
+        allowance for plot errors, ``sigmas sqrt(tr(R_1 + R_2))`` (``TwoPoint``)."""
+        init = self.initiator
+        if init.sigmas == 0:
+            pairs, g = two_point(zw, Rw, tw, p, R, t, v_max=init.v_max, margin=init.margin)
+            return pairs, g, np.full(pairs.shape[0], init.v_max * (t - tw) + init.margin)
+        spread = (np.sqrt(np.trace(Rw, axis1=-2, axis2=-1)),
+                  np.sqrt(np.trace(R, axis1=-2, axis2=-1)))
+        widest = init.sigmas * np.hypot(spread[0].max(), spread[1].max())
+        pairs, g = two_point(zw, Rw, tw, p, R, t, v_max=init.v_max,
+                             margin=init.margin + widest)
+        i, j = pairs[:, 0], pairs[:, 1]
+        reach = (init.v_max * (t - tw) + init.margin
+                 + init.sigmas * np.hypot(spread[0][i], spread[1][j]))
+        keep = np.linalg.norm(p[j] - zw[i], axis=-1) <= reach
+        return pairs[keep], Gaussian._make((g.mean[keep], g.cov[keep])), reach[keep]
+
     def _initiate(self, z: Array, sensor: Any, t: float, waiting):
-        """New track beliefs ([x, y, vx, vy]) from the unclaimed plots, and the plots left
-        waiting for a partner (two-point)."""
+        """New track beliefs ([x, y, vx, vy]) from the unclaimed plots, the plots left
+        waiting for a partner (two-point) and, with ``TwoPoint.both_plots``, the second
+        plot's log-likelihood per new track (else None)."""
         if z.shape[0] == 0 and not isinstance(self.initiator, TwoPoint):
-            return None, waiting
+            return None, waiting, None
         p, R = self._plots(z, sensor) if z.shape[0] else (np.zeros((0, 2)),
                                                             np.zeros((0, 2, 2)))
         if isinstance(self.initiator, SinglePoint):
             if p.shape[0] == 0:
-                return None, waiting
-            return single_point(p, R, v_std=self.initiator.v_std), waiting
+                return None, waiting, None
+            return single_point(p, R, v_std=self.initiator.v_std), waiting, None
         zw, Rw, tw = waiting
         left = (p, R, t)
         if zw.shape[0] == 0 or p.shape[0] == 0 or t <= tw:
-            return None, left
-        pairs, g = two_point(zw, Rw, tw, p, R, t, v_max=self.initiator.v_max,
-                             margin=self.initiator.margin)
+            return None, left, None
+        pairs, g, reach = self._pairs(zw, Rw, tw, p, R, t)
         if pairs.shape[0] == 0:
-            return None, left
+            return None, left, None
         # each plot starts at most one track: the pairing of least total speed
         cost = np.full((zw.shape[0], p.shape[0]), _NO_PAIR)
         cost[pairs[:, 0], pairs[:, 1]] = np.linalg.norm(g.mean[:, 2:4], axis=1)
@@ -452,5 +491,12 @@ class Tracker:
         chosen = lookup[i[ok], j[ok]]
         rest = np.ones(p.shape[0], bool)
         rest[j[ok]] = False
+        second = None
+        if self.initiator.both_plots:
+            # uniform over the disc: 1 / (pi rho^2) per m^2; per m rad, times the range
+            ll = -np.log(np.pi * np.maximum(reach[chosen], 1e-9) ** 2)
+            if isinstance(sensor, RangeBearing):
+                ll = ll + np.log(np.maximum(z[j[ok]][:, 0], 1e-9))
+            second = ll
         return (Gaussian._make((g.mean[chosen], g.cov[chosen])),
-                (p[rest], R[rest], t))
+                (p[rest], R[rest], t), second)

@@ -1,0 +1,190 @@
+"""The defaults of ``trackkit track --as-radar`` against the previous ones, on whole recordings.
+
+Each recording (the Solent AIS file, 85 min, and the OpenSky ADS-B file, 6 min) is turned into
+radar plots by the virtual radar of its profile (``TRACK_PROFILES``), once per seed, and the
+same plots are tracked by
+
+- ``old``: the previous defaults, built explicitly here: a constant-velocity EKF,
+  single-point initiation and Wald's SPRT thresholds (alpha 0.01, beta 0.001: deleted at
+  the third missed scan);
+- ``new``: today's ``TRACK_PROFILES`` (the IMM of constant velocity and coordinated turn,
+  two-point initiation, deletion after a few missed scans);
+- ``new, deleted at the 3rd miss`` (``--coast``): today's, coasting no longer than the old
+  (where today's coasts longer).
+
+Every run is scored by one function, ``score(history, run, c) -> {name: value}`` (by default
+:func:`track_scores`: GOSPA and the track counts of ``trackkit.eval.track_metrics``); another
+is given as ``--scorer module:function`` with the same signature, and its names become the
+table's columns. The table gives the mean and the standard deviation over the seeds of each
+figure, and the wall time of a run's tracking.
+
+    python benchmarks/recorded_defaults.py [--solent FILE] [--opensky FILE] [--seeds 0-9]
+        [--max-scans N] [--scorer module:function] [--coast] [--only ais|opensky]
+
+The files default to ``shared/data`` beside the repository (as the tests find them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trackkit import io as tio
+from trackkit.eval.track_metrics import assign, gospa_steps, track_counts, track_summary
+from trackkit.sim.virtual_radar import VirtualRadar, VirtualRadarRun, virtual_radar
+from trackkit.tracking.history import TrackHistory, run_tracker
+from trackkit.tracking.recorded import TRACK_PROFILES, TrackProfile, build_tracker
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+Scorer = Callable[[TrackHistory, VirtualRadarRun, float], dict[str, float]]
+
+
+def profiles(kind: str, coast: bool = False) -> dict[str, TrackProfile]:
+    """The settings compared: the previous defaults and today's, on the same radar; with
+    ``coast``, also today's deleting at the third missed scan as the old did (where they do
+    not already): what coasting one scan longer costs and buys."""
+    new = TRACK_PROFILES[kind]
+    old = replace(new, turn_q=None, turn_std_deg=None, misses=None, v_max=None)
+    out = {"old": old, "new": new}
+    if coast and new.misses != 2.0:
+        out["new, deleted at the 3rd miss"] = replace(new, misses=2.0)
+    return out
+
+
+def radar(s: TrackProfile) -> VirtualRadar:
+    """The virtual radar of a profile, at the data's median position (as trackkit track)."""
+    return VirtualRadar(period=s.period, sigma_range=s.sigma_range,
+                        sigma_bearing=math.radians(s.sigma_bearing_deg), pd=s.pd,
+                        clutter=s.clutter, max_range=s.max_range, min_range=s.min_range)
+
+
+def resolvable_switches(run: VirtualRadarRun, tracks: Any, c: float) -> int:
+    """ID switches (a track's assigned object changes) between two objects farther apart,
+    at the step of the switch, than three cross-range standard deviations ``3 r sigma_b`` at
+    their mean range r from the site; a switch from an object no longer present counts.
+    A stand-in until ``trackkit.eval`` has its own."""
+    truth = run.truth
+    I, J = assign(truth, tracks, c)
+    step = np.repeat(np.arange(truth.n_steps), truth.sizes)[I]
+    o = np.lexsort((step, tracks.ids[J]))
+    step, obj, trk = step[o], truth.ids[I][o], tracks.ids[J][o]
+    k = np.flatnonzero((trk[1:] == trk[:-1]) & (obj[1:] != obj[:-1])) + 1
+    key = np.repeat(np.arange(truth.n_steps), truth.sizes) * (truth.ids.max() + 1) + truth.ids
+    want = step[k] * (truth.ids.max() + 1)
+    ia = np.searchsorted(key, want + obj[k - 1])
+    ib = np.searchsorted(key, want + obj[k])
+    present = (ia < key.size) & (key[np.minimum(ia, key.size - 1)] == want + obj[k - 1])
+    pa = truth.x[np.minimum(ia, key.size - 1)]
+    pb = truth.x[ib]
+    r = np.hypot(*((pa + pb) / 2 - np.asarray(run.radar.site)).T)
+    apart = np.hypot(*(pa - pb).T) > 3 * r * run.radar.sigma_bearing
+    return int(np.sum(~present | apart))
+
+
+def track_scores(history: TrackHistory, run: VirtualRadarRun, c: float) -> dict[str, float]:
+    """GOSPA (p = 2, cut-off c) and the track counts of one run."""
+    conf = history.confirmed()
+    g = gospa_steps(run.truth, conf, c, 2.0)
+    period = float(np.median(np.diff(history.times)))
+    t = track_summary(track_counts(run.truth, conf, c, times=history.times,
+                                   within=5 * period))
+    return {
+        "tracks per object": t["tracks"] / max(t["truths_confirmed"], 1),
+        "breaks": t["breaks"], "ID switches": t["id_switches"],
+        "resolvable switches": resolvable_switches(run, conf, c),
+        "mean purity": t["mean_purity"], "GOSPA (m)": float(np.mean(g.distance)),
+        "completeness": t["completeness"], "false tracks": t["false_tracks"],
+        "false track-scans": float(np.sum(g.false) / (c**2 / 2)),
+    }
+
+
+def run_once(reports: Any, s: TrackProfile, vr: VirtualRadar, seed: int,
+             max_scans: int | None) -> tuple[TrackHistory, VirtualRadarRun, float]:
+    """The radar's plots for ``seed`` tracked with the settings ``s``; the wall time (s) of
+    the tracking."""
+    run = virtual_radar(reports, vr, seed, max_scans=max_scans)
+    tracker, _ = build_tracker(run.sensor, s, max(vr.clutter, 0.1) / vr.volume, "gnn", "ekf")
+    t0 = time.perf_counter()
+    history, _ = run_tracker(tracker, run.scans)
+    return history, run, time.perf_counter() - t0
+
+
+def compare(kind: str, reports: Any, seeds: list[int], score: Scorer,
+            max_scans: int | None, coast: bool = False) -> dict[str, dict[str, list[float]]]:
+    """Per setting, per figure, the values over the seeds (and ``wall (s)``)."""
+    out: dict[str, dict[str, list[float]]] = {}
+    for name, s in profiles(kind, coast).items():
+        vr = radar(s)
+        rows: dict[str, list[float]] = {}
+        for seed in seeds:
+            history, run, wall = run_once(reports, s, vr, seed, max_scans)
+            for key, value in {**score(history, run, float(s.gospa_c)),
+                               "wall (s)": wall}.items():
+                rows.setdefault(key, []).append(float(value))
+        out[name] = rows
+    return out
+
+
+def table(title: str, results: dict[str, dict[str, list[float]]]) -> str:
+    """A markdown table: a row per figure, mean ± std over the seeds per setting."""
+    names = list(results)
+    keys = list(results[names[0]])
+    lines = [f"### {title}", "", "| figure | " + " | ".join(names) + " |",
+             "|---|" + "---|" * len(names)]
+    for key in keys:
+        cells = []
+        for name in names:
+            v = np.asarray(results[name][key])
+            cells.append(f"{_g(v.mean())} ± {_g(v.std(ddof=1) if v.size > 1 else 0.0)}")
+        lines.append(f"| {key} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _g(x: float) -> str:
+    return f"{x:.3g}" if abs(x) < 1000 else f"{x:.0f}"
+
+
+def _seeds(text: str) -> list[int]:
+    a, sep, b = text.partition("-")
+    return list(range(int(a), int(b) + 1)) if sep else [int(v) for v in text.split(",")]
+
+
+def _scorer(text: str | None) -> Scorer:
+    if not text:
+        return track_scores
+    module, _, name = text.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--solent", type=Path, default=DATA / "SolentAIS_20160112_130211.csv")
+    ap.add_argument("--opensky", type=Path, default=DATA / "OpenSky_Plane_States.csv")
+    ap.add_argument("--seeds", default="0-9", help="e.g. 0-9 or 100,101")
+    ap.add_argument("--max-scans", type=int, default=None)
+    ap.add_argument("--scorer", default=None, help="module:function (default track_scores)")
+    ap.add_argument("--coast", action="store_true",
+                    help="also today's settings deleting at the third missed scan")
+    ap.add_argument("--only", choices=("ais", "opensky"), default=None)
+    args = ap.parse_args()
+    seeds, score = _seeds(args.seeds), _scorer(args.scorer)
+    print(f"seeds {seeds[0]}..{seeds[-1]} ({len(seeds)}), mean ± std over seeds\n")
+    for kind, path, read in (("ais", args.solent, tio.read_ais_csv),
+                             ("opensky", args.opensky, tio.read_opensky_csv)):
+        if args.only not in (None, kind):
+            continue
+        reports, _ = read(path)
+        results = compare(kind, reports, seeds, score, args.max_scans, args.coast)
+        print(table(f"{path.name} ({kind})", results), "\n", flush=True)
+
+
+if __name__ == "__main__":
+    main()
