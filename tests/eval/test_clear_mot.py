@@ -265,6 +265,15 @@ def test_gospa_switching_hand_case():
     np.testing.assert_allclose(g.distance**2, g.gospa**2 + 9.0 * g.switches)
 
 
+def test_gospa_switching_with_no_object_in_any_scan():
+    """No truth at all (nothing in the radar's range): every track is false, no switch."""
+    truth = frames([[], []], [[], []], dim=2)
+    tracks = frames([[[0, 0]], []], [[4], []], dim=2)
+    g = gospa_switching(truth, tracks, 2.0, 2.0)
+    np.testing.assert_array_equal(g.switches, [0, 0])
+    np.testing.assert_allclose(g.distance, [np.sqrt(2.0), 0.0])
+
+
 # --- resolvable switches ----------------------------------------------------------------------
 
 

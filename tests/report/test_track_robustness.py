@@ -18,7 +18,9 @@ from ..cli_helpers import assert_user_error, trackkit
 AIS_HEADER = "Time,MMSI,Latitude_degrees,Longitude_degrees,COG_degrees,SOG_knots"
 # the AIS tracker's IMM carries the turn rate (rad/s) as a fifth state component
 TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "state_4", "var_x",
-                 "var_y", "var_vx", "var_vy", "var_state_4", "status", "lat", "lon"]
+                 "var_y", "var_vx", "var_vy", "var_state_4", "status", "lat", "lon",
+                 "x_smooth", "y_smooth", "vx_smooth", "vy_smooth", "var_x_smooth",
+                 "var_y_smooth", "var_vx_smooth", "var_vy_smooth", "lat_smooth", "lon_smooth"]
 RADAR_FILES = {"tracks.parquet", "tracks.csv", "tracks.geojson", "tracks.png", "gospa.png",
                "tracks_summary.csv", "report.html", "results.json", "manifest.json"}
 
@@ -199,16 +201,17 @@ def test_absurd_ais_reports_are_bad_records(tmp_path):
     f.write_text("\n".join(",".join(c) for c in cut) + "\n")
     out = tmp_path / "skip"
     ran = trackkit("track", str(f), "--as-radar", "--out", str(out), cwd=tmp_path)
-    assert_user_error(ran, 0, f"{f}:5:Latitude_degrees: latitude outside [-90, 90]", "'91'",
+    # an absurd speed is a field set missing (the position is good), not a skipped record
+    assert_user_error(ran, 0,
+                      f"{f}:5:Latitude_degrees: position not available (latitude 91)", "'91'",
                       f"{f}:6:Longitude_degrees: longitude outside [-180, 180]", "'1e300'",
-                      f"{f}:7:SOG_knots: |speed| above 1943.84", "Mach 3",
                       f"{f}:8:Time: time out of range", "'2250-01-12 13:02:20.000'",
-                      "skipped 4")
+                      "skipped 3", "speed 1 (1 magnitude above 1943.84)")
     assert "overflow" not in ran.text and "warning" not in ran.text.lower()
     assert _names(out) == RADAR_FILES | {"skipped.csv"}
     doc = json.loads((out / "results.json").read_text())
-    assert doc["input"]["records_skipped"] == 4
-    assert doc["input"]["records_kept"] == len(lines) - 5
+    assert doc["input"]["records_skipped"] == 3
+    assert doc["input"]["records_kept"] == len(lines) - 4
     assert doc["results"]["tracks"]["truths"] == 4 and doc["results"]["tracks_confirmed"] >= 4
 
 
@@ -220,7 +223,7 @@ def test_solent_sample_by_name(tmp_path):
     the sample; a marine radar at the data's median tracks nearly every vessel."""
     ran = trackkit("track", "solent-ais", "--as-radar", cwd=tmp_path)
     out = tmp_path / "trackkit-out" / "track-solent-ais"
-    assert_user_error(ran, 0, "solent-ais.csv: 2159 records read, 2158 kept",
+    assert_user_error(ran, 0, "solent-ais.csv (solent layout): 2159 records read, 2158 kept",
                       "no records skipped", f"report: {out / 'report.html'}")
     assert _names(out) == RADAR_FILES
     doc = json.loads((out / "results.json").read_text())
@@ -232,7 +235,7 @@ def test_solent_sample_by_name(tmp_path):
 
 def test_opensky_sample_by_name_and_a_file_of_that_name_first(tmp_path):
     ran = trackkit("track", "opensky-adsb", "--as-radar", "--out", "o", cwd=tmp_path)
-    assert_user_error(ran, 0, "opensky-adsb.csv: 1556 records read, 1452 kept",
+    assert_user_error(ran, 0, "opensky-adsb.csv (opensky layout): 1556 records read, 1452 kept",
                       "dropped 104 exact duplicates")
     assert _names(tmp_path / "o") == RADAR_FILES
     doc = json.loads((tmp_path / "o" / "results.json").read_text())
@@ -242,7 +245,7 @@ def test_opensky_sample_by_name_and_a_file_of_that_name_first(tmp_path):
     # a real file of a sample's name is read instead of the sample
     (tmp_path / "opensky-adsb").write_text("\n".join(_ais_lines()) + "\n")
     ran = trackkit("track", "opensky-adsb", "--as-radar", "--out", "mine", cwd=tmp_path)
-    assert_user_error(ran, 0, f"opensky-adsb: {len(_ais_lines()) - 1} records read")
+    assert_user_error(ran, 0, f"opensky-adsb (solent layout): {len(_ais_lines()) - 1} records read")
     assert json.loads((tmp_path / "mine" / "results.json").read_text())["input"][
         "format"] == "ais"
     ran = trackkit("track", "opensky", "--as-radar", cwd=tmp_path)

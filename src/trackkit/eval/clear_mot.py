@@ -355,6 +355,8 @@ def _penalty(c: float, switching_penalty: float | None) -> float:
 def _switch_counts(tk: IntArray, xs: IntArray, a: IntArray, S: int) -> Array:
     """Per step: full switches plus half the half switches of the truths' assigned tracks
     ``a`` (-1: none), each truth counted from its first assignment on."""
+    if tk.size == 0:
+        return np.zeros(S)
     o = np.argsort(tk, kind="stable")  # each truth's rows in step order
     t, a = tk[o], a[o]
     on = a >= 0
