@@ -13,7 +13,7 @@ same plots are tracked by
   (where today's coasts longer).
 
 Every run is scored by one function, ``score(history, run, c) -> {name: value}`` (by default
-:func:`track_scores`: GOSPA and the track counts of ``trackkit.eval.track_metrics``); another
+:func:`track_scores`: the figures of ``trackkit.eval.clear_mot.score_run``); another
 is given as ``--scorer module:function`` with the same signature, and its names become the
 table's columns. The table gives the mean and the standard deviation over the seeds of each
 figure, and the wall time of a run's tracking.
@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from trackkit import io as tio
-from trackkit.eval.track_metrics import assign, gospa_steps, track_counts, track_summary
+from trackkit.eval.clear_mot import score_run
 from trackkit.sim.virtual_radar import VirtualRadar, VirtualRadarRun, virtual_radar
 from trackkit.tracking.history import TrackHistory, run_tracker
 from trackkit.tracking.recorded import TRACK_PROFILES, TrackProfile, build_tracker
@@ -66,44 +66,23 @@ def radar(s: TrackProfile) -> VirtualRadar:
                         clutter=s.clutter, max_range=s.max_range, min_range=s.min_range)
 
 
-def resolvable_switches(run: VirtualRadarRun, tracks: Any, c: float) -> int:
-    """ID switches (a track's assigned object changes) between two objects farther apart,
-    at the step of the switch, than three cross-range standard deviations ``3 r sigma_b`` at
-    their mean range r from the site; a switch from an object no longer present counts.
-    A stand-in until ``trackkit.eval`` has its own."""
-    truth = run.truth
-    I, J = assign(truth, tracks, c)
-    step = np.repeat(np.arange(truth.n_steps), truth.sizes)[I]
-    o = np.lexsort((step, tracks.ids[J]))
-    step, obj, trk = step[o], truth.ids[I][o], tracks.ids[J][o]
-    k = np.flatnonzero((trk[1:] == trk[:-1]) & (obj[1:] != obj[:-1])) + 1
-    key = np.repeat(np.arange(truth.n_steps), truth.sizes) * (truth.ids.max() + 1) + truth.ids
-    want = step[k] * (truth.ids.max() + 1)
-    ia = np.searchsorted(key, want + obj[k - 1])
-    ib = np.searchsorted(key, want + obj[k])
-    present = (ia < key.size) & (key[np.minimum(ia, key.size - 1)] == want + obj[k - 1])
-    pa = truth.x[np.minimum(ia, key.size - 1)]
-    pb = truth.x[ib]
-    r = np.hypot(*((pa + pb) / 2 - np.asarray(run.radar.site)).T)
-    apart = np.hypot(*(pa - pb).T) > 3 * r * run.radar.sigma_bearing
-    return int(np.sum(~present | apart))
+#: the figures of ``trackkit.eval.clear_mot.score_run`` the table shows, with their labels
+FIGURES = {"tracks_per_object": "tracks per object", "breaks": "breaks",
+           "id_switches": "ID switches", "id_switches_resolvable": "resolvable ID switches",
+           "fragmentations": "fragmentations", "idf1": "IDF1", "mota": "MOTA",
+           "gospa": "GOSPA (m)", "gospa_switching": "GOSPA with switching (m)",
+           "completeness": "completeness", "false_tracks": "false tracks",
+           "false_track_scans": "false track-scans", "mean_purity": "mean purity",
+           "rmse": "RMSE (m)"}
 
 
 def track_scores(history: TrackHistory, run: VirtualRadarRun, c: float) -> dict[str, float]:
-    """GOSPA (p = 2, cut-off c) and the track counts of one run."""
-    conf = history.confirmed()
-    g = gospa_steps(run.truth, conf, c, 2.0)
-    period = float(np.median(np.diff(history.times)))
-    t = track_summary(track_counts(run.truth, conf, c, times=history.times,
-                                   within=5 * period))
-    return {
-        "tracks per object": t["tracks"] / max(t["truths_confirmed"], 1),
-        "breaks": t["breaks"], "ID switches": t["id_switches"],
-        "resolvable switches": resolvable_switches(run, conf, c),
-        "mean purity": t["mean_purity"], "GOSPA (m)": float(np.mean(g.distance)),
-        "completeness": t["completeness"], "false tracks": t["false_tracks"],
-        "false track-scans": float(np.sum(g.false) / (c**2 / 2)),
-    }
+    """The figures of one run as ``trackkit track`` reports them (``score_run``: CLEAR-MOT
+    ID switches, those between objects the radar resolves, IDF1, MOTA, GOSPA with and
+    without the switching penalty c, the track counts)."""
+    got = score_run(history.confirmed(), run.truth, tuple(run.radar.site),
+                    run.radar.sigma_bearing, c)
+    return {label: got[key] for key, label in FIGURES.items()}
 
 
 def run_once(reports: Any, s: TrackProfile, vr: VirtualRadar, seed: int,
