@@ -111,7 +111,7 @@ class ReadReport:
     def summary(self) -> str:
         """A few lines for a log or the CLI."""
         layout = f" ({self.layout} layout)" if self.layout else ""
-        lines = [f"{self.path}{layout}: {self.rows_read} records read, {self.rows_kept} kept"]
+        lines = [f"{self.path}: {self.rows_read} records read, {self.rows_kept} kept{layout}"]
         if self.skipped:
             lines.append(f"  skipped {self.n_skipped}: " + ", ".join(
                 f"{n} {r}" for r, n in sorted(self.skipped.items(), key=lambda kv: -kv[1])))
