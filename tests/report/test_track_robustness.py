@@ -224,7 +224,7 @@ def test_solent_sample_by_name(tmp_path):
     the sample; a marine radar at the data's median tracks nearly every vessel."""
     ran = trackkit("track", "solent-ais", "--as-radar", cwd=tmp_path)
     out = tmp_path / "trackkit-out" / "track-solent-ais"
-    assert_user_error(ran, 0, "solent-ais.csv (solent layout): 2159 records read, 2158 kept",
+    assert_user_error(ran, 0, "solent-ais.csv: 2159 records read, 2158 kept",
                       "no records skipped", f"report: {out / 'report.html'}")
     assert _names(out) == RADAR_FILES
     doc = json.loads((out / "results.json").read_text())
@@ -236,7 +236,7 @@ def test_solent_sample_by_name(tmp_path):
 
 def test_opensky_sample_by_name_and_a_file_of_that_name_first(tmp_path):
     ran = trackkit("track", "opensky-adsb", "--as-radar", "--out", "o", cwd=tmp_path)
-    assert_user_error(ran, 0, "opensky-adsb.csv (opensky layout): 1556 records read, 1452 kept",
+    assert_user_error(ran, 0, "opensky-adsb.csv: 1556 records read, 1452 kept",
                       "dropped 104 exact duplicates")
     assert _names(tmp_path / "o") == RADAR_FILES
     doc = json.loads((tmp_path / "o" / "results.json").read_text())
@@ -246,7 +246,7 @@ def test_opensky_sample_by_name_and_a_file_of_that_name_first(tmp_path):
     # a real file of a sample's name is read instead of the sample
     (tmp_path / "opensky-adsb").write_text("\n".join(_ais_lines()) + "\n")
     ran = trackkit("track", "opensky-adsb", "--as-radar", "--out", "mine", cwd=tmp_path)
-    assert_user_error(ran, 0, f"opensky-adsb (solent layout): {len(_ais_lines()) - 1} records read")
+    assert_user_error(ran, 0, f"opensky-adsb: {len(_ais_lines()) - 1} records read")
     assert json.loads((tmp_path / "mine" / "results.json").read_text())["input"][
         "format"] == "ais"
     ran = trackkit("track", "opensky", "--as-radar", cwd=tmp_path)
