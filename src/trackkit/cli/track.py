@@ -62,8 +62,9 @@ def _profile_default(key: str, unit: str = "") -> str:
 @app.command()
 def track(
     file: Annotated[Path | None, typer.Argument(
-        help="Detections (CSV or Parquet), AIS CSV or OpenSky state-vector CSV, or a bundled "
-        "sample: solent-ais, opensky-adsb (see trackkit list).",
+        help="AIS (Solent, NOAA MarineCadastre, Danish Maritime Authority CSV or NMEA "
+        "!AIVDM), ADS-B (OpenSky state vectors or SBS-1), detections (CSV or Parquet), or a "
+        "bundled sample: solent-ais, opensky-adsb (see trackkit list).",
         show_default=f"the bundled sample {DEFAULT_SAMPLE}, as radar plots")] = None,
     fmt: Annotated[TrackFormat | None, typer.Option(
         "--format", "-f", help="What the file holds.",
