@@ -78,6 +78,9 @@ costs seconds, not the half hour of Stone Soup on the full Solent file).
     python benchmarks/bench_recorded_stonesoup.py FILE --max-scans 200 --settings pda-2-del3
     python benchmarks/bench_recorded_stonesoup.py FILE... --save runs/
     python benchmarks/bench_recorded_stonesoup.py runs/*.json --rescore
+
+``--rescore`` merges runs of one file saved by several processes (``--settings`` split
+between them, ``--save`` to different folders).
 """
 
 from __future__ import annotations
@@ -493,6 +496,23 @@ def load(path: Path) -> dict[str, Any]:
     return {**meta, "times": a["times"], "truth": frames("truth"), "tracks": tracks}
 
 
+def merge(runs: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Saved runs of one file (same seed and scans; Stone Soup's settings run in separate
+    processes) as one run, in the order of ``SETTINGS``; trackkit's from the first."""
+    merged: dict[tuple, dict[str, Any]] = {}
+    for run in runs:
+        key = (Path(run["file"]).name, run["seed"], run["scans"])
+        if key not in merged:
+            merged[key] = run
+            continue
+        for name, tracks in run["tracks"].items():
+            merged[key]["tracks"].setdefault(name, tracks)
+    order = ["trackkit"] + [st.name for st in SETTINGS]
+    for run in merged.values():
+        run["tracks"] = {n: run["tracks"][n] for n in order if n in run["tracks"]}
+    return list(merged.values())
+
+
 def render(run: dict[str, Any], ev: dict[str, Any]) -> str:
     """The markdown of one file's comparison."""
     ours = ev["scores"]["trackkit"]
@@ -517,15 +537,16 @@ def main(argv: Sequence[str] | None = None) -> None:
                     help="score runs saved by --save again, without tracking")
     args = ap.parse_args(argv)
     chosen = [s for s in SETTINGS if s.name in args.settings]
+    if args.rescore:
+        for run in merge([load(Path(f)) for f in args.files]):
+            print("\n" + render(run, evaluate(run)) + "\n", flush=True)
+        return
     for file in args.files:
-        if args.rescore:
-            run = load(Path(file))
-        else:
-            if args.save is not None:
-                args.save.mkdir(parents=True, exist_ok=True)
-            run = compare(file, chosen, args.seed, args.max_scans,
-                          log=lambda m: print(m, flush=True),
-                          save_to=None if args.save is None else args.save / Path(file).stem)
+        if args.save is not None:
+            args.save.mkdir(parents=True, exist_ok=True)
+        run = compare(file, chosen, args.seed, args.max_scans,
+                      log=lambda m: print(m, flush=True),
+                      save_to=None if args.save is None else args.save / Path(file).stem)
         print("\n" + render(run, evaluate(run)) + "\n", flush=True)
 
 
