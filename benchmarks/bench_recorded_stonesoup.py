@@ -59,7 +59,9 @@ go to one function, ``score``, which calls trackkit's metric code (``gospa_steps
 the profile's cut-off c. ``diagnose`` says what each tracker got wrong where: confirmed
 track-scans matched to no object near another object's track (duplicates on clustered
 vessels), after the object the track last held has left the truth (coasting after its reports
-end, or out of range) or elsewhere (clutter), and the breaks on a still object (under
+end, or out of range) or elsewhere (clutter), and the breaks just after the object was
+out of the truth (a reporting gap longer than the radar bridges: no plots), on a still
+object (under
 0.5 m/s: moored, at anchor, drifting), on a turning object (heading change over the 30 s
 before the break above 20 deg) and beside another object (within 100 m).
 
@@ -325,9 +327,10 @@ def _unassigned_kinds(truth: Frames, tracks: Frames, I: NDArray, J: NDArray, c: 
 def _break_kinds(truth: Frames, tracks: Frames, I: NDArray, J: NDArray,
                  times: NDArray) -> dict[str, int]:
     """The breaks (an object's track changing while the previous track is gone) and, of
-    them, those on a still object (moving under ``STILL_M_S``), on a turn (heading change
-    above ``TURN_DEG`` over the ``TURN_WINDOW_S`` before) and beside another object (within
-    ``NEAR_M``)."""
+    them, those just after the object was out of the truth (a gap in its reports longer than
+    the radar bridges, or out of range: no plots), those on a still object (moving under
+    ``STILL_M_S``), on a turn (heading change above ``TURN_DEG`` over the ``TURN_WINDOW_S``
+    before) and beside another object (within ``NEAR_M``)."""
     S = truth.n_steps
     xs = np.repeat(np.arange(S), truth.sizes)
     ys = np.repeat(np.arange(S), tracks.sizes)
@@ -335,12 +338,14 @@ def _break_kinds(truth: Frames, tracks: Frames, I: NDArray, J: NDArray,
     pos = {(o, s): truth.x[i] for i, (o, s) in enumerate(zip(truth.ids.tolist(), xs.tolist(),
                                                               strict=True))}
     lag = max(int(round(TURN_WINDOW_S / np.median(np.diff(times)))), 2) if S > 1 else 2
-    out = {"breaks": 0, "breaks_still": 0, "breaks_turning": 0, "breaks_near": 0}
+    out = {"breaks": 0, "breaks_unseen": 0, "breaks_still": 0, "breaks_turning": 0,
+           "breaks_near": 0}
     prev_obj, prev_track = -1, -1
     for k in np.lexsort((xs[I], truth.ids[I])).tolist():
         obj, s, tid = int(truth.ids[I[k]]), int(xs[I[k]]), int(tracks.ids[J[k]])
         if obj == prev_obj and tid != prev_track and track_last[prev_track] < s:
             out["breaks"] += 1
+            out["breaks_unseen"] += (obj, s - 1) not in pos
             before = pos.get((obj, max(s - lag, 0)), pos[(obj, s)])
             still = np.hypot(*(pos[(obj, s)] - before)) < STILL_M_S * (
                 times[s] - times[max(s - lag, 0)])
@@ -426,10 +431,10 @@ def diagnosis_table(title: str, diags: dict[str, dict[str, int]]) -> str:
     """Unmatched confirmed track-scans by kind and breaks on turning objects, per tracker."""
     lines = [f"#### {title}: where the tracks went wrong", "",
              "| tracker, setting | duplicate track-scans | coasting track-scans "
-             "| clutter track-scans | breaks | on a still object | on a turn "
-             "| beside another object |", "|---" * 8 + "|"]
-    keys = ("duplicate", "coasting", "clutter", "breaks", "breaks_still", "breaks_turning",
-            "breaks_near")
+             "| clutter track-scans | breaks | after the object was unseen | on a still "
+             "object | on a turn | beside another object |", "|---" * 9 + "|"]
+    keys = ("duplicate", "coasting", "clutter", "breaks", "breaks_unseen", "breaks_still",
+            "breaks_turning", "breaks_near")
     for name, d in diags.items():
         lines.append(f"| {name} | " + " | ".join(str(d[k]) for k in keys) + " |")
     return "\n".join(lines)
