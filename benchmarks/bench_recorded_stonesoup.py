@@ -327,8 +327,9 @@ def _unassigned_kinds(truth: Frames, tracks: Frames, I: NDArray, J: NDArray, c: 
 def _break_kinds(truth: Frames, tracks: Frames, I: NDArray, J: NDArray,
                  times: NDArray) -> dict[str, int]:
     """The breaks (an object's track changing while the previous track is gone) and, of
-    them, those just after the object was out of the truth (a gap in its reports longer than
-    the radar bridges, or out of range: no plots), those on a still object (moving under
+    them, those where the object was out of the truth since its last assigned scan (a gap
+    in its reports longer than the radar bridges, or out of range: no plots), those on a
+    still object (moving under
     ``STILL_M_S``), on a turn (heading change above ``TURN_DEG`` over the ``TURN_WINDOW_S``
     before) and beside another object (within ``NEAR_M``)."""
     S = truth.n_steps
@@ -340,21 +341,20 @@ def _break_kinds(truth: Frames, tracks: Frames, I: NDArray, J: NDArray,
     lag = max(int(round(TURN_WINDOW_S / np.median(np.diff(times)))), 2) if S > 1 else 2
     out = {"breaks": 0, "breaks_unseen": 0, "breaks_still": 0, "breaks_turning": 0,
            "breaks_near": 0}
-    prev_obj, prev_track = -1, -1
+    prev_obj, prev_track, prev_s = -1, -1, -1
     for k in np.lexsort((xs[I], truth.ids[I])).tolist():
         obj, s, tid = int(truth.ids[I[k]]), int(xs[I[k]]), int(tracks.ids[J[k]])
         if obj == prev_obj and tid != prev_track and track_last[prev_track] < s:
             out["breaks"] += 1
-            out["breaks_unseen"] += (obj, s - 1) not in pos
-            before = pos.get((obj, max(s - lag, 0)), pos[(obj, s)])
-            still = np.hypot(*(pos[(obj, s)] - before)) < STILL_M_S * (
-                times[s] - times[max(s - lag, 0)])
-            out["breaks_still"] += bool(still)
+            out["breaks_unseen"] += any((obj, k) not in pos for k in range(prev_s + 1, s))
+            before = pos.get((obj, s - lag))  # unknown (not still) if it was unseen then
+            out["breaks_still"] += bool(before is not None and np.hypot(
+                *(pos[(obj, s)] - before)) < STILL_M_S * (times[s] - times[s - lag]))
             out["breaks_turning"] += _turning(pos, obj, s, lag)
             others = truth.x[truth.offsets[s]:truth.offsets[s + 1]]
             d = np.sort(np.hypot(*(others - pos[(obj, s)]).T))
             out["breaks_near"] += bool(d.size > 1 and d[1] < NEAR_M)
-        prev_obj, prev_track = obj, tid
+        prev_obj, prev_track, prev_s = obj, tid, s
     return out
 
 
@@ -522,10 +522,11 @@ def render(run: dict[str, Any], ev: dict[str, Any]) -> str:
     """The markdown of one file's comparison."""
     ours = ev["scores"]["trackkit"]
     theirs = {k: v for k, v in ev["scores"].items() if k != "trackkit"}
-    title = (f"{run['file']}: {run['scans']} scans, {run['plots']} plots, "
+    title = (f"{Path(run['file']).name}: {run['scans']} scans, {run['plots']} plots, "
              f"{int(ours['objects'])} objects, seed {run['seed']}, GOSPA cut-off "
              f"{run['cutoff_m']:g} m")
-    return table(title, ours, theirs) + "\n\n" + diagnosis_table(run["file"], ev["diagnosis"])
+    diagnosis = diagnosis_table(Path(run["file"]).name, ev["diagnosis"])
+    return table(title, ours, theirs) + "\n\n" + diagnosis
 
 
 def main(argv: Sequence[str] | None = None) -> None:

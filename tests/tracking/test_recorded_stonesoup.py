@@ -17,6 +17,7 @@ from stonesoup.types.array import StateVector
 from stonesoup.types.detection import Detection
 from stonesoup.types.state import State
 
+from trackkit.eval.track_metrics import Frames
 from trackkit.io import read_ais_csv, samples
 from trackkit.sim.virtual_radar import VirtualRadar, virtual_radar
 
@@ -110,3 +111,28 @@ def test_the_truth_scored_as_tracks_is_one_clean_track_per_object():
     d = bench.diagnose(run.truth, run.truth, run.scans.times, 500.0)
     assert set(d) >= {"duplicate", "coasting", "clutter", "breaks", "breaks_turning"}
     assert not any(d.values()), d
+
+
+def _frames(rows: list[tuple[int, int, float, float]], steps: int):
+    """Frames from (step, id, x, y) rows."""
+    rows = sorted(rows)
+    step = np.array([r[0] for r in rows])
+    offsets = np.searchsorted(step, np.arange(steps + 1)).astype(np.int64)
+    x = np.array([[r[2], r[3]] for r in rows])
+    return Frames(offsets, x, np.array([r[1] for r in rows], np.int64))
+
+
+def test_diagnose_tells_a_duplicate_a_coasting_track_clutter_and_a_break_apart():
+    steps, times = 10, 3.0 * np.arange(10)
+    truth = _frames([(s, 0, 100.0 * s, 0.0) for s in range(steps)]
+                    + [(s, 1, 5000.0, 0.0) for s in range(8)], steps)  # object 1 ends at 7
+    tracks = _frames(
+        [(s, 10, 100.0 * s, 5.0) for s in range(4)]  # object 0, lost at scan 4 ...
+        + [(s, 11, 100.0 * s, -5.0) for s in range(5, steps)]  # ... and a new track: a break
+        + [(s, 12, 5030.0, 0.0) for s in range(steps)]  # object 1, coasting at 8 and 9
+        + [(s, 13, 5060.0, 0.0) for s in (2, 3, 4)]  # a second track on object 1
+        + [(s, 14, 20e3, 20e3) for s in (0, 1)], steps)  # far from everything
+    d = bench.diagnose(tracks, truth, times, 500.0)
+    assert d == {"duplicate": 3, "coasting": 2, "clutter": 2, "breaks": 1,
+                 "breaks_unseen": 0, "breaks_still": 0, "breaks_turning": 0,
+                 "breaks_near": 0}
