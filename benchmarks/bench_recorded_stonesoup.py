@@ -81,13 +81,16 @@ costs seconds, not the half hour of Stone Soup on the full Solent file).
     python benchmarks/bench_recorded_stonesoup.py FILE... --save runs/
     python benchmarks/bench_recorded_stonesoup.py runs/*.json --rescore
 
-``--rescore`` merges runs of one file saved by several processes (``--settings`` split
-between them, ``--save`` to different folders).
+``--rescore`` merges runs of the same plots saved by several processes (``--settings`` split
+between them, ``--save`` to different folders; ``--settings`` with no name runs trackkit
+alone, so a new trackkit can be set beside Stone Soup runs kept from before, as long as the
+plots are the same: the runs carry the plots' SHA-256).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import time
@@ -383,6 +386,8 @@ def diagnose(confirmed: Frames, truth: Frames, times: NDArray[np.float64], c: fl
 
 
 def _fmt(key: str, v: float) -> str:
+    if math.isnan(v):
+        return "-"  # not measured (a run saved before CPU time was), or no denominator
     if key in ("breaks", "id_switches", "false_tracks"):
         return f"{int(v)}"
     if key in ("mean_purity", "completeness"):
@@ -392,15 +397,16 @@ def _fmt(key: str, v: float) -> str:
 
 def _ratio(r: dict[str, float], ours: dict[str, float]) -> str:
     """Wall and CPU time per scan of ``r`` over trackkit's."""
-    return (f"{r['ms_per_scan'] / ours['ms_per_scan']:.0f}x, "
-            f"{r['cpu_ms_per_scan'] / ours['cpu_ms_per_scan']:.0f}x")
+    wall, cpu = (r[k] / ours[k] for k in ("ms_per_scan", "cpu_ms_per_scan"))
+    return ", ".join("-" if math.isnan(v) else f"{v:.0f}x" for v in (wall, cpu))
 
 
 def best_of(rows: dict[str, dict[str, float]]) -> dict[str, tuple[float, str]]:
     """Per metric, Stone Soup's best value over the settings and the setting that gave it."""
     best = {}
     for key, _, lower in COLUMNS:
-        name = (min if lower else max)(rows, key=lambda n: rows[n][key])
+        known = [n for n in rows if not math.isnan(rows[n][key])] or list(rows)
+        name = (min if lower else max)(known, key=lambda n: rows[n][key])
         best[key] = (rows[name][key], name)
     return best
 
@@ -419,6 +425,8 @@ def table(title: str, ours: dict[str, float], theirs: dict[str, dict[str, float]
     lines.append(row("trackkit", ours).replace(f" | {_ratio(ours, ours)} |", " | 1 |"))
     for name, r in theirs.items():
         lines.append(row(f"Stone Soup {name}", r))
+    if not theirs:
+        return "\n".join(lines)
     best = best_of(theirs)
     cells = [f"{_fmt(k, best[k][0])} ({best[k][1]})" for k, _, _ in COLUMNS]
     fastest = {k: best[k][0] for k in ("ms_per_scan", "cpu_ms_per_scan")}
@@ -453,8 +461,11 @@ def compare(file: str, settings: Sequence[Setting], seed: int, max_scans: int | 
     log(f"{file}: {len(times)} scans, {result.plots} plots, trackkit {ms[0]:.2f} ms/scan "
         f"({ms[1]:.2f} CPU)")
     run = {"file": file, "scans": len(times), "plots": result.plots, "seed": seed,
+           "plots_sha256": hashlib.sha256(result.scans.z.tobytes()).hexdigest(),
            "cutoff_m": float(result.recording.settings.gospa_c), "times": times,
            "truth": result.truth, "tracks": {"trackkit": (result.history.confirmed(), ms)}}
+    if save_to is not None:
+        save(run, save_to)
     for st in settings:
         run["tracks"][st.name] = run_stonesoup(st, result)
         wall, cpu = run["tracks"][st.name][1]
@@ -483,7 +494,7 @@ def save(run: dict[str, Any], path: Path) -> None:
     for n, (f, _) in enumerate(run["tracks"].values()):
         arrays.update({f"tracks{n}_{k}": v for k, v in f._asdict().items()})
     np.savez_compressed(path.with_suffix(".npz"), **arrays)
-    meta = {k: run[k] for k in ("file", "scans", "plots", "seed", "cutoff_m")}
+    meta = {k: run[k] for k in ("file", "scans", "plots", "seed", "plots_sha256", "cutoff_m")}
     meta["ms_per_scan"] = {name: ms for name, (_, ms) in run["tracks"].items()}
     path.with_suffix(".json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
 
@@ -502,11 +513,12 @@ def load(path: Path) -> dict[str, Any]:
 
 
 def merge(runs: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Saved runs of one file (same seed and scans; Stone Soup's settings run in separate
-    processes) as one run, in the order of ``SETTINGS``; trackkit's from the first."""
+    """Saved runs of the same plots (Stone Soup's settings run in separate processes, or
+    trackkit run again) as one run, in the order of ``SETTINGS``; trackkit's from the
+    first. Runs of different plots (another seed, length, or radar code) stay apart."""
     merged: dict[tuple, dict[str, Any]] = {}
     for run in runs:
-        key = (Path(run["file"]).name, run["seed"], run["scans"])
+        key = (Path(run["file"]).name, run["seed"], run["scans"], run.get("plots_sha256"))
         if key not in merged:
             merged[key] = run
             continue
