@@ -63,7 +63,8 @@ end, or out of range) or elsewhere (clutter), and the breaks just after the obje
 out of the truth (a reporting gap longer than the radar bridges: no plots), on a still
 object (under
 0.5 m/s: moored, at anchor, drifting), on a turning object (heading change over the 30 s
-before the break above 20 deg) and beside another object (within 100 m).
+before the break above 20 deg) and beside another object (within 100 m), and the ID
+switches between objects within 100 m of each other.
 
 Timing. Wall time per scan of each tracker's scan loop, one after the other in one process
 (trackkit: ``run_tracker`` from its first scan to its last, timed through the progress
@@ -373,13 +374,35 @@ def _turning(pos: dict, obj: int, s: int, lag: int) -> bool:
     return abs(math.degrees(math.remainder(h2 - h1, 2 * math.pi))) > TURN_DEG
 
 
+def _near_switches(truth: Frames, tracks: Frames, I: NDArray, J: NDArray) -> dict[str, int]:
+    """The ID switches (a track's object changing) and, of them, those where the object it
+    held before is within ``NEAR_M`` of the new one at the switch: vessels moored or moving
+    together, which a radar cannot tell apart far out."""
+    S = truth.n_steps
+    xs = np.repeat(np.arange(S), truth.sizes)
+    pos = {(o, s): truth.x[i] for i, (o, s) in enumerate(zip(truth.ids.tolist(), xs.tolist(),
+                                                              strict=True))}
+    out = {"id_switches": 0, "id_switches_near": 0}
+    prev_obj, prev_track = -1, -1
+    for k in np.lexsort((xs[I], tracks.ids[J])).tolist():
+        obj, s, tid = int(truth.ids[I[k]]), int(xs[I[k]]), int(tracks.ids[J[k]])
+        if tid == prev_track and obj != prev_obj:
+            out["id_switches"] += 1
+            old = pos.get((prev_obj, s))
+            out["id_switches_near"] += bool(old is not None and np.hypot(
+                *(old - pos[(obj, s)])) < NEAR_M)
+        prev_obj, prev_track = obj, tid
+    return out
+
+
 def diagnose(confirmed: Frames, truth: Frames, times: NDArray[np.float64], c: float
              ) -> dict[str, int]:
     """Where a tracker went wrong: its unmatched track-scans by kind, and its breaks by
     where they happened."""
     I, J = assign(truth, confirmed, c, 2.0)
     return {**_unassigned_kinds(truth, confirmed, I, J, c),
-            **_break_kinds(truth, confirmed, I, J, times)}
+            **_break_kinds(truth, confirmed, I, J, times),
+            **_near_switches(truth, confirmed, I, J)}
 
 
 # --- the table ----------------------------------------------------------------------------------
@@ -440,9 +463,10 @@ def diagnosis_table(title: str, diags: dict[str, dict[str, int]]) -> str:
     lines = [f"#### {title}: where the tracks went wrong", "",
              "| tracker, setting | duplicate track-scans | coasting track-scans "
              "| clutter track-scans | breaks | after the object was unseen | on a still "
-             "object | on a turn | beside another object |", "|---" * 9 + "|"]
+             "object | on a turn | beside another object | ID switches | between objects "
+             "within 100 m |", "|---" * 11 + "|"]
     keys = ("duplicate", "coasting", "clutter", "breaks", "breaks_unseen", "breaks_still",
-            "breaks_turning", "breaks_near")
+            "breaks_turning", "breaks_near", "id_switches", "id_switches_near")
     for name, d in diags.items():
         lines.append(f"| {name} | " + " | ".join(str(d[k]) for k in keys) + " |")
     return "\n".join(lines)

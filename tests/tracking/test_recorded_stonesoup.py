@@ -135,4 +135,16 @@ def test_diagnose_tells_a_duplicate_a_coasting_track_clutter_and_a_break_apart()
     d = bench.diagnose(tracks, truth, times, 500.0)
     assert d == {"duplicate": 3, "coasting": 2, "clutter": 2, "breaks": 1,
                  "breaks_unseen": 0, "breaks_still": 0, "breaks_turning": 0,
-                 "breaks_near": 0}
+                 "breaks_near": 0, "id_switches": 0, "id_switches_near": 0}
+
+
+def test_diagnose_tells_switches_between_close_objects_from_the_rest():
+    steps, times = 6, 3.0 * np.arange(6)
+    # objects 0 and 1 are 30 m apart, 2 and 3 a kilometre; each pair's tracks swap at scan 3
+    where = {0: (0.0, 0.0), 1: (30.0, 0.0), 2: (0.0, 5000.0), 3: (1000.0, 5000.0)}
+    truth = _frames([(s, o, *xy) for s in range(steps) for o, xy in where.items()], steps)
+    held = {10: (0, 1), 11: (1, 0), 12: (2, 3), 13: (3, 2)}  # track: (object before, after)
+    tracks = _frames([(s, t, *where[pair[s >= 3]]) for s in range(steps)
+                      for t, pair in held.items()], steps)
+    d = bench.diagnose(tracks, truth, times, 500.0)
+    assert (d["id_switches"], d["id_switches_near"], d["breaks"]) == (4, 2, 0)
