@@ -543,6 +543,8 @@ def merge(runs: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     merged: dict[tuple, dict[str, Any]] = {}
     for run in runs:
         key = (Path(run["file"]).name, run["seed"], run["scans"], run.get("plots_sha256"))
+        same = [k for k in merged if k[:3] == key[:3] and None in (k[3], key[3])]
+        key = same[0] if same else key  # a run saved without the hash: the same plots
         if key not in merged:
             merged[key] = run
             continue
