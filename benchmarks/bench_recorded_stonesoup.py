@@ -37,7 +37,8 @@ to a file:
 
 * ``pda-2-del3``: confirm on the second plot, delete after 3 missed scans. trackkit's SPRT
   score (alpha 0.01, beta 0.001, pd 0.9) confirms after two or three hits and deletes after
-  about three misses in a row, so this is the closest match to trackkit's logic.
+  about four misses in a row (each costs ln(1 - pd P_G) = -2.2 of the 6.9 the score may drop
+  below its maximum); deleting after three and after five missed scans bracket it.
 * ``pda-2-del5`` and ``pda-2-del10``: coast longer. Three misses in a row happen to a held
   object with probability (1 - pd)^3 = 1e-3 per scan, i.e. about once per track-hour at 3 s
   scans, a break each time; five (1e-5) make that rare, ten (30 s at 3 s scans) also carry
