@@ -57,26 +57,26 @@ Scoring. Both trackers' confirmed tracks at every scan (Stone Soup's ``tracker.t
 holding its updated or predicted state at the scan; trackkit's ``TrackHistory.confirmed()``)
 go to one function, ``score``, which calls trackkit's metric code (``gospa_steps``,
 ``track_counts``, ``track_summary`` as ``report.track_pages.track_metrics`` uses them), with
-the profile's cut-off c. ``diagnose`` says what each tracker got wrong where: confirmed
-track-scans matched to no object near another object's track (duplicates on clustered
-vessels), after the object the track last held has left the truth (coasting after its reports
-end, or out of range) or elsewhere (clutter), and the breaks just after the object was
-out of the truth (a reporting gap longer than the radar bridges: no plots), on a still
-object (under
-0.5 m/s: moored, at anchor, drifting), on a turning object (heading change over the 30 s
-before the break above 20 deg) and beside another object (within 100 m), and the ID
-switches between objects within 100 m of each other.
+the profile's cut-off c; it is the one place to change the metrics. ``diagnose`` says what
+each tracker got wrong where: confirmed track-scans matched to no object near another
+object's track (duplicates on clustered vessels), after the object the track last held has
+left the truth (coasting after its reports end, or out of range) or elsewhere (clutter); the
+breaks after the object was out of the truth (a reporting gap longer than the radar bridges:
+no plots), on a still object (under 0.5 m/s: moored, at anchor, drifting), on a turning
+object (heading change over the 30 s before the break above 20 deg) and beside another
+object (within 100 m); and the ID switches between objects within 100 m of each other.
 
-Timing. Wall time per scan of each tracker's scan loop, one after the other in one process
-(trackkit: ``run_tracker`` from its first scan to its last, timed through the progress
-callback; Stone Soup: ``next(tracker)`` per scan); reading the file and making the plots are
-not timed.
+Timing. Wall and CPU time per scan of each tracker's scan loop, one after the other in one
+process (trackkit: ``run_tracker`` from its first scan to its last, timed through the
+progress callback; Stone Soup: ``next(tracker)`` per scan); reading the file and making the
+plots are not timed. On a shared machine the CPU time is the steadier figure.
 
 For each metric the best Stone Soup setting is kept ("Stone Soup at its best"); the script
 prints one markdown table per file (the tables of docs/recorded-data.md and
 benchmarks/RESULTS.md are its output). ``--save DIR`` keeps every tracker's confirmed tracks
 and times; ``--rescore`` scores saved runs again without tracking (a change of metric code
-costs seconds, not the half hour of Stone Soup on the full Solent file).
+costs seconds, not the eight minutes of CPU per Stone Soup setting on the whole Solent
+file).
 
     python benchmarks/bench_recorded_stonesoup.py solent-ais opensky-adsb
     python benchmarks/bench_recorded_stonesoup.py FILE --max-scans 200 --settings pda-2-del3
