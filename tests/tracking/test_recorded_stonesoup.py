@@ -148,3 +148,19 @@ def test_diagnose_tells_switches_between_close_objects_from_the_rest():
                       for t, pair in held.items()], steps)
     d = bench.diagnose(tracks, truth, times, 500.0)
     assert (d["id_switches"], d["id_switches_near"], d["breaks"]) == (4, 2, 0)
+
+
+def test_both_trackers_run_on_the_same_plots_and_are_scored_alike():
+    run = bench.compare("solent-ais", [bench.SETTINGS[0]], seed=0, max_scans=12,
+                        log=lambda message: None)
+    assert list(run["tracks"]) == ["trackkit", "pda-2-del3"]
+    ss, (wall, cpu) = run["tracks"]["pda-2-del3"]
+    assert ss.n_steps == run["truth"].n_steps == 12 and wall > 0 and cpu > 0
+    # a confirmed Stone Soup track is present at every scan from confirmation to deletion
+    steps = np.repeat(np.arange(ss.n_steps), ss.sizes)
+    for tid in np.unique(ss.ids):
+        at = steps[ss.ids == tid]
+        assert np.array_equal(at, np.arange(at[0], at[-1] + 1)), tid
+    scores = bench.evaluate(run)["scores"]
+    for name in ("trackkit", "pda-2-del3"):
+        assert scores[name]["completeness"] > 0.5, (name, scores[name])
