@@ -106,7 +106,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from trackkit.eval.track_metrics import Frames, assign, gospa_steps, track_counts, track_summary
+from trackkit.eval.clear_mot import score_run
+from trackkit.eval.track_metrics import Frames, assign
 from trackkit.tracking.gating import GATE_PROBABILITY
 from trackkit.tracking.recorded import TrackingResult, TrackOptions, track_recording
 
@@ -142,10 +143,14 @@ COLUMNS = (
     ("tracks_per_object", "tracks per object", True),
     ("breaks", "breaks", True),
     ("id_switches", "ID switches", True),
+    ("id_switches_resolvable", "resolvable ID switches", True),
+    ("idf1", "IDF1", False),
+    ("mota", "MOTA", False),
     ("false_tracks", "false tracks", True),
-    ("mean_purity", "purity", False),
+    ("false_track_scans", "false track-scans", True),
     ("completeness", "completeness", False),
-    ("gospa_mean", "GOSPA (m)", True),
+    ("gospa", "GOSPA (m)", True),
+    ("gospa_switching", "GOSPA with switching (m)", True),
     ("ms_per_scan", "ms per scan", True),
     ("cpu_ms_per_scan", "CPU ms per scan", True),
 )
@@ -286,19 +291,13 @@ def run_stonesoup(setting: Setting, result: TrackingResult
 # --- one scoring function for both --------------------------------------------------------------
 
 
-def score(confirmed: Frames, truth: Frames, times: NDArray[np.float64], c: float
-          ) -> dict[str, float]:
-    """The metrics of one run's confirmed tracks against the truth (cut-off c m, order 2),
-    with trackkit's metric code, as ``report.track_pages.track_metrics`` computes them."""
-    g = gospa_steps(truth, confirmed, c, 2.0)
-    period = float(np.median(np.diff(times))) if times.size > 1 else 0.0
-    tot = track_summary(track_counts(truth, confirmed, c, p=2.0, times=times,
-                                     within=5 * period))
-    out = {k: float(v) for k, v in tot.items()}
-    out["gospa_mean"] = float(np.mean(g.distance))
-    out["objects"] = float(tot["truths"])
-    out["tracks_per_object"] = tot["tracks"] / max(tot["truths"], 1)
-    return out
+def score(confirmed: Frames, truth: Frames, site: tuple[float, float], sigma_bearing: float,
+          c: float) -> dict[str, float]:
+    """The figures of one run's confirmed tracks against the truth, with trackkit's metric
+    code as ``trackkit track`` reports them (``eval.clear_mot.score_run``: cut-off, CLEAR-MOT
+    threshold and switching penalty c, order 2; ID switches between objects the radar at
+    ``site`` with bearing noise ``sigma_bearing`` rad resolves)."""
+    return {k: float(v) for k, v in score_run(confirmed, truth, site, sigma_bearing, c).items()}
 
 
 # --- what went wrong where ----------------------------------------------------------------------
@@ -414,10 +413,11 @@ def diagnose(confirmed: Frames, truth: Frames, times: NDArray[np.float64], c: fl
 def _fmt(key: str, v: float) -> str:
     if math.isnan(v):
         return "-"  # not measured (a run saved before CPU time was), or no denominator
-    if key in ("breaks", "id_switches", "false_tracks"):
+    if key in ("breaks", "id_switches", "id_switches_resolvable", "false_tracks",
+               "false_track_scans"):
         return f"{int(v)}"
-    if key in ("mean_purity", "completeness"):
-        return f"{v:.2f}"
+    if key in ("mean_purity", "completeness", "idf1", "mota"):
+        return f"{v:.3f}"
     return f"{v:.1f}" if "ms_per_scan" not in key or v >= 10 else f"{v:.2f}"
 
 
@@ -490,6 +490,8 @@ def compare(file: str, settings: Sequence[Setting], seed: int, max_scans: int | 
     run = {"file": file, "scans": len(times), "plots": result.plots, "seed": seed,
            "plots_sha256": hashlib.sha256(result.scans.z.tobytes()).hexdigest(),
            "cutoff_m": float(result.recording.settings.gospa_c), "times": times,
+           "site": [float(v) for v in result.site],
+           "sigma_bearing": float(result.sensor.sigma_bearing),
            "truth": result.truth, "tracks": {"trackkit": (result.history.confirmed(), ms)}}
     if save_to is not None:
         save(run, save_to)
@@ -507,7 +509,8 @@ def evaluate(run: dict[str, Any]) -> dict[str, Any]:
     c, times, truth = run["cutoff_m"], run["times"], run["truth"]
     scores, diags = {}, {}
     for name, (frames, (wall, cpu)) in run["tracks"].items():
-        scores[name] = {**score(frames, truth, times, c), "ms_per_scan": wall,
+        scores[name] = {**score(frames, truth, tuple(run["site"]), run["sigma_bearing"], c),
+                        "ms_per_scan": wall,
                         "cpu_ms_per_scan": cpu}
         label = name if name == "trackkit" else f"Stone Soup {name}"
         diags[label] = diagnose(frames, truth, times, c)
@@ -521,7 +524,8 @@ def save(run: dict[str, Any], path: Path) -> None:
     for n, (f, _) in enumerate(run["tracks"].values()):
         arrays.update({f"tracks{n}_{k}": v for k, v in f._asdict().items()})
     np.savez_compressed(path.with_suffix(".npz"), **arrays)
-    meta = {k: run[k] for k in ("file", "scans", "plots", "seed", "plots_sha256", "cutoff_m")}
+    meta = {k: run[k] for k in ("file", "scans", "plots", "seed", "plots_sha256", "cutoff_m",
+                                "site", "sigma_bearing")}
     meta["ms_per_scan"] = {name: ms for name, (_, ms) in run["tracks"].items()}
     path.with_suffix(".json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
 

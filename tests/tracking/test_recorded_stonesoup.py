@@ -105,9 +105,10 @@ def test_every_plot_of_a_scan_becomes_one_detection_at_the_scans_time():
 
 def test_the_truth_scored_as_tracks_is_one_clean_track_per_object():
     run = _radar_run(scans=6)
-    s = bench.score(run.truth, run.truth, run.scans.times, 500.0)
-    assert s["gospa_mean"] == 0.0 and s["tracks_per_object"] == 1.0
+    s = bench.score(run.truth, run.truth, (0.0, 0.0), run.sensor.sigma_bearing, 500.0)
+    assert s["gospa"] == s["gospa_switching"] == 0.0 and s["tracks_per_object"] == 1.0
     assert (s["breaks"], s["id_switches"], s["false_tracks"]) == (0, 0, 0)
+    assert s["idf1"] == s["mota"] == 1.0
     d = bench.diagnose(run.truth, run.truth, run.scans.times, 500.0)
     assert set(d) >= {"duplicate", "coasting", "clutter", "breaks", "breaks_turning"}
     assert not any(d.values()), d
