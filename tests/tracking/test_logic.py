@@ -17,6 +17,7 @@ from trackkit.tracking.logic import (
     TrackStatus,
     concatenate,
     confirmed,
+    held,
     select,
     sprt_thresholds,
     tentative,
@@ -24,6 +25,7 @@ from trackkit.tracking.logic import (
 )
 
 T, C, D = TrackStatus.TENTATIVE, TrackStatus.CONFIRMED, TrackStatus.DELETED
+L = TrackStatus.LOST
 
 
 # ------------------------------------------------------------------------------------------
@@ -332,6 +334,90 @@ def test_score_confirm_sticky_and_delete_on_drop():
     assert isinstance(s, ScoreState)
 
 
+def reference_held_score(logic, hits, log_liks):
+    """Scalar loop of the hold rule: a confirmed track more than the delete threshold below
+    its maximum score is LOST, CONFIRMED again once back within it, deleted beyond the hold
+    threshold."""
+    score = np.log(logic.pd * logic.new_target_density / logic.clutter_density)
+    best, status = score, T
+
+    def decide(status):
+        drop = score - best
+        if status == D or drop < logic.hold_threshold:
+            return D
+        if status == T and score >= logic.confirm_threshold:
+            status = C
+        if drop < logic.delete_threshold:
+            return D if status == T else L
+        return T if status == T else C
+
+    status = decide(status)
+    out = [(score, best, status)]
+    for h, ll in zip(hits, log_liks, strict=True):
+        score += (np.log(logic.pd) + ll - np.log(logic.clutter_density) if h
+                  else np.log(1 - logic.pd * logic.pg))
+        best = max(best, score)
+        status = decide(status)
+        out.append((score, best, status))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_score_with_hold_equals_scalar_reference(seed):
+    rng = np.random.default_rng(100 + seed)
+    logic = ScoreLogic.from_sprt(1e-2, 1e-3, pd=0.9, clutter_density=1e-6,
+                                 new_target_density=1e-8, hold_threshold=-30.0)
+    n_tracks, n_steps = 12, 80
+    # runs of hits and of misses, so tracks are confirmed, lost, taken up again and deleted
+    p_hit = rng.uniform(0.2, 0.95, n_tracks)
+    hits = np.zeros((n_steps, n_tracks), dtype=bool)
+    hits[0] = True
+    for k in range(1, n_steps):
+        stay = rng.random(n_tracks) < 0.85
+        hits[k] = np.where(stay, hits[k - 1], rng.random(n_tracks) < p_hit)
+    lls = -np.log(2 * np.pi * 900.0) - 0.5 * rng.chisquare(2, (n_steps, n_tracks))
+    s = logic.init(n_tracks)
+    got = [s]
+    for h, ll in zip(hits, lls, strict=True):
+        s = logic.step(s, h, ll)
+        got.append(s)
+    seen = set()
+    for t in range(n_tracks):
+        for k, (score, best, status) in enumerate(reference_held_score(logic, hits[:, t],
+                                                                       lls[:, t])):
+            assert got[k].score[t] == pytest.approx(score, rel=1e-12, abs=1e-12)
+            assert got[k].max_score[t] == pytest.approx(best, rel=1e-12, abs=1e-12)
+            assert got[k].status[t] == status
+            seen.add(int(status))
+    assert seen == {T, C, D, L}  # the draws walk every status
+
+
+def test_score_hold_loses_takes_up_and_deletes():
+    """With a hold, the miss that would delete a confirmed track makes it LOST (not
+    confirmed, held); hits bring it back once its score is again within the delete
+    threshold of its maximum; enough misses delete it. A tentative track is deleted at the
+    delete threshold as without a hold."""
+    logic = ScoreLogic(pd=0.9, clutter_density=1e-4, new_target_density=1e-5,
+                       confirm_threshold=8.0, delete_threshold=-5.0, hold_threshold=-12.0)
+    ll = np.array([-5.0, -5.0])  # a hit adds 4.105, a miss ln 0.1 = -2.303
+    s = logic.init(2)
+    for h in ([1, 0], [1, 0], [1, 0]):  # track 0 confirmed at 9.907; track 1 deleted
+        s = logic.step(s, np.array(h, bool), ll)
+    assert list(s.status) == [C, D]
+    for k in range(4):  # drops 2.3, 4.6, 6.9 (lost), 9.2
+        s = logic.step(s, np.array([False, False]))
+        assert s.status[0] == (C if k < 2 else L)
+    assert held(s)[0] and not confirmed(s)[0]
+    s = logic.step(s, np.array([True, False]), ll)  # drop 5.1: held still
+    assert s.status[0] == L
+    s = logic.step(s, np.array([True, False]), ll)  # 1.0 below the max: seen again
+    assert s.status[0] == C
+    for k in range(5):  # drops 3.3, 5.6 (lost), 7.9, 10.2, 12.5 (gone)
+        s = logic.step(s, np.array([False, False]))
+        assert s.status[0] == (C, L, L, L, D)[k]
+    assert to_delete(s)[0]
+
+
 def test_score_hit_increment_matches_matlab_form():
     """MATLAB's hit adds ln(V * likelihood * P_D / P_FA); with lambda = P_FA / V that is
     ln P_D + ln likelihood - ln lambda."""
@@ -351,6 +437,9 @@ def test_score_bad_input():
         ScoreLogic(pd=0.9, clutter_density=0.0, new_target_density=1e-7)
     with pytest.raises(ValueError, match="delete_threshold"):
         ScoreLogic(pd=0.9, clutter_density=1e-6, new_target_density=1e-7, delete_threshold=1)
+    with pytest.raises(ValueError, match="hold_threshold"):
+        ScoreLogic(pd=0.9, clutter_density=1e-6, new_target_density=1e-7,
+                   delete_threshold=-5.0, hold_threshold=-4.0)
     logic = ScoreLogic(pd=0.9, clutter_density=1e-6, new_target_density=1e-7)
     s = logic.init(2)
     with pytest.raises(ValueError, match="log_likelihood"):

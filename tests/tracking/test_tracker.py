@@ -21,6 +21,7 @@ from trackkit.tracking import (
     loglik_costs,
     predict_measurement,
 )
+from trackkit.tracking.logic import held
 from trackkit.tracking.tracker import GNN, JPDA, SinglePoint, Tracker, Tracks, TwoPoint
 
 from .pdaf import jpda_update
@@ -322,3 +323,83 @@ def test_bad_input_is_named():
         GNN(missed_distance=10.0)
     with pytest.raises(ValueError, match="v_max"):
         TwoPoint(v_max=-1.0)
+
+
+# --- held tracks and track segment association -----------------------------------------------
+
+
+def _gap_scene(seed: int, jump: float = 0.0):
+    """Four constant-velocity targets seen for 30 scans, unseen for 15 (no plot of them: a
+    reporting gap), then seen again for 35; the last target comes back ``jump`` metres off
+    its course. Plots at pd 0.9 among 10 false plots a scan. Yields scans."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros((4, 4))
+    x[:, :2] = rng.uniform(-5000, 5000, (4, 2))
+    x[:, 2:] = rng.normal(0.0, 5.0, (4, 2))
+    sd = np.sqrt(np.diag(RADAR.noise))
+    for k in range(1, 81):
+        x[:, :2] += x[:, 2:] * 2.0
+        if k == 46:
+            x[3, 0] += jump
+        seen = (k <= 30) | (k > 45)
+        zt = RADAR.h(x) + rng.normal(size=(4, 2)) * sd
+        zt = zt[(rng.random(4) < 0.9) & seen]
+        nc = rng.poisson(10.0)
+        zc = np.stack([rng.uniform(0, 40000.0, nc), rng.uniform(-np.pi, np.pi, nc)], 1)
+        yield Scan(k * 2.0, 0, np.concatenate([zt, zc]))
+
+
+def _held_tracker(hold_scans: int | None, rejoin: float = 1000.0) -> Tracker:
+    logic = ScoreLogic.from_sprt(alpha=1e-2, beta=1e-3, pd=0.9, clutter_density=density(),
+                                 new_target_density=density() / 100)
+    if hold_scans is not None:
+        logic = replace(logic, hold_threshold=logic.delete_threshold
+                        + hold_scans * np.log(0.1))
+    return tracker("EKF", RADAR, logic=logic, initiator=TwoPoint(v_max=20.0),
+                   rejoin_within=rejoin)
+
+
+def _confirmed_ids(trk: Tracker, scans) -> list[set[int]]:
+    tracks, out = trk.init(), []
+    for scan in scans:
+        tracks = trk.step(tracks, scan)
+        out.append(set(tracks.ids[tracks.confirmed].tolist()))
+    return out
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_held_track_gives_its_id_to_the_new_track_that_continues_it(seed):
+    """Lost in a 30 s gap, each target's track is held (not confirmed, not deleted); the
+    new track started when it is seen again takes the held track's ID, so the same four IDs
+    are confirmed before and after the gap. Without the hold, four new IDs."""
+    ids = _confirmed_ids(_held_tracker(40), _gap_scene(seed))
+    before, after = ids[20], ids[-1]
+    assert len(before) == 4 and after == before
+    assert not set().union(*ids[34:46])  # lost in the gap: not shown
+    plain = _confirmed_ids(_held_tracker(None), _gap_scene(seed))
+    assert len(plain[-1]) == 4 and not plain[-1] & plain[20]
+
+
+def test_a_new_track_far_from_a_held_one_keeps_its_own_id():
+    """The fourth target comes back 3 km off its course: farther than rejoin_within (1 km),
+    so its new track keeps the new ID while the other three continue their held tracks."""
+    ids = _confirmed_ids(_held_tracker(40), _gap_scene(1, jump=3000.0))
+    before, after = ids[20], ids[-1]
+    assert len(before) == 4 and len(after) == 4 and len(after & before) == 3
+
+
+def test_a_held_track_is_deleted_after_its_hold_and_never_confirmed_by_plots():
+    """Held tracks take no plot (their gate has grown): the plots of a target seen again
+    start a new track; a held track no new track continues is deleted after its hold."""
+    trk = _held_tracker(10)
+    tracks = trk.init()
+    for scan in list(_gap_scene(2))[:21]:
+        tracks = trk.step(tracks, scan)
+    ids = set(tracks.ids[tracks.confirmed].tolist())
+    assert len(ids) == 4
+    for k in range(16):
+        tracks = trk.step(tracks, Scan(44.0 + 2 * k, 0, np.zeros((0, 2))))
+        if k == 8:  # 9 misses: lost, held
+            assert ids <= set(tracks.ids.tolist())
+            assert held(tracks.state)[np.isin(tracks.ids, list(ids))].all()
+    assert not ids & set(tracks.ids.tolist())

@@ -46,6 +46,7 @@ __all__ = [
     "TimerState",
     "TimerLogic",
     "lost",
+    "held",
 ]
 
 Array = NDArray[np.float64]
@@ -64,11 +65,13 @@ class TrackStatus(IntEnum):
     TENTATIVE = 0
     CONFIRMED = 1
     DELETED = 2
+    LOST = 3  #: confirmed, then missed too long to be shown; held for re-acquisition
 
 
 _TENT = np.int8(TrackStatus.TENTATIVE)
 _CONF = np.int8(TrackStatus.CONFIRMED)
 _DEL = np.int8(TrackStatus.DELETED)
+_LOST = np.int8(TrackStatus.LOST)
 
 
 # ------------------------------------------------------------------------------------------
@@ -83,6 +86,11 @@ def confirmed(state: HistoryState | ScoreState) -> Bool:
 def tentative(state: HistoryState | ScoreState) -> Bool:
     """Tracks whose status is TENTATIVE."""
     return np.asarray(state.status) == _TENT
+
+
+def held(state: HistoryState | ScoreState) -> Bool:
+    """Tracks whose status is LOST: kept, unseen, for a plot to take them up again."""
+    return np.asarray(state.status) == _LOST
 
 
 def to_delete(state: HistoryState | ScoreState) -> Bool:
@@ -305,6 +313,15 @@ class ScoreLogic:
     ``L >= confirm_threshold`` and deleted when ``L - max_j L_j < delete_threshold`` (a
     negative number: the drop from the running maximum). ``from_sprt`` sets both thresholds
     from Wald's SPRT error probabilities. Defaults follow MATLAB: 20 and -5.
+
+    ``hold_threshold`` (None: off, a number below ``delete_threshold``) holds a confirmed
+    track rather than deleting it: while ``hold_threshold <= L - max_j L_j <
+    delete_threshold`` it is LOST (kept and updated, not shown), CONFIRMED again once hits
+    bring its score back within ``delete_threshold`` of the maximum, deleted below
+    ``hold_threshold``. An object unseen for a while (a reporting gap, a long fade) keeps its
+    track and ID instead of getting a new one, and a stray plot in a lost track's wide gate
+    cannot show it again: it takes the score's gain of several good hits. A tentative track
+    is deleted at ``delete_threshold`` as without a hold.
     """
 
     pd: float
@@ -313,6 +330,7 @@ class ScoreLogic:
     pg: float = 1.0
     confirm_threshold: float = 20.0
     delete_threshold: float = -5.0
+    hold_threshold: float | None = None
 
     def __post_init__(self) -> None:
         _probability(self.pd, "pd")
@@ -328,6 +346,10 @@ class ScoreLogic:
                 f"delete_threshold = {self.delete_threshold!r}; expected a negative number "
                 "(the allowed drop of the score below its maximum)"
             )
+        h = self.hold_threshold
+        if h is not None and not (np.isfinite(h) and h < self.delete_threshold):
+            raise ValueError(f"hold_threshold = {h!r}; expected None or a number below "
+                             f"delete_threshold ({self.delete_threshold!r})")
 
     @classmethod
     def from_sprt(cls, alpha: float, beta: float, **params) -> ScoreLogic:
@@ -376,9 +398,15 @@ class ScoreLogic:
 
     def _decide(self, score: Array, max_score: Array,
                 status: NDArray[np.int8]) -> NDArray[np.int8]:
-        conf = (status == _CONF) | (score >= self.confirm_threshold)
         drop = score - max_score < self.delete_threshold
-        out = np.where(drop, _DEL, np.where(conf, _CONF, _TENT))
+        if self.hold_threshold is None:
+            conf = (status == _CONF) | (score >= self.confirm_threshold)
+            out = np.where(drop, _DEL, np.where(conf, _CONF, _TENT))
+        else:
+            seen = (status != _TENT) | (score >= self.confirm_threshold)
+            gone = score - max_score < self.hold_threshold
+            out = np.where(gone | (drop & ~seen), _DEL,
+                           np.where(drop, _LOST, np.where(seen, _CONF, _TENT)))
         return np.where(status == _DEL, _DEL, out).astype(np.int8)
 
 

@@ -65,6 +65,8 @@ class TrackProfile:
     turn_std_deg: float | None = None  # turn-rate std of a new track (deg/s)
     misses: float | None = None  # consecutive missed scans a track coasts through
     v_max: float | None = None  # top speed for two-point initiation (m/s)
+    hold: float | None = None  # time a lost track is held, unseen, for a new one to continue
+    rejoin: float | None = None  # how near a new track must be to a held one to continue it (m)
 
 
 #: defaults per input: a coastal marine radar over AIS traffic, an en-route air surveillance
@@ -366,7 +368,8 @@ def build_tracker(sensor: Any, s: TrackProfile, clutter_density: float, associat
     initiator, init_desc = _initiator(sensor, s)
     tracker = Tracker(filt_, motion, sensor, pd=s.pd, clutter_density=clutter_density,
                       associator=GNN() if associator == "gnn" else JPDA(),
-                      logic=logic, initiator=initiator, **extra)
+                      logic=logic, initiator=initiator, **extra,
+                      rejoin_within=math.inf if s.rejoin is None else float(s.rejoin))
     unit = "per_m_rad" if hasattr(sensor, "sigma_bearing") else "per_m2"
     desc = {"filter": filt.upper(), **motion_desc, "associator": associator.upper(),
             "gate": "the filter's own innovation covariance (the IMM's: its models' mixture)",
@@ -414,6 +417,12 @@ def _logic(s: TrackProfile, clutter_density: float) -> tuple[Any, dict[str, Any]
         logic = replace(logic, delete_threshold=(float(s.misses) + 0.5) * math.log1p(-s.pd))
         rule = (f"track score, confirmed at the SPRT threshold (alpha 0.01), deleted after "
                 f"{int(s.misses) + 1} consecutive missed scans")
+    if s.hold and s.period:
+        scans = round(s.hold / s.period)
+        logic = replace(logic, hold_threshold=logic.delete_threshold
+                        + scans * math.log1p(-s.pd))
+        rule += (f"; a confirmed track is then held unseen for {scans} more scans "
+                 f"({s.hold:g} s), taken up again by a plot in its gate")
     text = (f"{rule}: confirmed at a score of {logic.confirm_threshold:.3g}, deleted at a drop "
             f"of {-logic.delete_threshold:.3g} below its maximum")
     return logic, {"logic": text}

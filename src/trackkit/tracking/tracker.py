@@ -6,12 +6,14 @@ One scan, for every live track at once (axis 0 of one batched belief is the trac
     predict      x-, P- = f.predict(x, P, dt)                      one filter call
     measure      zhat, S from the filter's own innovation            one filter call
     gate         d2_ij = nu_ij^T S_i^-1 nu_ij <= gamma(P_G)         KD-tree pre-gate
+                 (a held track gates no plot)
     associate    GNN (least cost, per cluster) or JPDA (marginals beta_ij, beta_i0)
     update       GNN: f.update(x-, z_assigned)  (nan: a missed track keeps x-)
                  JPDA: every gated hypothesis updated as one batch, then the mixture
                  x = beta_0 x- + sum_j beta_j x_j, P = sum (beta (P + d d^T)) moment-matched
                  (a filter with ``merge_hypotheses``, the IMM, combines its own beliefs)
     logic        hit/miss -> M-of-N or SPRT score -> confirm, delete
+    rejoin       a newly confirmed track takes the ID of the held track it continues
     initiate     unassigned plots -> new tentative tracks, new IDs
 
 ``zhat`` and ``S`` come from the filter itself: an update at ``z0 = h(x-)`` returns the
@@ -28,6 +30,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, moment_match
@@ -51,8 +54,10 @@ from trackkit.tracking.logic import (
     IdCounter,
     ScoreLogic,
     ScoreState,
+    TrackStatus,
     concatenate,
     confirmed,
+    held,
     select,
     to_delete,
 )
@@ -215,6 +220,17 @@ def _join(a: Any, b: Any) -> Any:
     return type(a)._make(np.concatenate([x, y]) for x, y in zip(a, b, strict=True))
 
 
+def _without_held(g: Gate, held_: NDArray[np.bool_]) -> Gate:
+    """The gate without the pairs of held (lost, unseen) tracks: a held track's gate has
+    grown with every missed scan, and a plot in it is as likely another object's; the object
+    found again starts a new track, which ``Tracker._rejoin`` tests against the held ones."""
+    if not held_.any():
+        return g
+    keep = ~held_[g.track]
+    return g._replace(track=g.track[keep], det=g.det[keep], d2=g.d2[keep],
+                      loglik=g.loglik[keep], nu=g.nu[keep])
+
+
 # --- the tracker ----------------------------------------------------------------------------
 
 
@@ -226,7 +242,9 @@ class Tracker:
     model. ``pd`` and ``clutter_density`` (false plots per unit of measurement space per
     scan) set the association's likelihood ratios and the score logic; ``p_gate`` the gate.
     The state is ``[x, y, vx, vy]`` with any extras after (e.g. a turn rate), which new tracks
-    get with ``extra_mean`` and ``extra_std``.
+    get with ``extra_mean`` and ``extra_std``. With a score logic that holds lost tracks
+    (``ScoreLogic.hold_threshold``), a newly confirmed track within ``rejoin_within`` (m) of
+    a held one continues it under its ID (``_rejoin``).
     """
 
     filter: Any
@@ -240,6 +258,7 @@ class Tracker:
     initiator: SinglePoint | TwoPoint = field(default_factory=SinglePoint)
     extra_mean: tuple[float, ...] = ()
     extra_std: tuple[float, ...] = ()
+    rejoin_within: float = np.inf
 
     def __post_init__(self) -> None:
         if not 0.0 < self.pd <= 1.0:
@@ -332,6 +351,7 @@ class Tracker:
             zhat, S = self.measurement_prediction(belief, sensor)
             g = gate(zhat, S, z, self.p_gate, angular=getattr(sensor, "angular", None),
                      threshold=self._gate_threshold())
+            g = _without_held(g, held(state))
             info["pairs"] = g.size
             if isinstance(self.associator, JPDA):
                 belief, hit, ll, claimed = self._jpda(belief, g, z, sensor, info)
@@ -339,11 +359,14 @@ class Tracker:
                 belief, hit, ll, claimed = self._gnn(belief, g, z, sensor, info)
             state = (self.logic.step(state, hit, ll) if isinstance(self.logic, ScoreLogic)
                      else self.logic.step(state, hit))
+        ids, born = tracks.ids.copy(), tracks.born.copy()
+        if T:
+            state, rejoined = self._rejoin(belief, tracks.state, state, ids, born)
         # delete, then start tracks from the plots no track claimed
         keep = ~to_delete(state)
-        deleted = tracks.ids[~keep]
+        deleted = np.setdiff1d(tracks.ids[~keep], rejoined) if T else tracks.ids[~keep]
         belief, state = _take(belief, np.flatnonzero(keep)), select(state, keep)
-        ids, born = tracks.ids[keep], tracks.born[keep]
+        ids, born = ids[keep], born[keep]
         new, waiting, second = self._initiate(z[~claimed], sensor, float(scan.time),
                                               tracks.waiting)
         counter = tracks.counter
@@ -362,6 +385,39 @@ class Tracker:
             # PSD by construction): spare the next predict its full check of a user's input
             register(belief.cov)
         return Tracks(belief, ids, state, born, float(scan.time), counter, waiting, step_info)
+
+    def _rejoin(self, belief: Any, before: Any, state: Any, ids: NDArray[np.int64],
+                born: Array) -> tuple[Any, NDArray[np.int64]]:
+        """Track segment association: each track confirmed at this scan is tested against
+        the held tracks, both at the scan's time, on ``[x, y, vx, vy]``:
+
+            d2 = (x_new - x_held)^T (P_new + P_held)^-1 (x_new - x_held) <= chi2(P_G, 4)
+
+        with the positions no farther apart than ``rejoin_within`` (a held track's covariance
+        grows without bound while it is unseen, so the test alone would join it to any new
+        track in a wide area); the pairs of least ``d2 + ln det(P_new + P_held)`` (twice
+        the negative log likelihood of one object) are joined: the new track takes the held track's ID and
+        birth (``ids``, ``born`` in place), the held track is deleted. An object lost and
+        found again keeps its identity whether its lost track or a new one found it."""
+        fresh = np.flatnonzero(confirmed(state) & ~confirmed(before) & ~held(before))
+        lost = np.flatnonzero(held(state))
+        if fresh.size == 0 or lost.size == 0:
+            return state, np.zeros(0, np.int64)
+        g = self.estimate(belief)
+        x, P = np.asarray(g.mean)[:, :4], np.asarray(g.cov)[:, :4, :4]
+        dx = x[fresh][:, None] - x[lost][None]
+        C = P[fresh][:, None] + P[lost][None]
+        d2 = np.einsum("abi,abi->ab", dx, np.linalg.solve(C, dx[..., None])[..., 0])
+        near = np.hypot(dx[..., 0], dx[..., 1]) <= self.rejoin_within
+        cost = np.where(near & (d2 <= chi2.ppf(self.p_gate, 4)),
+                        d2 + np.linalg.slogdet(C)[1], np.inf)
+        i, j = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e300))
+        ok = np.isfinite(cost[i, j])
+        a, b = fresh[i[ok]], lost[j[ok]]
+        ids[a], born[a] = ids[b], born[b]
+        status = np.asarray(state.status).copy()
+        status[b] = TrackStatus.DELETED
+        return state._replace(status=status), ids[a].copy()
 
     def _gate_threshold(self) -> float | None:
         """gamma of the gate: the GNN's missed distance squared, or None (from p_gate)."""
