@@ -215,6 +215,35 @@ def test_pngs_html_and_results(small, tmp_path):
     assert doc["input"]["records_skipped"] == 2 and doc["input"]["out_of_order_sorted"] == 4
 
 
+def test_report_solves_the_gospa_assignment_once(small, tmp_path, monkeypatch):
+    """GOSPA, the track counts, GOSPA with switching and the track table's identities all
+    come from one solve of the assignment (each costs a few tenths of a second on a whole
+    recording); the table from it equals the table that solves its own."""
+    import trackkit.eval.track_metrics as mt
+    from trackkit.report.track_table import track_table
+
+    solves = []
+    kernel = mt._assign
+
+    def counted(*args, **kw):
+        solves.append(args[0].x.shape[0])
+        return kernel(*args, **kw)
+
+    monkeypatch.setattr(mt, "_assign", counted)
+    rep = report_of(small)
+    paths = write_track_report(rep, tmp_path / "out")
+    assert len(solves) == 1 and solves[0] == rep.truth.x.shape[0]
+    assert paths["summary"].exists()
+    names = [f"vessel {k}" for k in range(int(rep.truth.ids.max()) + 1)]
+    kw = dict(truth=rep.truth, c=rep.gospa_c, object_ids=names, epoch=rep.epoch)
+    given = track_table(rep.history, **kw, assignment=track_metrics(
+        rep.history, rep.truth, rep.gospa_c)["_assignment"])
+    assert len(solves) == 2
+    alone = track_table(rep.history, **kw)
+    assert len(solves) == 3  # the table alone solves it itself
+    assert given.equals(alone) and any(alone["identity"].to_pylist())
+
+
 def test_metrics_parts_add_up(small):
     _, run, h = small
     m = track_metrics(h, run.truth, 500.0)

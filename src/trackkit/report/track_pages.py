@@ -61,7 +61,7 @@ from trackkit.eval.clear_mot import (
     id_scores,
     mota_steps,
 )
-from trackkit.eval.track_metrics import Frames, gospa_steps, track_counts, track_summary
+from trackkit.eval.track_metrics import Frames, assign, gospa_steps, track_counts, track_summary
 from trackkit.io.frames import EnuFrame, ground_geodetic
 from trackkit.io.records import ReadReport
 from trackkit.report.files import REPORT_HTML, RESULTS_JSON, write_atomically
@@ -317,7 +317,9 @@ def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: floa
     ``false`` are the means over scans of its additive parts (p-th powers, m^p), so that
     ``rms = (localisation + missed + false)^(1/p)``; ``missed_per_scan`` and
     ``false_per_scan`` are the mean numbers of objects left unassigned and of confirmed
-    tracks assigned to none."""
+    tracks assigned to none. Keys that start with ``_`` are for the figures and the track
+    table, not written: the per-scan series and ``_assignment``, the rows of the GOSPA
+    assignment (``eval.track_metrics.assign``) that every score here is computed from."""
     conf = history.confirmed()
     ids_conf = np.unique(conf.ids)
     out: dict[str, Any] = {
@@ -328,7 +330,8 @@ def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: floa
     }
     if truth is None:
         return out
-    g = gospa_steps(truth, conf, c, p)
+    ab = assign(truth, conf, c, p)  # one solve serves every score below and the track table
+    g = gospa_steps(truth, conf, c, p, assignment=ab)
     half = c**p / 2
     out["gospa"] = {
         "c": float(c), "p": float(p), "mean": float(np.mean(g.distance)),
@@ -340,18 +343,20 @@ def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: floa
         "objects_per_scan": float(truth.sizes.mean()),
     }
     period = float(np.median(np.diff(history.times))) if history.times.size > 1 else 0.0
-    counts = track_counts(truth, conf, c, p=p, times=history.times, within=5 * period)
+    counts = track_counts(truth, conf, c, p=p, times=history.times, within=5 * period,
+                          assignment=ab)
     summary = track_summary(counts)
     out["tracks"] = {k: (v if isinstance(v, int) else float(v)) for k, v in summary.items()}
     out["tracks"]["confirmed_within_s"] = 5 * period
     out["_gospa_steps"] = g  # for the figure; not written
-    out.update(_identity(truth, conf, c, p, site, sigma_bearing))
+    out["_assignment"] = ab  # for the track table; not written
+    out.update(_identity(truth, conf, c, p, site, sigma_bearing, ab))
     return out
 
 
 def _identity(truth: Frames, conf: Frames, c: float, p: float,
-              site: tuple[float, float] | None, sigma_bearing: float | None
-              ) -> dict[str, Any]:
+              site: tuple[float, float] | None, sigma_bearing: float | None,
+              assignment: tuple[NDArray[np.int64], NDArray[np.int64]]) -> dict[str, Any]:
     """CLEAR-MOT, IDF1 and GOSPA with switching (``identity``) and their per-scan series
     (``_identity_steps``, not written). The CLEAR-MOT and IDF1 threshold is the GOSPA
     cut-off c: a track farther than c from an object is neither assigned to it by GOSPA
@@ -360,7 +365,7 @@ def _identity(truth: Frames, conf: Frames, c: float, p: float,
     cm = clear_mot(truth, conf, c)
     s = clear_mot_summary(cm)
     ids = id_scores(truth, conf, c)
-    gs = gospa_switching(truth, conf, c, p, switching_penalty=c)
+    gs = gospa_switching(truth, conf, c, p, switching_penalty=c, assignment=assignment)
     resolvable: int | None = None
     res_steps = None
     if site is not None and sigma_bearing is not None:
@@ -785,7 +790,8 @@ def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
     table = history_table(rep.history, epoch=rep.epoch, frame=rep.frame,
                           smoothed=rep.smoothed)
     summary = track_table(rep.history, truth=rep.truth, c=rep.gospa_c,
-                          object_ids=rep.object_ids, epoch=rep.epoch)
+                          object_ids=rep.object_ids, epoch=rep.epoch,
+                          assignment=metrics.get("_assignment"))
     out = {"parquet": write_tracks_parquet(table, folder / TRACKS_PARQUET),
            "csv": write_tracks_csv(table, folder / TRACKS_CSV)}
     out["summary"] = folder / TRACKS_SUMMARY_CSV
