@@ -47,7 +47,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
@@ -64,8 +63,15 @@ from trackkit.eval.clear_mot import (
 from trackkit.eval.track_metrics import Frames, assign, gospa_steps, track_counts, track_summary
 from trackkit.io.frames import EnuFrame, ground_geodetic
 from trackkit.io.records import ReadReport
-from trackkit.report.files import REPORT_HTML, RESULTS_JSON, write_atomically
+from trackkit.report.files import (
+    REPORT_HTML,
+    RESULTS_JSON,
+    finite_or_none,
+    write_atomically,
+    write_json,
+)
 from trackkit.report.html import CSS, notes_and_figures
+from trackkit.report.plots import save_figure
 from trackkit.report.track_map import MAP_CSS, map_data, map_html
 from trackkit.report.track_table import track_table
 from trackkit.report.track_words import headline_figures, settings_in_words
@@ -102,7 +108,6 @@ NO_TRACK_CONFIRMED = (
     "detection probability and clutter options.")
 _STATUS = {int(s): s.name.lower() for s in TrackStatus}
 _STATE_NAMES = ("x", "y", "vx", "vy")
-_DPI = 110
 
 
 # --- the tables -------------------------------------------------------------------------------
@@ -387,12 +392,6 @@ def _identity(truth: Frames, conf: Frames, c: float, p: float,
 # --- figures ----------------------------------------------------------------------------------
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=_DPI, format="png")
-    return path
-
-
 def track_figure(history: TrackHistory, *, background: Array | None = None,
                  background_label: str = "reported positions",
                  site: tuple[float, float] | None = None, max_range: float | None = None,
@@ -533,25 +532,13 @@ def _input_document(read: ReadReport | None, source: str, fmt: str) -> dict[str,
             str(read.epoch.astype("datetime64[ms]")) + "Z"}
 
 
-def _finite_or_none(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {k: _finite_or_none(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite_or_none(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, np.generic):
-        return _finite_or_none(obj.item())
-    return obj
-
-
 def results_document(rep: TrackReport, metrics: Mapping[str, Any]) -> dict[str, Any]:
     """``results.json``: the input account, the configuration, the track counts and GOSPA."""
     doc = {"title": rep.title, "input": _input_document(rep.read, rep.source, rep.fmt),
            "config": {k: dict(v) for k, v in rep.config.items()},
            "results": {k: v for k, v in metrics.items() if not k.startswith("_")},
            "notes": list(rep.notes), "trackkit": __version__}
-    return _finite_or_none(doc)
+    return finite_or_none(doc)
 
 
 def _fmt(v: Any) -> str:
@@ -804,22 +791,20 @@ def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
     if rep.read is not None and (rep.read.n_skipped or rep.read.bad):
         out["skipped"] = write_skipped_csv(rep.read, folder / SKIPPED_CSV)
     images: dict[str, Path] = {}
-    images["tracks"] = _save(track_figure(rep.history, background=rep.background,
+    images["tracks"] = save_figure(track_figure(rep.history, background=rep.background,
                                           background_label=rep.background_label,
                                           site=rep.site, max_range=rep.max_range,
                                           title=rep.title), folder / TRACKS_PNG)
     g = metrics.get("_gospa_steps")
     if g is not None and rep.truth is not None:
-        images["gospa"] = _save(gospa_figure(rep.history.times, g, rep.truth.sizes,
+        images["gospa"] = save_figure(gospa_figure(rep.history.times, g, rep.truth.sizes,
                                              rep.history.confirmed().sizes, rep.gospa_c,
                                              epoch=rep.epoch), folder / GOSPA_PNG)
     out.update({f"{k}_png": v for k, v in images.items()})
     out["html"] = folder / REPORT_HTML
     out["html"].write_text(render_track_html(rep, metrics, images, summary), encoding="utf-8")
     doc = results_document(rep, metrics)
-    out["results"] = folder / RESULTS_JSON
-    out["results"].write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n",
-                              encoding="utf-8")
+    out["results"] = write_json(doc, folder / RESULTS_JSON)
     return out
 
 
