@@ -4,6 +4,7 @@ track`` writes, bit for bit."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -23,6 +24,7 @@ from trackkit.tracking.recorded import (
     TrackProfile,
     build_tracker,
     open_recording,
+    profile_radar,
     track_recording,
 )
 
@@ -54,6 +56,21 @@ def test_options_fill_in_the_input_kinds_profile():
     assert (ais.pd, ais.q) == (0.8, 2.0)
     assert ais.period == TRACK_PROFILES["ais"].period
     assert given.settings("detections").period is None  # a detections file has no scans
+
+
+def test_profile_radar_is_the_radar_trackkit_track_uses():
+    s = replace(TRACK_PROFILES["ais"], period=4.0, sigma_bearing_deg=0.3, clutter=2.0)
+    vr = profile_radar(s, (100.0, -50.0), max_gap=90.0)
+    assert (vr.site, vr.period, vr.sigma_range, vr.pd, vr.clutter, vr.max_gap) == (
+        (100.0, -50.0), 4.0, s.sigma_range, s.pd, 2.0, 90.0)
+    assert math.isclose(vr.sigma_bearing, math.radians(0.3))
+    assert (vr.min_range, vr.max_range) == (s.min_range, s.max_range)
+    result = track_recording(samples.path("solent-ais"), TrackOptions(
+        as_radar=True, max_scans=3, max_gap=90.0, profile=TrackProfile(
+            period=4.0, sigma_bearing_deg=0.3, clutter=2.0)))
+    shown = result.config["virtual radar"]
+    assert (shown["period_s"], shown["clutter_per_scan"], shown["max_gap_s"]) == (4.0, 2.0, 90.0)
+    assert shown["sigma_bearing_deg"] == 0.3 and shown["site_x_m"] == 0.0
 
 
 def test_a_detections_file_is_not_made_into_radar_plots(tmp_path):
