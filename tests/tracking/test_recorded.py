@@ -45,9 +45,14 @@ def test_track_recording_gives_the_tracks_trackkit_track_writes(tmp_path):
                                 tmp_path / "mine.parquet")
     written, ours = pq.read_table(out / TRACKS_PARQUET), pq.read_table(mine)
     assert written.equals(ours, check_metadata=True)
-    for k, name in enumerate(("x", "y", "vx", "vy")):  # bit for bit, not to rounding
+    # the IMM's fifth component is the CT model's turn rate, named so in both files
+    for k, name in enumerate(("x", "y", "vx", "vy", "turn_rate")):  # bit for bit
         column = written.column(name).to_numpy()
         assert np.array_equal(column.view(np.int64), h.mean[:, k].view(np.int64))
+    header = (out / "tracks.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
+    for names in (written.column_names, header):
+        assert "turn_rate" in names and "var_turn_rate" in names
+        assert not any(name.startswith("state_") for name in names)
 
 
 def test_options_fill_in_the_input_kinds_profile():

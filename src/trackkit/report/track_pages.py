@@ -12,14 +12,17 @@
 Rows of ``tracks.parquet`` / ``tracks.csv``: one per live track per scan (tentative and
 confirmed): ``id, scan, time`` (s from the epoch), ``time_utc`` (when the epoch is known;
 a UTC timestamp in Parquet, ISO 8601 text with a ``Z`` in CSV), the state ``x, y, vx, vy``
-(m, m/s, x east, y north in the local frame; extra components as ``state_4...``), the
-covariance diagonal ``var_x, var_y, var_vx, var_vy`` (m^2, m^2/s^2), ``status``
+(m, m/s, x east, y north in the local frame), the extra components by the names the
+tracker's models give them (``turn_rate``, rad/s counter-clockwise, of the IMM's
+coordinated-turn model; else ``state_4 ...``), the covariance diagonal ``var_x, var_y,
+var_vx, var_vy`` (m^2, m^2/s^2; ``var_turn_rate`` ...), ``status``
 ("tentative" or "confirmed") and ``lat, lon`` (deg, WGS-84, when the frame is known: the
 ground point of the 2-D track, see :func:`ground_geodetic`; an aircraft's x, y far from the
 frame's origin are those of the point under it only to altitude x distance / earth radius,
 600 m for 10 km up at 400 km, so its lat, lon are off by as much). With the smoothed
 tracks (:mod:`trackkit.tracking.smoothing`, a Rauch-Tung-Striebel smoother over each track's
-whole life), after those: ``x_smooth, y_smooth, vx_smooth, vy_smooth``, their variances
+whole life), after those: ``x_smooth, y_smooth, vx_smooth, vy_smooth`` (and
+``turn_rate_smooth`` ...), their variances
 ``var_x_smooth ...`` and ``lat_smooth, lon_smooth``, row for row. Floats
 round-trip exactly in both files (Parquet is binary, the CSV writer prints the shortest
 decimal that reads back as the same double).
@@ -102,6 +105,10 @@ NO_TRACK_CONFIRMED = (
     "detection probability and clutter options.")
 _STATUS = {int(s): s.name.lower() for s in TrackStatus}
 _STATE_NAMES = ("x", "y", "vx", "vy")
+#: the units of the columns every history has
+_UNITS = ("x", "y", "vx", "vy", "var_x", "var_y", "var_vx", "var_vy", "lat", "lon")
+#: units of the extra state components a model names, and of their variances
+_EXTRA_UNITS = {"turn_rate": ("rad/s", "rad^2/s^2")}
 _DPI = 110
 
 
@@ -128,7 +135,7 @@ def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
     scan = np.repeat(np.arange(h.times.size, dtype=np.int64), per_scan)
     t = h.times[scan]
     n = h.mean.shape[1]
-    names = [_STATE_NAMES[k] if k < 4 else f"state_{k}" for k in range(n)]
+    names = _state_names(h, n)
     cols: dict[str, Any] = {"id": np.asarray(h.ids, np.int64), "scan": scan, "time": t}
     if epoch is not None:
         cols["time_utc"] = pa.array(_utc(epoch, t)).cast(pa.timestamp("ns", tz="UTC"))
@@ -141,27 +148,30 @@ def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
     if frame is not None:
         cols["lat"], cols["lon"] = ground_geodetic(frame, h.mean[:, 0], h.mean[:, 1])
     if smoothed is not None:
-        cols.update(_smoothed_columns(smoothed, h.ids.size, frame))
+        cols.update(_smoothed_columns(smoothed, h.ids.size, frame, names))
     meta = {"epoch": None if epoch is None else str(epoch.astype("datetime64[ns]")),
             "frame": None if frame is None else [frame.lat0, frame.lon0, frame.alt0],
             "units": {"time": "s from epoch", "x": "m east", "y": "m north", "vx": "m/s",
                       "vy": "m/s", "var_x": "m^2", "var_y": "m^2", "var_vx": "m^2/s^2",
                       "var_vy": "m^2/s^2", "lat": "deg", "lon": "deg"}}
+    meta["units"].update({k: u for name in names[4:] if name in _EXTRA_UNITS
+                          for k, u in zip((name, f"var_{name}"), _EXTRA_UNITS[name],
+                                          strict=True)})
     if smoothed is not None:
         meta["units"].update({f"{k}_smooth": u for k, u in list(meta["units"].items())
-                              if k != "time"})
+                              if k != "time" and (k in _UNITS or f"{k}_smooth" in cols)})
     table = pa.table({k: v if isinstance(v, pa.Array) else pa.array(v) for k, v in cols.items()})
     return table.replace_schema_metadata({"trackkit": json.dumps(meta)})
 
 
-def _smoothed_columns(sm: SmoothedTracks, rows: int, frame: EnuFrame | None
-                      ) -> dict[str, Array]:
+def _smoothed_columns(sm: SmoothedTracks, rows: int, frame: EnuFrame | None,
+                      state: list[str]) -> dict[str, Array]:
     """``x_smooth ...``, ``var_x_smooth ...`` and ``lat_smooth, lon_smooth`` of the smoothed
-    components."""
+    components (named as the history's ``state`` components)."""
     if sm.mean.shape[0] != rows:
         raise ValueError(f"smoothed tracks have {sm.mean.shape[0]} rows; the history has "
                          f"{rows}: expected the smoothed tracks of this history")
-    names = [_STATE_NAMES[k] if k < 4 else f"state_{k}" for k in sm.dims.tolist()]
+    names = [state[k] if k < len(state) else f"state_{k}" for k in sm.dims.tolist()]
     cols = {f"{name}_smooth": np.asarray(sm.mean[:, i], float) for i, name in enumerate(names)}
     var = np.diagonal(sm.cov, axis1=-2, axis2=-1)
     cols.update({f"var_{name}_smooth": np.asarray(var[:, i], float)
@@ -170,6 +180,14 @@ def _smoothed_columns(sm: SmoothedTracks, rows: int, frame: EnuFrame | None
     if frame is not None and xy is not None:
         cols["lat_smooth"], cols["lon_smooth"] = ground_geodetic(frame, xy[:, 0], xy[:, 1])
     return cols
+
+
+def _state_names(h: TrackHistory, n: int) -> list[str]:
+    """The columns of the ``n`` state components: ``x, y, vx, vy``, then the history's
+    ``extra_names`` (``state_4 ...`` for one it does not name)."""
+    extra = tuple(h.extra_names)
+    return [_STATE_NAMES[k] if k < 4 else extra[k - 4] if k - 4 < len(extra)
+            else f"state_{k}" for k in range(n)]
 
 
 def _smoothed_xy(sm: SmoothedTracks) -> Array | None:
