@@ -340,6 +340,45 @@ def test_no_file_tracks_the_bundled_sample_and_says_so(tmp_path):
     assert len(mmsi) > 20 and all(s.isdigit() and len(s) == 9 for s in mmsi)
 
 
+def test_the_tracker_options_reach_the_tracker(tmp_path):
+    out = tmp_path / "o"
+    ran = _invoke("solent-ais", "--as-radar", "--max-scans", "6", "--misses", "5", "--v-max",
+                  "12", "--turn-q", "2e-5", "--turn-std-deg", "4", "--out", str(out))
+    assert ran.exit_code == 0, ran.output
+    tracker = json.loads((out / "results.json").read_text())["config"]["tracker"]
+    assert tracker["v_max_m_s"] == 12.0 and "two-point" in tracker["initiator"]
+    assert tracker["turn_rate_noise_rad2_s3"] == 2e-5
+    assert tracker["initial_turn_rate_std_deg_s"] == pytest.approx(4.0, rel=1e-12)
+    assert "deleted after 6 consecutive missed scans" in tracker["logic"]
+    # a detections file gets two-point initiation and the IMM when asked for them
+    f = tmp_path / "plots.csv"
+    _detections(f, bad=False)
+    ran = _invoke(str(f), "--v-max", "30", "--turn-q", "1e-4", "--misses", "2", "--out",
+                  str(tmp_path / "d"))
+    assert ran.exit_code == 0, ran.output
+    tracker = json.loads((tmp_path / "d" / "results.json").read_text())["config"]["tracker"]
+    assert "coordinated turn" in tracker["motion"] and tracker["v_max_m_s"] == 30.0
+    assert "deleted after 3 consecutive missed scans" in tracker["logic"]
+
+
+def test_a_tracker_option_the_tracker_would_not_use_is_refused(tmp_path):
+    f = tmp_path / "d.csv"
+    f.write_text("time,x,y\n0,1,2\n")
+    for args, names in (
+            (["solent-ais", "--as-radar", "--v-std", "5"],
+             ["--v-std 5", "two-point initiation", "--v-max (20 m/s)"]),
+            ([str(f), "--v-max", "30", "--v-std", "5"], ["--v-std 5", "--v-max (30 m/s)"]),
+            ([str(f), "--turn-std-deg", "3"], ["--turn-std-deg 3", "--turn-q"]),
+            ([str(f), "--misses", "-1"], ["--misses", "-1"])):
+        res = _invoke(*args, "--out", str(tmp_path / "never"))
+        assert res.exit_code == 2, res.output
+        for name in names:
+            assert name in " ".join(res.output.split()), (name, res.output)
+        assert not (tmp_path / "never").exists()
+    res = _invoke(str(f), "--v-std", "5", "--out", str(tmp_path / "single"))
+    assert res.exit_code == 0, res.output  # single-point initiation uses it
+
+
 def _detections(path: Path, bad: bool = True) -> None:
     """Three targets in a straight line for 40 scans of 2 s, some clutter; with ``bad``, line
     11 has x = 'abc', line 21 repeats line 20 and two scans are out of time order."""

@@ -108,6 +108,19 @@ def test_the_profiles_build_the_trackers_they_describe():
     assert desc["motion"] == "constant velocity" and desc["associator"] == "JPDA"
 
 
+def test_the_profile_given_makes_the_tracker():
+    given = TrackProfile(misses=5, v_max=12.0, turn_q=2e-5, turn_std_deg=4.0)
+    s = open_recording(samples.path("solent-ais"),
+                       TrackOptions(as_radar=True, profile=given)).settings
+    trk, _ = build_tracker(RangeBearing(sigma_range=20.0, sigma_bearing=0.01), s, 1e-5,
+                           "gnn", "ekf")
+    miss = math.log1p(-s.pd)
+    assert 5 * miss > trk.logic.delete_threshold > 6 * miss
+    assert trk.initiator.v_max == 12.0
+    assert trk.filter.models[1].q_omega == 2e-5
+    assert trk.extra_std == (math.radians(4.0),)
+
+
 def _old_defaults(result) -> Tracker:
     """The tracker trackkit track used before the IMM defaults, built here explicitly: a
     constant-velocity EKF (q 0.05 m^2/s^3), single-point initiation (velocity std 10 m/s)

@@ -125,8 +125,31 @@ def track(
         "--q", callback=number(0), help="Process noise of the constant-velocity model "
         "(m^2/s^3).", show_default=_profile_default("q"))] = None,
     v_std: Annotated[float | None, typer.Option(
-        "--v-std", callback=number(0), help="Velocity std of a new track (m/s).",
+        "--v-std", callback=number(0), help="Velocity std of a track started from a single "
+        "plot (m/s): single-point initiation, a detections file's. Two-point initiation (AIS, "
+        "ADS-B, or --v-max) takes the velocity from the two plots and does not use it.",
         show_default=_profile_default("v_std"))] = None,
+    v_max: Annotated[float | None, typer.Option(
+        "--v-max", callback=number(0), help="Top speed of the traffic (m/s): a track starts "
+        "from two plots of consecutive scans no farther apart than v_max times the scan "
+        "interval plus three standard deviations of their separation (two-point "
+        "initiation). Given for a detections file, it replaces single-point initiation.",
+        show_default=_profile_default("v_max"))] = None,
+    misses: Annotated[int | None, typer.Option(
+        "--misses", callback=at_least(0), help="Consecutive missed scans a track coasts "
+        "through (count); it is deleted at the next. Without it a detections file's track is "
+        "deleted at Wald's SPRT threshold (the third miss at pd 0.9).",
+        show_default=_profile_default("misses"))] = None,
+    turn_q: Annotated[float | None, typer.Option(
+        "--turn-q", callback=number(0, open_lo=False), help="Turn-rate noise of the "
+        "coordinated-turn model (rad^2/s^3; the turn rate's variance grows by turn_q dt): the "
+        "filter is an IMM of constant velocity and coordinated turn. Given for a detections "
+        "file, it replaces the constant-velocity filter.",
+        show_default=_profile_default("turn_q"))] = None,
+    turn_std_deg: Annotated[float | None, typer.Option(
+        "--turn-std-deg", callback=number(0), help="Turn-rate std of a new track (deg/s), in "
+        "the IMM's coordinated-turn model.",
+        show_default=_profile_default("turn_std_deg"))] = None,
     gospa_c: Annotated[float | None, typer.Option(
         "--gospa-c", callback=number(0), help="GOSPA cut-off (m).",
         show_default=_profile_default("gospa_c"))] = None,
@@ -155,13 +178,15 @@ def track(
         profile = TrackProfile(period=period, sigma_range=sigma_range,
                                sigma_bearing_deg=sigma_bearing_deg, sigma_pos=sigma_pos, pd=pd,
                                clutter=clutter, max_range=max_range, min_range=min_range, q=q,
-                               v_std=v_std, gospa_c=gospa_c)
+                               v_std=v_std, gospa_c=gospa_c, turn_q=turn_q,
+                               turn_std_deg=turn_std_deg, misses=misses, v_max=v_max)
         options = TrackOptions(
             fmt=fmt.value if fmt else None, as_radar=as_radar, columns=columns, units=units,
             site_lat=site_lat, site_lon=site_lon, profile=profile,
             max_gap=max_gap, seed=seed, associator=associator.value, filter=filt.value,
             on_bad=on_bad.value, until=until, max_scans=max_scans)
         recording = open_recording(file, options)
+        _check_used(profile, recording.settings)
         target, label = output_dir(out, f"track-{recording.path.stem}")
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
@@ -176,6 +201,18 @@ def track(
             paths = _write(result, where.path)
             state.interrupted = "interrupted"
             print_track_summary(result.read, result, paths)
+
+
+def _check_used(given: TrackProfile, used: TrackProfile) -> None:
+    """A tracker option the chosen tracker would ignore is a mistake: say which and why."""
+    if given.v_std is not None and used.v_max is not None:
+        raise ValueError(f"--v-std {given.v_std:g}: tracks here start by two-point "
+                         "initiation, which takes the velocity from the two plots and does not "
+                         f"use --v-std; its speed limit is --v-max ({used.v_max:g} m/s)")
+    if given.turn_std_deg is not None and used.turn_q is None:
+        raise ValueError(f"--turn-std-deg {given.turn_std_deg:g}: the filter here is "
+                         "constant-velocity, with no turn rate; give --turn-q for the IMM of "
+                         "constant velocity and coordinated turn")
 
 
 def _bars(bar: Any) -> Any:
