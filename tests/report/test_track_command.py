@@ -34,6 +34,7 @@ from trackkit.tracking import ScoreLogic, SinglePoint, Tracker, TrackStatus
 from trackkit.tracking.history import run_tracker
 
 from ..cli_helpers import assert_user_error, trackkit
+from ..io import layout_files
 from ..sim.test_virtual_radar import fleet
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -377,6 +378,29 @@ def test_a_tracker_option_the_tracker_would_not_use_is_refused(tmp_path):
         assert not (tmp_path / "never").exists()
     res = _invoke(str(f), "--v-std", "5", "--out", str(tmp_path / "single"))
     assert res.exit_code == 0, res.output  # single-point initiation uses it
+
+
+def test_the_report_shows_the_layout_and_what_was_set_missing(tmp_path):
+    """A NOAA MarineCadastre file with courses out of range and a "not available" code: the
+    page's input section names the layout and counts the courses set missing by reason."""
+    f = layout_files.write_noaa(tmp_path / "AIS <harbour>.csv", layout_files.fleet(), special={
+        3: {"COG": "-120.3"}, 5: {"COG": "-120.3"}, 7: {"COG": "-120.3"},
+        9: {"COG": "-49.6"}, 11: {"Heading": "511"}})
+    out = tmp_path / "o"
+    ran = _invoke(str(f), "--as-radar", "--out", str(out))
+    assert ran.exit_code == 0, ran.output
+    page = (out / "report.html").read_text(encoding="utf-8")
+    section = page[page.index("<h2>Input</h2>"):]
+    assert "<th>layout recognised</th><td>AIS CSV, NOAA MarineCadastre layout (noaa)</td>" \
+        in section
+    for field_reason, n in (("course: outside [0, 360]", 3),
+                            ("course: not available (-49.6)", 1),
+                            ("heading: not available (511)", 1)):
+        assert f"<th>{field_reason}</th><td>{n}</td>" in section, field_reason
+    assert "AIS &lt;harbour&gt;.csv" in section and "AIS <harbour>" not in section
+    doc = json.loads((out / "results.json").read_text())["input"]
+    assert doc["layout"] == "noaa" and doc["set_missing"]["course"] == {
+        "outside [0, 360]": 3, "not available (-49.6)": 1}
 
 
 def _detections(path: Path, bad: bool = True) -> None:

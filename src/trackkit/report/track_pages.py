@@ -66,6 +66,7 @@ from trackkit.eval.clear_mot import (
 )
 from trackkit.eval.track_metrics import Frames, gospa_steps, track_counts, track_summary
 from trackkit.io.frames import EnuFrame, ground_geodetic
+from trackkit.io.layouts import LAYOUTS
 from trackkit.io.records import ReadReport
 from trackkit.report.files import REPORT_HTML, RESULTS_JSON, write_atomically
 from trackkit.report.html import CSS, notes_and_figures
@@ -538,10 +539,12 @@ def track_report(result: TrackingResult) -> TrackReport:
 def _input_document(read: ReadReport | None, source: str, fmt: str) -> dict[str, Any]:
     if read is None:
         return {"file": source, "format": fmt}
-    return {"file": read.path, "format": fmt, "records_read": read.rows_read,
+    return {"file": read.path, "format": fmt, "layout": read.layout or None,
+            "records_read": read.rows_read,
             "records_kept": read.rows_kept, "records_skipped": read.n_skipped,
             "skipped_by_reason": dict(read.skipped), "duplicates_dropped": read.duplicates,
             "out_of_order_sorted": read.out_of_order, "not_given": dict(read.not_given),
+            "set_missing": {k: dict(v) for k, v in read.set_missing.items()},
             "epoch_utc": None if read.epoch is None else
             str(read.epoch.astype("datetime64[ms]")) + "Z"}
 
@@ -732,9 +735,18 @@ def _input_html(rep: TrackReport) -> list[str]:
               "skipped_by_reason": "skipped, by reason",
               "duplicates_dropped": "exact duplicates dropped",
               "out_of_order_sorted": "records out of time order (sorted)",
-              "not_given": "optional fields not given (kept as nan)", "epoch_utc": "t = 0 at"}
+              "not_given": "optional fields not given (kept as nan)", "epoch_utc": "t = 0 at",
+              "layout": "layout recognised"}
+    if inp.get("layout"):
+        inp["layout"] = _layout_title(inp["layout"])
+    missing = inp.pop("set_missing", None)
     parts = ["<h2>Input</h2>", _table([(labels.get(k, k), v) for k, v in inp.items()
                                       if v is not None])]
+    if missing:
+        parts.append(_table([(f"{name}: {reason}", n) for name, why in missing.items()
+                             for reason, n in sorted(why.items(), key=lambda kv: -kv[1])],
+                            caption="optional fields set missing (kept as nan), by field "
+                                    "and reason"))
     if rep.read is not None and rep.read.out_of_order:
         parts.append(f"<p>{rep.read.out_of_order} records were out of time order in the file; "
                      "they were sorted by time before tracking.</p>")
@@ -745,6 +757,12 @@ def _input_html(rep: TrackReport) -> list[str]:
         parts += [f"<li><code>{esc(str(b))}</code></li>" for b in shown]
         parts.append("</ul>")
     return parts
+
+
+def _layout_title(name: str) -> str:
+    """``NOAA MarineCadastre ... (noaa)``: the layout recognised, in words and by name."""
+    known = LAYOUTS.get(name)
+    return f"{known.title} ({name})" if known is not None else name
 
 
 def _map_section(rep: TrackReport, table: pa.Table | None) -> list[str]:
