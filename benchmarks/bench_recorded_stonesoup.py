@@ -269,9 +269,9 @@ def run_stonesoup(setting: Setting, result: TrackingResult
     its wall and CPU time per scan (ms)."""
     detector = stonesoup_scans(result.scans, measurement_model(result.sensor))
     tracker = iter(stonesoup_tracker(setting, result, detector))
-    # keyed by the track itself (hashed by identity), which keeps every track alive: an
-    # id() of a deleted track may be reused by a new one
-    ids: dict[Any, int] = {}
+    # keyed by Stone Soup's own track ID (a UUID): Python's id() of a deleted track may be
+    # reused by a new one, and keeping every track alive would hold all their states
+    ids: dict[str, int] = {}
     sizes, rows, spent, cpu = [], [], 0.0, 0.0
     for _ in range(len(detector)):
         t0, c0 = time.perf_counter(), time.process_time()
@@ -281,7 +281,7 @@ def run_stonesoup(setting: Setting, result: TrackingResult
         sizes.append(len(tracks))
         for tr in tracks:
             sv = tr.state_vector
-            rows.append((ids.setdefault(tr, len(ids)), float(sv[0, 0]), float(sv[2, 0])))
+            rows.append((ids.setdefault(tr.id, len(ids)), float(sv[0, 0]), float(sv[2, 0])))
     arr = np.array(rows, dtype=float).reshape(-1, 3)
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     n = len(detector)
