@@ -103,6 +103,8 @@ class MotionBase:
     linear: bool = False
     #: which state components are angles (wrapped in residuals, averaged circularly)
     angular: tuple[bool, ...] | None = None
+    #: the state components' names where the model fixes them (None: not named)
+    state_names: ClassVar[tuple[str, ...] | None] = None
 
     def f(self, x: Array, dt: ArrayLike) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
@@ -394,6 +396,7 @@ class CoordinatedTurn(MotionBase):
     q: ArrayLike = 1.0
     q_omega: float = 1e-4
     dim_x: int = field(default=5, init=False)
+    state_names: ClassVar[tuple[str, ...] | None] = ("x", "y", "vx", "vy", "turn_rate")
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", _per_axis(self.q, 2, "q"))

@@ -263,6 +263,22 @@ class Tracker:
             return self.sensor[scan.sensor]
         return self.sensor
 
+    @property
+    def extra_names(self) -> tuple[str, ...]:
+        """The names of the state's extras: those the motion model (or the IMM's models, by
+        their state maps) gives its state, else ``state_4, state_5 ...``."""
+        n = 4 + len(self.extra_mean)
+        names = {k: f"state_{k}" for k in range(4, n)}
+        if self.motion is not None:
+            models, maps = [self.motion], [np.arange(getattr(self.motion, "dim_x", n))]
+        else:
+            models = list(getattr(self.filter, "models", ()))
+            maps = list(getattr(self.filter, "state_maps", ()))
+        for model, where in zip(models, maps, strict=False):
+            own = getattr(model, "state_names", None) or ()
+            names.update({int(k): name for k, name in zip(where, own, strict=False) if 4 <= k < n})
+        return tuple(names[k] for k in range(4, n))
+
     def init(self, time: float = 0.0) -> Tracks:
         """No tracks yet, at ``time``."""
         n = 4 + len(self.extra_mean)
