@@ -70,6 +70,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation, moment_match
 from trackkit.filters.base import (
     Filter,
@@ -80,8 +81,8 @@ from trackkit.filters.base import (
     produced,
     register,
 )
-from trackkit.filters.kalman import KF, condition, linearize
-from trackkit.filters.kalman_fast import dot_rows, predict_matrices
+from trackkit.filters.kalman import EKF, KF, condition, linearize
+from trackkit.filters.kalman_fast import dot_rows, innovation_cov, predict_matrices
 from trackkit.linalg import (
     check_covariance,
     gaussian_loglik,
@@ -484,6 +485,49 @@ class IMM(Filter):
         else:
             post = IMMBelief(mu, post.mean, post.cov)
         return post, Innovation(v, Sm)
+
+    def measurement_prediction(self, belief: IMMBelief | Gaussian,
+                               sensor: Any) -> tuple[Array, Array] | None:
+        """The predicted measurement ``zhat (..., m)`` and its covariance ``S (..., m, m)``:
+        the mixture's moments that :meth:`update` returns as its innovation, without the
+        update. For models with first-order inner filters (KF, EKF), per model j
+
+            zhat_j = h(x_j-),   S_j = H_j P_j- H_j^T + R,   nu_j = z0 - zhat_j
+
+        at ``z0 = h(x-)``, x- the combined prediction (angles wrapped in nu_j); then
+        ``nu = sum_j c_j nu_j``, ``S = sum_j c_j (S_j + (nu_j - nu)(nu_j - nu)^T)`` and
+        ``zhat = z0 - nu`` (angles wrapped): the update's ``z - innov.nu`` and
+        ``innov.cov`` at ``z = z0``, the same arithmetic to the last bit. None for other
+        inner filters or shapes (the caller takes the update at z0 instead)."""
+        b = self._belief(belief, "IMM.measurement_prediction")
+        R = sensor.noise
+        if not (all(type(f) is EKF and f.order == 1 or type(f) is KF for f in self.filters)
+                and (getattr(sensor, "linear", False) or not any(type(f) is KF
+                                                                 for f in self.filters))
+                and not (self._kf_only and getattr(sensor, "linear", False))
+                and type(R) is np.ndarray and R.dtype == np.float64):
+            return None
+        z0 = np.asarray(sensor.h(self.estimate(b).mean), dtype=float)
+        nus, Ss = [], []
+        for j in range(self.r):
+            x, Pj = self._part(b.mean, b.cov, j)
+            zhat, H = linearize(sensor, x)
+            S = innovation_cov(Pj, np.asarray(H, dtype=float), R)
+            if S is None:
+                return None
+            nus.append(sensor.residual(z0, zhat))
+            Ss.append(S)
+        m = z0.shape[-1]
+        batch = np.broadcast_shapes(*(np.shape(v)[:-1] for v in nus),
+                                    *(np.shape(s)[:-2] for s in Ss))
+        nu = np.stack([np.broadcast_to(v, batch + (m,)) for v in nus], -2)
+        S = np.stack([np.broadcast_to(s, batch + (m, m)) for s in Ss], -3)
+        v, Sm = mixture_innovation(b.mu, nu, S)
+        zhat = z0 - v
+        ang = np.asarray(getattr(sensor, "angular", (False,) * m))
+        if ang.any():
+            zhat[..., ang] = wrap(zhat[..., ang])
+        return zhat, Sm
 
     def log_likelihood(self, belief: IMMBelief | Gaussian, z: ArrayLike, sensor: Any) -> Array:
         """``log p(z) = log sum_j c_j N(nu_j; 0, S_j)``, the predicted measurement mixture's

@@ -283,6 +283,10 @@ class Tracker:
         if type(self.filter) in _FIRST_ORDER and getattr(self.filter, "order", 1) == 1:
             mp = predict_measurement(belief, sensor)
             return mp.zhat, mp.S
+        fast = getattr(self.filter, "measurement_prediction", None)
+        out = None if fast is None else fast(belief, sensor)
+        if out is not None:  # the filter's own, without an update (the IMM's)
+            return out
         z0 = np.asarray(sensor.h(self.estimate(belief).mean), dtype=float)
         _, innov = self.filter.update(belief, z0, sensor)
         zhat = z0 - innov.nu
