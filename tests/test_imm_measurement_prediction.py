@@ -130,3 +130,13 @@ def test_declined_cases_fall_back_to_the_update(case):
     zhat, S = trk.measurement_prediction(b, sensor)
     zr, Sr = by_update(f, b, sensor)
     assert np.array_equal(zhat, zr) and np.array_equal(S, Sr)
+
+
+@pytest.mark.parametrize("mu_ct", [0.3, 0.0])
+def test_combined_mean_is_the_estimates_mean(mu_ct):
+    """The combination's mean alone (for z0) equals ``estimate().mean`` bit for bit, also
+    when the turn model's weight is exactly 0 (combine's limit)."""
+    f = cv_ct()
+    b = predicted(f, 11, 20)
+    b = b._replace(mu=np.tile([1.0 - mu_ct, mu_ct], (20, 1)))
+    assert np.array_equal(f._combined_mean(b), f.estimate(b).mean)

@@ -507,7 +507,7 @@ class IMM(Filter):
                 and not (self._kf_only and getattr(sensor, "linear", False))
                 and type(R) is np.ndarray and R.dtype == np.float64):
             return None
-        z0 = np.asarray(sensor.h(self.estimate(b).mean), dtype=float)
+        z0 = np.asarray(sensor.h(self._combined_mean(b)), dtype=float)
         nus, Ss = [], []
         for j in range(self.r):
             x, Pj = self._part(b.mean, b.cov, j)
@@ -528,6 +528,16 @@ class IMM(Filter):
         if ang.any():
             zhat[..., ang] = wrap(zhat[..., ang])
         return zhat, Sm
+
+    def _combined_mean(self, b: IMMBelief) -> Array:
+        """``estimate(b).mean`` without the covariance (the same sums as :func:`combine`)."""
+        if self._carry.all() or self.fill == "zero":
+            return self.estimate(b).mean
+        x = np.einsum("...j,...jn->...n", b.mu, b.mean)
+        total = np.einsum("...j,jn->...n", b.mu, self._carry.astype(float))
+        if (total < _SMALL_WEIGHT).any():  # the limit of underflowed weights: combine's own
+            return self.estimate(b).mean
+        return x / total
 
     def log_likelihood(self, belief: IMMBelief | Gaussian, z: ArrayLike, sensor: Any) -> Array:
         """``log p(z) = log sum_j c_j N(nu_j; 0, S_j)``, the predicted measurement mixture's
