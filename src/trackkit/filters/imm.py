@@ -81,7 +81,7 @@ from trackkit.filters.base import (
     produced,
     register,
 )
-from trackkit.filters.kalman import EKF, KF, condition, linearize
+from trackkit.filters.kalman import EKF, KF, condition, jacobian_predict, linearize
 from trackkit.filters.kalman_fast import dot_rows, innovation_cov, predict_matrices
 from trackkit.linalg import (
     check_covariance,
@@ -462,8 +462,13 @@ class IMM(Filter):
         preds = []
         for j in range(self.r):
             x0, P0j = self._part(X0, P0, j)
-            preds.append(self.filters[j].predict(Gaussian._make((x0, register(P0j))),
-                                                 motions[j], dt))
+            f, motion = self.filters[j], motions[j]
+            if type(f) is EKF and getattr(motion, "dim_x", None) == x0.shape[-1]:
+                # EKF.predict without re-checking the mixture of a belief checked above
+                check_dt(dt, "IMM.predict")
+                preds.append(jacobian_predict(x0, P0j, motion, dt))
+                continue
+            preds.append(f.predict(Gaussian._make((x0, register(P0j))), motion, dt))
         return self._assemble(c, preds)
 
     def update(self, belief: IMMBelief | Gaussian, z: ArrayLike,
@@ -698,7 +703,18 @@ class IMM(Filter):
         parts, nus, Ss = [], [], []
         for j in range(self.r):
             x, Pj = self._part(b.mean, b.cov, j)
-            g, innov = self.filters[j].update(Gaussian._make((x, register(Pj))), z, sensor)
+            f = self.filters[j]
+            if type(f) is EKF and f.order == 1:
+                # EKF.update without its checks of a belief and z checked above (z has no
+                # nan left): the residual at h(x-) and the Kalman update of kalman.condition
+                zhat, H = linearize(sensor, x)
+                nu = sensor.residual(z, zhat)
+                xn, Pn, S = condition(x, Pj, nu, H, sensor.noise)
+                parts.append(Gaussian._make((xn, Pn)))
+                nus.append(nu)
+                Ss.append(S)
+                continue
+            g, innov = f.update(Gaussian._make((x, register(Pj))), z, sensor)
             parts.append(g)
             nus.append(innov.nu)
             Ss.append(innov.cov)
