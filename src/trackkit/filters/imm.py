@@ -54,8 +54,9 @@ returned :class:`~trackkit.belief.Innovation` is that of the moment-matched pred
 measurement, ``nu = sum_j c_j nu_j = z - zhat`` and
 ``S = sum_j c_j (S_j + (nu_j - nu)(nu_j - nu)^T)`` (``zhat_j - zhat = nu - nu_j``), so that
 gating and the multi-target tracker's association use the mixture's first two moments.
-``log_likelihood`` gives the mixture's exact ``log sum_j c_j N(nu_j; 0, S_j)`` and
-``merge_hypotheses`` the JPDA combination per model (used by the tracker).
+``log_likelihood`` gives the mixture's exact ``log sum_j c_j N(nu_j; 0, S_j)``,
+``measurement_prediction`` that innovation's predicted measurement and covariance without the
+update (for the tracker's gate), and ``merge_hypotheses`` the JPDA combination per model.
 
 When every model is linear with a ``KF`` inside and all share one state, the same equations
 run on a fast path for large batches (the end of this module); the general path above takes

@@ -17,7 +17,9 @@ One scan, for every live track at once (axis 0 of one batched belief is the trac
 ``zhat`` and ``S`` come from the filter itself: an update at ``z0 = h(x-)`` returns the
 residual ``z0 - zhat`` and the innovation covariance ``S`` of that filter (exactly
 ``h(x-)`` and ``H P H^T + R`` for the KF and EKF, the unscented ones for the UKF and CKF,
-the mixture's for an IMM), so the gate and the association use the filter's likelihood.
+the mixture's for an IMM), so the gate and the association use the filter's likelihood. A
+filter with a ``measurement_prediction`` (the IMM of first-order EKFs) gives the same two
+without the update.
 """
 
 from __future__ import annotations
