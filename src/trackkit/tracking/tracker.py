@@ -17,7 +17,9 @@ One scan, for every live track at once (axis 0 of one batched belief is the trac
 ``zhat`` and ``S`` come from the filter itself: an update at ``z0 = h(x-)`` returns the
 residual ``z0 - zhat`` and the innovation covariance ``S`` of that filter (exactly
 ``h(x-)`` and ``H P H^T + R`` for the KF and EKF, the unscented ones for the UKF and CKF,
-the mixture's for an IMM), so the gate and the association use the filter's likelihood.
+the mixture's for an IMM), so the gate and the association use the filter's likelihood. A
+filter with a ``measurement_prediction`` (the IMM of first-order EKFs) gives the same two
+without the update.
 """
 
 from __future__ import annotations
@@ -299,6 +301,10 @@ class Tracker:
         if type(self.filter) in _FIRST_ORDER and getattr(self.filter, "order", 1) == 1:
             mp = predict_measurement(belief, sensor)
             return mp.zhat, mp.S
+        fast = getattr(self.filter, "measurement_prediction", None)
+        out = None if fast is None else fast(belief, sensor)
+        if out is not None:  # the filter's own, without an update (the IMM's)
+            return out
         z0 = np.asarray(sensor.h(self.estimate(belief).mean), dtype=float)
         _, innov = self.filter.update(belief, z0, sensor)
         zhat = z0 - innov.nu
