@@ -64,7 +64,8 @@ left the truth (coasting after its reports end, or out of range) or elsewhere (c
 breaks after the object was out of the truth (a reporting gap longer than the radar bridges:
 no plots), on a still object (under 0.5 m/s: moored, at anchor, drifting), on a turning
 object (heading change over the 30 s before the break above 20 deg) and beside another
-object (within 100 m); and the ID switches between objects within 100 m of each other.
+object (within 100 m); and the CLEAR-MOT ID switches of the score table with, of them,
+those where another object was within 100 m of the switching one.
 
 Timing. Wall and CPU time per scan of each tracker's scan loop, one after the other in one
 process (trackkit: ``run_tracker`` from its first scan to its last, timed through the
@@ -106,7 +107,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from trackkit.eval.clear_mot import score_run
+from trackkit.eval.clear_mot import clear_mot, score_run
 from trackkit.eval.track_metrics import Frames, assign
 from trackkit.tracking.gating import GATE_PROBABILITY
 from trackkit.tracking.recorded import TrackingResult, TrackOptions, track_recording
@@ -268,9 +269,9 @@ def run_stonesoup(setting: Setting, result: TrackingResult
     its wall and CPU time per scan (ms)."""
     detector = stonesoup_scans(result.scans, measurement_model(result.sensor))
     tracker = iter(stonesoup_tracker(setting, result, detector))
-    # keyed by the track itself (hashed by identity), which keeps every track alive: an
-    # id() of a deleted track may be reused by a new one
-    ids: dict[Any, int] = {}
+    # keyed by Stone Soup's own track ID (a UUID): Python's id() of a deleted track may be
+    # reused by a new one, and keeping every track alive would hold all their states
+    ids: dict[str, int] = {}
     sizes, rows, spent, cpu = [], [], 0.0, 0.0
     for _ in range(len(detector)):
         t0, c0 = time.perf_counter(), time.process_time()
@@ -280,7 +281,7 @@ def run_stonesoup(setting: Setting, result: TrackingResult
         sizes.append(len(tracks))
         for tr in tracks:
             sv = tr.state_vector
-            rows.append((ids.setdefault(tr, len(ids)), float(sv[0, 0]), float(sv[2, 0])))
+            rows.append((ids.setdefault(tr.id, len(ids)), float(sv[0, 0]), float(sv[2, 0])))
     arr = np.array(rows, dtype=float).reshape(-1, 3)
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     n = len(detector)
@@ -376,25 +377,19 @@ def _turning(pos: dict, obj: int, s: int, lag: int) -> bool:
     return abs(math.degrees(math.remainder(h2 - h1, 2 * math.pi))) > TURN_DEG
 
 
-def _near_switches(truth: Frames, tracks: Frames, I: NDArray, J: NDArray) -> dict[str, int]:
-    """The ID switches (a track's object changing) and, of them, those where the object it
-    held before is within ``NEAR_M`` of the new one at the switch: vessels moored or moving
+def _near_switches(truth: Frames, tracks: Frames, c: float) -> dict[str, int]:
+    """The CLEAR-MOT ID switches (``clear_mot``, threshold c: an object matched to another
+    track than its last, as the score table counts them) and, of them, those where another
+    object is within ``NEAR_M`` of the switching one at the switch: vessels moored or moving
     together, which a radar cannot tell apart far out."""
-    S = truth.n_steps
-    xs = np.repeat(np.arange(S), truth.sizes)
-    pos = {(o, s): truth.x[i] for i, (o, s) in enumerate(zip(truth.ids.tolist(), xs.tolist(),
-                                                              strict=True))}
-    out = {"id_switches": 0, "id_switches_near": 0}
-    prev_obj, prev_track = -1, -1
-    for k in np.lexsort((xs[I], tracks.ids[J])).tolist():
-        obj, s, tid = int(truth.ids[I[k]]), int(xs[I[k]]), int(tracks.ids[J[k]])
-        if tid == prev_track and obj != prev_obj:
-            out["id_switches"] += 1
-            old = pos.get((prev_obj, s))
-            out["id_switches_near"] += bool(old is not None and np.hypot(
-                *(old - pos[(obj, s)])) < NEAR_M)
-        prev_obj, prev_track = obj, tid
-    return out
+    cm = clear_mot(truth, tracks, c)
+    near = 0
+    for s, obj in zip(cm.switch_step.tolist(), cm.switch_truth.tolist(), strict=True):
+        here = slice(int(truth.offsets[s]), int(truth.offsets[s + 1]))
+        ids, x = truth.ids[here], truth.x[here, :2]
+        d = np.hypot(*(x[ids != obj] - x[ids == obj][0]).T)
+        near += bool(d.size and d.min() < NEAR_M)
+    return {"id_switches": int(cm.switch_step.size), "id_switches_near": near}
 
 
 def diagnose(confirmed: Frames, truth: Frames, times: NDArray[np.float64], c: float
@@ -404,7 +399,7 @@ def diagnose(confirmed: Frames, truth: Frames, times: NDArray[np.float64], c: fl
     I, J = assign(truth, confirmed, c, 2.0)
     return {**_unassigned_kinds(truth, confirmed, I, J, c),
             **_break_kinds(truth, confirmed, I, J, times),
-            **_near_switches(truth, confirmed, I, J)}
+            **_near_switches(truth, confirmed, c)}
 
 
 # --- the table ----------------------------------------------------------------------------------
@@ -462,12 +457,13 @@ def table(title: str, ours: dict[str, float], theirs: dict[str, dict[str, float]
 
 
 def diagnosis_table(title: str, diags: dict[str, dict[str, int]]) -> str:
-    """Unmatched confirmed track-scans by kind and breaks on turning objects, per tracker."""
+    """Unmatched confirmed track-scans by kind, breaks by where they happened and the
+    CLEAR-MOT ID switches beside another object, per tracker."""
     lines = [f"#### {title}: where the tracks went wrong", "",
              "| tracker, setting | duplicate track-scans | coasting track-scans "
              "| clutter track-scans | breaks | after the object was unseen | on a still "
-             "object | on a turn | beside another object | ID switches | between objects "
-             "within 100 m |", "|---" * 11 + "|"]
+             "object | on a turn | beside another object | ID switches (CLEAR-MOT) | with "
+             "another object within 100 m |", "|---" * 11 + "|"]
     keys = ("duplicate", "coasting", "clutter", "breaks", "breaks_unseen", "breaks_still",
             "breaks_turning", "breaks_near", "id_switches", "id_switches_near")
     for name, d in diags.items():

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -41,7 +40,7 @@ from trackkit import io as tio
 from trackkit.eval.clear_mot import score_run
 from trackkit.sim.virtual_radar import VirtualRadar, VirtualRadarRun, virtual_radar
 from trackkit.tracking.history import TrackHistory, run_tracker
-from trackkit.tracking.recorded import TRACK_PROFILES, TrackProfile, build_tracker
+from trackkit.tracking.recorded import TRACK_PROFILES, TrackProfile, build_tracker, profile_radar
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 Scorer = Callable[[TrackHistory, VirtualRadarRun, float], dict[str, float]]
@@ -57,13 +56,6 @@ def profiles(kind: str, coast: bool = False) -> dict[str, TrackProfile]:
     if coast and new.misses != 2.0:
         out["new, deleted at the 3rd miss"] = replace(new, misses=2.0)
     return out
-
-
-def radar(s: TrackProfile) -> VirtualRadar:
-    """The virtual radar of a profile, at the data's median position (as trackkit track)."""
-    return VirtualRadar(period=s.period, sigma_range=s.sigma_range,
-                        sigma_bearing=math.radians(s.sigma_bearing_deg), pd=s.pd,
-                        clutter=s.clutter, max_range=s.max_range, min_range=s.min_range)
 
 
 #: the figures of ``trackkit.eval.clear_mot.score_run`` the table shows, with their labels
@@ -101,7 +93,7 @@ def compare(kind: str, reports: Any, seeds: list[int], score: Scorer,
     """Per setting, per figure, the values over the seeds (and ``wall (s)``)."""
     out: dict[str, dict[str, list[float]]] = {}
     for name, s in profiles(kind, coast).items():
-        vr = radar(s)
+        vr = profile_radar(s)  # at the data's median position, as trackkit track
         rows: dict[str, list[float]] = {}
         for seed in seeds:
             history, run, wall = run_once(reports, s, vr, seed, max_scans)

@@ -252,6 +252,27 @@ def test_ct_batch_mixed_zero_and_nonzero_turn_rates():
 # --------------------------------------------------------------------------------------------
 
 
+def test_ct_f_and_jacobian_is_f_and_jacobian_bitwise():
+    """The fused evaluation (one set of turn coefficients, used by the EKF prediction)
+    equals f and jacobian to the last bit, on turn rates either side of the series threshold;
+    a subclass that overrides f gets its own f."""
+    ct = CoordinatedTurn(q=0.5, q_omega=1e-3)
+    rng = np.random.default_rng(5)
+    x = np.column_stack([rng.normal(0, 1e3, (60, 2)), rng.normal(0, 10, (60, 2)),
+                         np.concatenate([rng.normal(0, 1e-4, 30), rng.normal(0, 0.05, 30)])])
+    for dt in (3.0, np.float64(0.5)):
+        fx, F = ct.f_and_jacobian(x, dt)
+        assert np.array_equal(fx, ct.f(x, dt)) and np.array_equal(F, ct.jacobian(x, dt))
+
+    class Shifted(CoordinatedTurn):
+        def f(self, x, dt):
+            return super().f(x, dt) + 1.0
+
+    fx, F = Shifted().f_and_jacobian(x, 3.0)
+    assert np.array_equal(fx, CoordinatedTurn().f(x, 3.0) + 1.0)
+    assert np.array_equal(F, CoordinatedTurn().jacobian(x, 3.0))
+
+
 def test_cv_state_ordering_and_transition():
     cv = ConstantVelocity(dim=2, q=1.0)
     dt = 0.5

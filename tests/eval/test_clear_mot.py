@@ -27,7 +27,7 @@ from trackkit.eval.clear_mot import (
     mota_steps,
     score_run,
 )
-from trackkit.eval.track_metrics import Frames, frames, gospa_steps
+from trackkit.eval.track_metrics import Frames, assign, frames, gospa_steps
 
 C = 2.0  # threshold (and GOSPA cut-off) of the random scenes
 
@@ -367,3 +367,17 @@ def test_a_switch_of_an_absent_truth_is_refused():
     truth, _ = scene(0, steps=5)
     with pytest.raises(ValueError, match="truth 12345 is not in the truth at step 2"):
         classify_switches([2], [12345], truth, (0.0, 0.0), SB)
+
+
+@pytest.mark.parametrize(("seed", "p"), [(7, 2.0), (8, 1.0), (9, 3.0)])
+def test_gospa_switching_with_a_given_assignment_is_the_same(seed, p):
+    """Passing the GOSPA assignment gives every array bit for bit."""
+    truth, tracks = scene(seed, steps=40, objects=12)
+    ab = assign(truth, tracks, C, p)
+    a = gospa_switching(truth, tracks, C, p, switching_penalty=1.3)
+    b = gospa_switching(truth, tracks, C, p, switching_penalty=1.3, assignment=ab)
+    for name, x, y in zip(a._fields, a, b, strict=True):
+        np.testing.assert_array_equal(x, y, err_msg=name)
+    assert np.sum(a.switches) > 0
+    with pytest.raises(ValueError, match="expected an order"):
+        gospa_switching(truth, tracks, C, 0.5, assignment=ab)

@@ -646,3 +646,76 @@ def test_track_counts_with_a_given_assignment_are_the_same():
     b = track_counts(X, Y, 3.0, assignment=assign(X, Y, 3.0))
     for name in TrackCounts._fields:
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def _random_pair(seed: int, d: int) -> tuple[Frames, Frames]:
+    """Truth and estimates with IDs over 30 steps of random sizes (some empty), clustered so
+    that components of several points form, and two large steps (n m >= 4096) that go
+    through the kernel's broadcast pass."""
+    rng = np.random.default_rng(seed)
+    n = rng.integers(0, 9, 30)
+    m = rng.integers(0, 11, 30)
+    n[[4, 17]], m[[4, 17]] = (70, 90), (80, 60)
+    xs = [rng.uniform(0, 12, (k, d)) for k in n]
+    ys = [x[: min(k, len(x))] + rng.normal(0, 0.6, (min(k, len(x)), d)) for x, k in zip(
+        xs, m, strict=True)]
+    ys = [np.concatenate([y, rng.uniform(0, 12, (k - len(y), d))]) for y, k in zip(
+        ys, m, strict=True)]
+    return (frames(xs, [rng.permutation(k) for k in n], dim=d),
+            frames(ys, [rng.permutation(k) for k in m], dim=d))
+
+
+@pytest.mark.parametrize(("seed", "d", "p"), [(0, 2, 2.0), (1, 2, 1.0), (2, 3, 3.0),
+                                              (3, 2, 1.5)])
+def test_given_assignment_gives_the_same_bits(seed, d, p):
+    """gospa_steps and track_counts with the assignment passed equal them without, bit for
+    bit, whatever the order the rows are given in."""
+    X, Y = _random_pair(seed, d)
+    c = 1.5
+    ab = assign(X, Y, c, p)
+    assert ab[0].size > 100
+    o = np.random.default_rng(seed).permutation(ab[0].size)
+    plain = gospa_steps(X, Y, c, p)
+    for rows in (ab, (ab[0][o], ab[1][o])):
+        for name, a, b in zip(plain._fields, plain, gospa_steps(X, Y, c, p, assignment=rows),
+                              strict=True):
+            np.testing.assert_array_equal(a, b, err_msg=name)
+            assert a.dtype == b.dtype, name
+        counts = track_counts(X, Y, c, p=p, assignment=rows)
+        for name, a, b in zip(TrackCounts._fields, track_counts(X, Y, c, p=p), counts,
+                              strict=True):
+            np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+def test_given_assignment_is_checked():
+    X, Y = _random_pair(0, 2)
+    I, J = assign(X, Y, 1.5)
+    with pytest.raises(ValueError, match="different steps"):
+        gospa_steps(X, Y, 1.5, assignment=(I, np.roll(J, 1)))
+    with pytest.raises(ValueError, match="outside"):
+        track_counts(X, Y, 1.5, assignment=(I, J + Y.offsets[-1]))
+    with pytest.raises(ValueError, match="expected integers"):
+        gospa_steps(X, Y, 1.5, assignment=(I, J[:-1]))
+    with pytest.raises(ValueError, match="expected the rows"):
+        gospa_steps(X, Y, 1.5, assignment=(I,))
+
+
+def test_dominant_truths_equal_a_count_per_track():
+    """Per track, the truth of most pairs, the lowest on a tie, against a dictionary count;
+    the number of pairs is that of the dominant truth."""
+    rng = np.random.default_rng(9)
+    track = rng.integers(0, 40, 3000) * 3 + 5
+    truth = rng.integers(0, 6, 3000) + 100
+    got = mt.dominant_truths(track, truth)
+    want: dict[int, dict[int, int]] = {}
+    for a, b in zip(track.tolist(), truth.tolist(), strict=True):
+        want.setdefault(a, {}).setdefault(b, 0)
+        want[a][b] += 1
+    rows = [(a, *max(sorted(want[a].items()), key=lambda kv: kv[1])) for a in sorted(want)]
+    assert [tuple(r) for r in zip(*(g.tolist() for g in got), strict=True)] == rows
+    ties = sum(list(want[a].values()).count(n) > 1 for a, _, n in rows)
+    assert ties > 0  # the tie rule was exercised
+    empty = mt.dominant_truths(np.zeros(0, np.int64), np.zeros(0, np.int64))
+    assert all(e.size == 0 for e in empty)
+    with pytest.raises(ValueError, match="expected integers"):
+        mt.dominant_truths(track, truth[:-1])

@@ -34,6 +34,7 @@ from trackkit.tracking import ScoreLogic, SinglePoint, Tracker, TrackStatus
 from trackkit.tracking.history import run_tracker
 
 from ..cli_helpers import assert_user_error, trackkit
+from ..io import layout_files
 from ..sim.test_virtual_radar import fleet
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -215,6 +216,35 @@ def test_pngs_html_and_results(small, tmp_path):
     assert doc["input"]["records_skipped"] == 2 and doc["input"]["out_of_order_sorted"] == 4
 
 
+def test_report_solves_the_gospa_assignment_once(small, tmp_path, monkeypatch):
+    """GOSPA, the track counts, GOSPA with switching and the track table's identities all
+    come from one solve of the assignment (each costs a few tenths of a second on a whole
+    recording); the table from it equals the table that solves its own."""
+    import trackkit.eval.track_metrics as mt
+    from trackkit.report.track_table import track_table
+
+    solves = []
+    kernel = mt._assign
+
+    def counted(*args, **kw):
+        solves.append(args[0].x.shape[0])
+        return kernel(*args, **kw)
+
+    monkeypatch.setattr(mt, "_assign", counted)
+    rep = report_of(small)
+    paths = write_track_report(rep, tmp_path / "out")
+    assert len(solves) == 1 and solves[0] == rep.truth.x.shape[0]
+    assert paths["summary"].exists()
+    names = [f"vessel {k}" for k in range(int(rep.truth.ids.max()) + 1)]
+    kw = dict(truth=rep.truth, c=rep.gospa_c, object_ids=names, epoch=rep.epoch)
+    given = track_table(rep.history, **kw, assignment=track_metrics(
+        rep.history, rep.truth, rep.gospa_c)["_assignment"])
+    assert len(solves) == 2
+    alone = track_table(rep.history, **kw)
+    assert len(solves) == 3  # the table alone solves it itself
+    assert given.equals(alone) and any(alone["identity"].to_pylist())
+
+
 def test_metrics_parts_add_up(small):
     _, run, h = small
     m = track_metrics(h, run.truth, 500.0)
@@ -338,6 +368,68 @@ def test_no_file_tracks_the_bundled_sample_and_says_so(tmp_path):
     summary = pacsv.read_csv(out / "tracks_summary.csv").to_pydict()
     mmsi = [str(s) for s in summary["identity"] if s is not None]
     assert len(mmsi) > 20 and all(s.isdigit() and len(s) == 9 for s in mmsi)
+
+
+def test_the_tracker_options_reach_the_tracker(tmp_path):
+    out = tmp_path / "o"
+    ran = _invoke("solent-ais", "--as-radar", "--max-scans", "6", "--misses", "5", "--v-max",
+                  "12", "--turn-q", "2e-5", "--turn-std-deg", "4", "--out", str(out))
+    assert ran.exit_code == 0, ran.output
+    tracker = json.loads((out / "results.json").read_text())["config"]["tracker"]
+    assert tracker["v_max_m_s"] == 12.0 and "two-point" in tracker["initiator"]
+    assert tracker["turn_rate_noise_rad2_s3"] == 2e-5
+    assert tracker["initial_turn_rate_std_deg_s"] == pytest.approx(4.0, rel=1e-12)
+    assert "deleted after 6 consecutive missed scans" in tracker["logic"]
+    # a detections file gets two-point initiation and the IMM when asked for them
+    f = tmp_path / "plots.csv"
+    _detections(f, bad=False)
+    ran = _invoke(str(f), "--v-max", "30", "--turn-q", "1e-4", "--misses", "2", "--out",
+                  str(tmp_path / "d"))
+    assert ran.exit_code == 0, ran.output
+    tracker = json.loads((tmp_path / "d" / "results.json").read_text())["config"]["tracker"]
+    assert "coordinated turn" in tracker["motion"] and tracker["v_max_m_s"] == 30.0
+    assert "deleted after 3 consecutive missed scans" in tracker["logic"]
+
+
+def test_a_tracker_option_the_tracker_would_not_use_is_refused(tmp_path):
+    f = tmp_path / "d.csv"
+    f.write_text("time,x,y\n0,1,2\n")
+    for args, names in (
+            (["solent-ais", "--as-radar", "--v-std", "5"],
+             ["--v-std 5", "two-point initiation", "--v-max (20 m/s)"]),
+            ([str(f), "--v-max", "30", "--v-std", "5"], ["--v-std 5", "--v-max (30 m/s)"]),
+            ([str(f), "--turn-std-deg", "3"], ["--turn-std-deg 3", "--turn-q"]),
+            ([str(f), "--misses", "-1"], ["--misses", "-1"])):
+        res = _invoke(*args, "--out", str(tmp_path / "never"))
+        assert res.exit_code == 2, res.output
+        for name in names:
+            assert name in " ".join(res.output.split()), (name, res.output)
+        assert not (tmp_path / "never").exists()
+    res = _invoke(str(f), "--v-std", "5", "--out", str(tmp_path / "single"))
+    assert res.exit_code == 0, res.output  # single-point initiation uses it
+
+
+def test_the_report_shows_the_layout_and_what_was_set_missing(tmp_path):
+    """A NOAA MarineCadastre file with courses out of range and a "not available" code: the
+    page's input section names the layout and counts the courses set missing by reason."""
+    f = layout_files.write_noaa(tmp_path / "AIS <harbour>.csv", layout_files.fleet(), special={
+        3: {"COG": "-120.3"}, 5: {"COG": "-120.3"}, 7: {"COG": "-120.3"},
+        9: {"COG": "-49.6"}, 11: {"Heading": "511"}})
+    out = tmp_path / "o"
+    ran = _invoke(str(f), "--as-radar", "--out", str(out))
+    assert ran.exit_code == 0, ran.output
+    page = (out / "report.html").read_text(encoding="utf-8")
+    section = page[page.index("<h2>Input</h2>"):]
+    assert "<th>layout recognised</th><td>AIS CSV, NOAA MarineCadastre layout (noaa)</td>" \
+        in section
+    for field_reason, n in (("course: outside [0, 360]", 3),
+                            ("course: not available (-49.6)", 1),
+                            ("heading: not available (511)", 1)):
+        assert f"<th>{field_reason}</th><td>{n}</td>" in section, field_reason
+    assert "AIS &lt;harbour&gt;.csv" in section and "AIS <harbour>" not in section
+    doc = json.loads((out / "results.json").read_text())["input"]
+    assert doc["layout"] == "noaa" and doc["set_missing"]["course"] == {
+        "outside [0, 360]": 3, "not available (-49.6)": 1}
 
 
 def _detections(path: Path, bad: bool = True) -> None:

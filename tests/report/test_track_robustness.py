@@ -17,8 +17,8 @@ from ..cli_helpers import assert_user_error, trackkit
 
 AIS_HEADER = "Time,MMSI,Latitude_degrees,Longitude_degrees,COG_degrees,SOG_knots"
 # the AIS tracker's IMM carries the turn rate (rad/s) as a fifth state component
-TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "state_4", "var_x",
-                 "var_y", "var_vx", "var_vy", "var_state_4", "status", "lat", "lon",
+TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "turn_rate", "var_x",
+                 "var_y", "var_vx", "var_vy", "var_turn_rate", "status", "lat", "lon",
                  "x_smooth", "y_smooth", "vx_smooth", "vy_smooth", "var_x_smooth",
                  "var_y_smooth", "var_vx_smooth", "var_vy_smooth", "lat_smooth", "lon_smooth"]
 RADAR_FILES = {"tracks.parquet", "tracks.csv", "tracks.geojson", "tracks.png", "gospa.png",

@@ -4,6 +4,7 @@ track`` writes, bit for bit."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -23,6 +24,7 @@ from trackkit.tracking.recorded import (
     TrackProfile,
     build_tracker,
     open_recording,
+    profile_radar,
     track_recording,
 )
 
@@ -43,9 +45,14 @@ def test_track_recording_gives_the_tracks_trackkit_track_writes(tmp_path):
                                 tmp_path / "mine.parquet")
     written, ours = pq.read_table(out / TRACKS_PARQUET), pq.read_table(mine)
     assert written.equals(ours, check_metadata=True)
-    for k, name in enumerate(("x", "y", "vx", "vy")):  # bit for bit, not to rounding
+    # the IMM's fifth component is the CT model's turn rate, named so in both files
+    for k, name in enumerate(("x", "y", "vx", "vy", "turn_rate")):  # bit for bit
         column = written.column(name).to_numpy()
         assert np.array_equal(column.view(np.int64), h.mean[:, k].view(np.int64))
+    header = (out / "tracks.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
+    for names in (written.column_names, header):
+        assert "turn_rate" in names and "var_turn_rate" in names
+        assert not any(name.startswith("state_") for name in names)
 
 
 def test_options_fill_in_the_input_kinds_profile():
@@ -54,6 +61,21 @@ def test_options_fill_in_the_input_kinds_profile():
     assert (ais.pd, ais.q) == (0.8, 2.0)
     assert ais.period == TRACK_PROFILES["ais"].period
     assert given.settings("detections").period is None  # a detections file has no scans
+
+
+def test_profile_radar_is_the_radar_trackkit_track_uses():
+    s = replace(TRACK_PROFILES["ais"], period=4.0, sigma_bearing_deg=0.3, clutter=2.0)
+    vr = profile_radar(s, (100.0, -50.0), max_gap=90.0)
+    assert (vr.site, vr.period, vr.sigma_range, vr.pd, vr.clutter, vr.max_gap) == (
+        (100.0, -50.0), 4.0, s.sigma_range, s.pd, 2.0, 90.0)
+    assert math.isclose(vr.sigma_bearing, math.radians(0.3))
+    assert (vr.min_range, vr.max_range) == (s.min_range, s.max_range)
+    result = track_recording(samples.path("solent-ais"), TrackOptions(
+        as_radar=True, max_scans=3, max_gap=90.0, profile=TrackProfile(
+            period=4.0, sigma_bearing_deg=0.3, clutter=2.0)))
+    shown = result.config["virtual radar"]
+    assert (shown["period_s"], shown["clutter_per_scan"], shown["max_gap_s"]) == (4.0, 2.0, 90.0)
+    assert shown["sigma_bearing_deg"] == 0.3 and shown["site_x_m"] == 0.0
 
 
 def test_a_detections_file_is_not_made_into_radar_plots(tmp_path):
@@ -84,6 +106,19 @@ def test_the_profiles_build_the_trackers_they_describe():
     assert isinstance(trk.motion, ConstantVelocity) and isinstance(trk.initiator, SinglePoint)
     assert 2 * math.log1p(-0.9) > trk.logic.delete_threshold > 3 * math.log1p(-0.9)
     assert desc["motion"] == "constant velocity" and desc["associator"] == "JPDA"
+
+
+def test_the_profile_given_makes_the_tracker():
+    given = TrackProfile(misses=5, v_max=12.0, turn_q=2e-5, turn_std_deg=4.0)
+    s = open_recording(samples.path("solent-ais"),
+                       TrackOptions(as_radar=True, profile=given)).settings
+    trk, _ = build_tracker(RangeBearing(sigma_range=20.0, sigma_bearing=0.01), s, 1e-5,
+                           "gnn", "ekf")
+    miss = math.log1p(-s.pd)
+    assert 5 * miss > trk.logic.delete_threshold > 6 * miss
+    assert trk.initiator.v_max == 12.0
+    assert trk.filter.models[1].q_omega == 2e-5
+    assert trk.extra_std == (math.radians(4.0),)
 
 
 def _old_defaults(result) -> Tracker:

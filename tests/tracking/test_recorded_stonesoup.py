@@ -134,21 +134,27 @@ def test_diagnose_tells_a_duplicate_a_coasting_track_clutter_and_a_break_apart()
         + [(s, 13, 5060.0, 0.0) for s in (2, 3, 4)]  # a second track on object 1
         + [(s, 14, 20e3, 20e3) for s in (0, 1)], steps)  # far from everything
     d = bench.diagnose(tracks, truth, times, 500.0)
+    # CLEAR-MOT counts the break as an ID switch too (object 0 matched to another track)
     assert d == {"duplicate": 3, "coasting": 2, "clutter": 2, "breaks": 1,
                  "breaks_unseen": 0, "breaks_still": 0, "breaks_turning": 0,
-                 "breaks_near": 0, "id_switches": 0, "id_switches_near": 0}
+                 "breaks_near": 0, "id_switches": 1, "id_switches_near": 0}
 
 
-def test_diagnose_tells_switches_between_close_objects_from_the_rest():
+def test_diagnose_counts_the_clear_mot_switches_and_those_beside_another_object():
     steps, times = 6, 3.0 * np.arange(6)
-    # objects 0 and 1 are 30 m apart, 2 and 3 a kilometre; each pair's tracks swap at scan 3
+    # objects 0 and 1 are 30 m apart, 2 and 3 a kilometre; object 0's track is lost at scan 3
+    # and a new one takes it on (a switch beside object 1), the tracks of 2 and 3 swap
     where = {0: (0.0, 0.0), 1: (30.0, 0.0), 2: (0.0, 5000.0), 3: (1000.0, 5000.0)}
     truth = _frames([(s, o, *xy) for s in range(steps) for o, xy in where.items()], steps)
-    held = {10: (0, 1), 11: (1, 0), 12: (2, 3), 13: (3, 2)}  # track: (object before, after)
+    held = {10: (0, None), 14: (None, 0), 11: (1, 1), 12: (2, 3), 13: (3, 2)}
     tracks = _frames([(s, t, *where[pair[s >= 3]]) for s in range(steps)
-                      for t, pair in held.items()], steps)
+                      for t, pair in held.items() if pair[s >= 3] is not None], steps)
     d = bench.diagnose(tracks, truth, times, 500.0)
-    assert (d["id_switches"], d["id_switches_near"], d["breaks"]) == (4, 2, 0)
+    assert (d["id_switches"], d["id_switches_near"], d["breaks"], d["breaks_near"]) == (
+        3, 1, 1, 1)
+    # the score table's ID switches are the same CLEAR-MOT switches
+    assert d["id_switches"] == bench.score(tracks, truth, (0.0, 0.0), 0.01, 500.0)[
+        "id_switches"]
 
 
 def test_both_trackers_run_on_the_same_plots_and_are_scored_alike():

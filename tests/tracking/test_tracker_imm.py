@@ -227,3 +227,21 @@ def test_jpda_with_an_imm_is_the_merge_of_the_per_hypothesis_updates():
     # the test sees real mixtures: tracks with two or more hypotheses and a miss weight
     assert np.bincount(g.track).max() >= 2 and ((r.beta0 > 0) & (r.beta0 < 1)).any()
     assert n >= 3
+
+
+def test_the_extras_are_named_by_the_models_that_carry_them():
+    # the CT model's turn rate, wherever the IMM's state maps put it; an unnamed extra (an
+    # Augmented CV's) keeps its index; a CV tracker has none
+    assert imm_tracker(GNN()).extra_names == ("turn_rate",)
+    swapped = IMM([tk.models.CoordinatedTurn(q=1.0), tk.models.ConstantVelocity(dim=2, q=1.0)],
+                  tk.filters.EKF(), [[0.9, 0.1], [0.1, 0.9]])
+    assert tracker(swapped, None, GNN(), extra_mean=(0.0,),
+                   extra_std=(0.05,)).extra_names == ("turn_rate",)
+    aug = tk.models.Augmented(tk.models.ConstantVelocity(dim=2, q=1.0), extras=2)
+    assert tracker(tk.filters.EKF(), aug, GNN(), extra_mean=(0.0, 0.0),
+                   extra_std=(1.0, 1.0)).extra_names == ("state_4", "state_5")
+    assert tracker(tk.filters.EKF(), tk.models.ConstantVelocity(dim=2, q=1.0),
+                   GNN()).extra_names == ()
+    X, scan_list = scans(4)
+    h, _ = tk.tracking.history.run_tracker(imm_tracker(GNN()), scan_list[:3])
+    assert h.extra_names == ("turn_rate",) and h.mean.shape[1] == 5

@@ -59,6 +59,66 @@ def _profile_default(key: str, unit: str = "") -> str:
     return _PROFILE_HELP.format(**vals)
 
 
+#: the profile's options, the radar's then the tracker's (module-level, to keep ``track``
+#: short)
+PeriodOption = Annotated[float | None, typer.Option(
+    "--period", callback=number(0), help="Scan period (s).",
+    show_default=_profile_default("period"))]
+SigmaRangeOption = Annotated[float | None, typer.Option(
+    "--sigma-range", callback=number(0), help="Range noise std (m).",
+    show_default=_profile_default("sigma_range"))]
+SigmaBearingOption = Annotated[float | None, typer.Option(
+    "--sigma-bearing-deg", callback=number(0), help="Bearing noise std (deg).",
+    show_default=_profile_default("sigma_bearing_deg"))]
+SigmaPosOption = Annotated[float | None, typer.Option(
+    "--sigma-pos", callback=number(0), help="Position noise std of x, y detections (m).",
+    show_default=_profile_default("sigma_pos"))]
+PdOption = Annotated[float | None, typer.Option(
+    "--pd", callback=number(0, 1), help="Detection probability.",
+    show_default=_profile_default("pd"))]
+ClutterOption = Annotated[float | None, typer.Option(
+    "--clutter", callback=number(0, open_lo=False), help="False plots per scan.",
+    show_default=_profile_default("clutter"))]
+MaxRangeOption = Annotated[float | None, typer.Option(
+    "--max-range", callback=number(0), help="Instrumented range (m).",
+    show_default=_profile_default("max_range"))]
+MinRangeOption = Annotated[float | None, typer.Option(
+    "--min-range", callback=number(0, open_lo=False), help="Blind range (m).",
+    show_default=_profile_default("min_range"))]
+GospaCOption = Annotated[float | None, typer.Option(
+    "--gospa-c", callback=number(0), help="GOSPA cut-off (m).",
+    show_default=_profile_default("gospa_c"))]
+QOption = Annotated[float | None, typer.Option(
+    "--q", callback=number(0), help="Process noise of the constant-velocity model "
+    "(m^2/s^3).", show_default=_profile_default("q"))]
+VStdOption = Annotated[float | None, typer.Option(
+    "--v-std", callback=number(0), help="Velocity std of a track started from a single "
+    "plot (m/s): single-point initiation, a detections file's. Two-point initiation (AIS, "
+    "ADS-B, or --v-max) takes the velocity from the two plots and does not use it.",
+    show_default=_profile_default("v_std"))]
+VMaxOption = Annotated[float | None, typer.Option(
+    "--v-max", callback=number(0), help="Top speed of the traffic (m/s): a track starts "
+    "from two plots of consecutive scans no farther apart than v_max times the scan "
+    "interval plus three standard deviations of their separation (two-point "
+    "initiation). Given for a detections file, it replaces single-point initiation.",
+    show_default=_profile_default("v_max"))]
+MissesOption = Annotated[int | None, typer.Option(
+    "--misses", callback=at_least(0), help="Consecutive missed scans a track coasts "
+    "through (count); it is deleted at the next. Without it a detections file's track is "
+    "deleted at Wald's SPRT threshold (the third miss at pd 0.9).",
+    show_default=_profile_default("misses"))]
+TurnQOption = Annotated[float | None, typer.Option(
+    "--turn-q", callback=number(0, open_lo=False), help="Turn-rate noise of the "
+    "coordinated-turn model (rad^2/s^3; the turn rate's variance grows by turn_q dt): the "
+    "filter is an IMM of constant velocity and coordinated turn. Given for a detections "
+    "file, it replaces the constant-velocity filter.",
+    show_default=_profile_default("turn_q"))]
+TurnStdOption = Annotated[float | None, typer.Option(
+    "--turn-std-deg", callback=number(0), help="Turn-rate std of a new track (deg/s), in "
+    "the IMM's coordinated-turn model.",
+    show_default=_profile_default("turn_std_deg"))]
+
+
 @app.command()
 def track(
     file: Annotated[Path | None, typer.Argument(
@@ -89,30 +149,14 @@ def track(
     site_lon: Annotated[float | None, typer.Option(
         "--site-lon", callback=number(-180, 180, open_lo=False),
         help="Radar site longitude (deg).", show_default="the data's median")] = None,
-    period: Annotated[float | None, typer.Option(
-        "--period", callback=number(0), help="Scan period (s).",
-        show_default=_profile_default("period"))] = None,
-    sigma_range: Annotated[float | None, typer.Option(
-        "--sigma-range", callback=number(0), help="Range noise std (m).",
-        show_default=_profile_default("sigma_range"))] = None,
-    sigma_bearing_deg: Annotated[float | None, typer.Option(
-        "--sigma-bearing-deg", callback=number(0), help="Bearing noise std (deg).",
-        show_default=_profile_default("sigma_bearing_deg"))] = None,
-    sigma_pos: Annotated[float | None, typer.Option(
-        "--sigma-pos", callback=number(0), help="Position noise std of x, y detections (m).",
-        show_default=_profile_default("sigma_pos"))] = None,
-    pd: Annotated[float | None, typer.Option(
-        "--pd", callback=number(0, 1), help="Detection probability.",
-        show_default=_profile_default("pd"))] = None,
-    clutter: Annotated[float | None, typer.Option(
-        "--clutter", callback=number(0, open_lo=False), help="False plots per scan.",
-        show_default=_profile_default("clutter"))] = None,
-    max_range: Annotated[float | None, typer.Option(
-        "--max-range", callback=number(0), help="Instrumented range (m).",
-        show_default=_profile_default("max_range"))] = None,
-    min_range: Annotated[float | None, typer.Option(
-        "--min-range", callback=number(0, open_lo=False), help="Blind range (m).",
-        show_default=_profile_default("min_range"))] = None,
+    period: PeriodOption = None,
+    sigma_range: SigmaRangeOption = None,
+    sigma_bearing_deg: SigmaBearingOption = None,
+    sigma_pos: SigmaPosOption = None,
+    pd: PdOption = None,
+    clutter: ClutterOption = None,
+    max_range: MaxRangeOption = None,
+    min_range: MinRangeOption = None,
     max_gap: Annotated[float | None, typer.Option(
         "--max-gap", callback=number(0), help="Longest gap between an object's reports "
         "bridged by interpolation (s).", show_default="max(3 periods, 120 s)")] = None,
@@ -121,15 +165,13 @@ def track(
     associator: Annotated[AssociatorName, typer.Option(
         "--associator", help="Data association.")] = AssociatorName.gnn,
     filt: Annotated[FilterName, typer.Option("--filter", help="Track filter.")] = FilterName.ekf,
-    q: Annotated[float | None, typer.Option(
-        "--q", callback=number(0), help="Process noise of the constant-velocity model "
-        "(m^2/s^3).", show_default=_profile_default("q"))] = None,
-    v_std: Annotated[float | None, typer.Option(
-        "--v-std", callback=number(0), help="Velocity std of a new track (m/s).",
-        show_default=_profile_default("v_std"))] = None,
-    gospa_c: Annotated[float | None, typer.Option(
-        "--gospa-c", callback=number(0), help="GOSPA cut-off (m).",
-        show_default=_profile_default("gospa_c"))] = None,
+    q: QOption = None,
+    v_std: VStdOption = None,
+    v_max: VMaxOption = None,
+    misses: MissesOption = None,
+    turn_q: TurnQOption = None,
+    turn_std_deg: TurnStdOption = None,
+    gospa_c: GospaCOption = None,
     on_bad: Annotated[OnBad, typer.Option(
         "--on-bad", help="Skip bad records (counted, and listed in skipped.csv) or stop at "
         "the first.")] = OnBad.skip,
@@ -155,13 +197,15 @@ def track(
         profile = TrackProfile(period=period, sigma_range=sigma_range,
                                sigma_bearing_deg=sigma_bearing_deg, sigma_pos=sigma_pos, pd=pd,
                                clutter=clutter, max_range=max_range, min_range=min_range, q=q,
-                               v_std=v_std, gospa_c=gospa_c)
+                               v_std=v_std, gospa_c=gospa_c, turn_q=turn_q,
+                               turn_std_deg=turn_std_deg, misses=misses, v_max=v_max)
         options = TrackOptions(
             fmt=fmt.value if fmt else None, as_radar=as_radar, columns=columns, units=units,
             site_lat=site_lat, site_lon=site_lon, profile=profile,
             max_gap=max_gap, seed=seed, associator=associator.value, filter=filt.value,
             on_bad=on_bad.value, until=until, max_scans=max_scans)
         recording = open_recording(file, options)
+        _check_used(profile, recording.settings)
         target, label = output_dir(out, f"track-{recording.path.stem}")
         with OutputDir(target, label) as where:
             state.interrupted = f"interrupted; nothing was written to {target}"
@@ -176,6 +220,18 @@ def track(
             paths = _write(result, where.path)
             state.interrupted = "interrupted"
             print_track_summary(result.read, result, paths)
+
+
+def _check_used(given: TrackProfile, used: TrackProfile) -> None:
+    """A tracker option the chosen tracker would ignore is a mistake: say which and why."""
+    if given.v_std is not None and used.v_max is not None:
+        raise ValueError(f"--v-std {given.v_std:g}: tracks here start by two-point "
+                         "initiation, which takes the velocity from the two plots and does not "
+                         f"use --v-std; its speed limit is --v-max ({used.v_max:g} m/s)")
+    if given.turn_std_deg is not None and used.turn_q is None:
+        raise ValueError(f"--turn-std-deg {given.turn_std_deg:g}: the filter here is "
+                         "constant-velocity, with no turn rate; give --turn-q for the IMM of "
+                         "constant velocity and coordinated turn")
 
 
 def _bars(bar: Any) -> Any:

@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 from trackkit.eval.track_metrics import (
     Frames,
     assign,
+    checked_assignment,
     checked_frames,
     pairs_within,
     solve_partial,
@@ -313,14 +314,23 @@ def _id_scores(r: _Run, pairs: tuple[IntArray, IntArray, Array]) -> IdScores:
 
 
 def gospa_switching(truth: Frames, tracks: Frames, c: float, p: float = 2.0,
-                    switching_penalty: float | None = None) -> SwitchingGospa:
+                    switching_penalty: float | None = None, *,
+                    assignment: tuple[ArrayLike, ArrayLike] | None = None) -> SwitchingGospa:
     """GOSPA (alpha = 2, cut-off ``c``, order ``p``) of every step with Stone Soup's switching
     term (module docstring), penalty gamma = ``switching_penalty``, by default ``c``: at
     p = 2 a full switch then adds c^2 to GOSPA^2, as a missed object plus a false track do,
-    and a half switch c^2/2, as either does."""
+    and a half switch c^2/2, as either does.
+
+    ``assignment``: the rows ``(i, j)`` that ``track_metrics.assign(truth, tracks, c, p)``
+    returned, when the caller has them (saves solving it again; the result is the same to
+    the bit)."""
     gamma = _penalty(c, switching_penalty)
+    if not (p >= 1 and math.isfinite(p)):  # assign checks it too, but may not be called
+        raise ValueError(f"p = {p!r}; expected an order 1 <= p < inf")
     r = _run(truth, tracks, c)
-    return _gospa_switching(r, assign(r.X, r.Y, c, p), c, p, gamma)
+    ab = (assign(r.X, r.Y, c, p) if assignment is None
+          else checked_assignment(assignment, r.X, r.Y))
+    return _gospa_switching(r, ab, c, p, gamma)
 
 
 def _gospa_switching(r: _Run, assignment: tuple[IntArray, IntArray], c: float, p: float,

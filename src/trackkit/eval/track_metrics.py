@@ -65,7 +65,9 @@ __all__ = [
     "SetDistance",
     "TrackCounts",
     "assign",
+    "checked_assignment",
     "checked_frames",
+    "dominant_truths",
     "frames",
     "gospa",
     "gospa_steps",
@@ -475,6 +477,32 @@ def assign(
     return I, J
 
 
+def checked_assignment(
+    assignment: tuple[ArrayLike, ArrayLike], truth: Frames, estimates: Frames
+) -> tuple[IntArray, IntArray]:
+    """The rows ``(i, j)`` of an assignment of ``truth`` to ``estimates`` (as ``assign``
+    returns it) as int64 arrays sorted by ``i``, after checking that they are rows of the two
+    in the same step (the sort makes the per-step sums that use them add in ``assign``'s
+    order, so that a result is the same to the bit)."""
+    if len(assignment) != 2:
+        raise ValueError(f"assignment has {len(assignment)} parts; expected the rows (i, j)")
+    I, J = (np.asarray(a) for a in assignment)
+    if I.ndim != 1 or I.shape != J.shape or not all(
+            np.issubdtype(a.dtype, np.integer) or a.size == 0 for a in (I, J)):
+        raise ValueError(f"assignment rows have shapes {I.shape} and {J.shape}; expected "
+                         "integers (K,) each")
+    I, J = I.astype(np.int64), J.astype(np.int64)
+    xo, yo = np.asarray(truth.offsets), np.asarray(estimates.offsets)
+    if I.size and (I.min() < 0 or I.max() >= xo[-1] or J.min() < 0 or J.max() >= yo[-1]):
+        raise ValueError(f"assignment rows run outside the truth's {xo[-1]} and the "
+                         f"estimates' {yo[-1]} rows; expected rows of both")
+    if np.any(np.searchsorted(xo, I, "right") != np.searchsorted(yo, J, "right")):
+        raise ValueError("assignment pairs rows of different steps; expected the rows that "
+                         "assign(truth, estimates, c, p) returned")
+    o = np.argsort(I, kind="stable")
+    return I[o], J[o]
+
+
 def pairs_within(truth: Frames, estimates: Frames, c: float) -> tuple[IntArray, IntArray, Array]:
     """Every pair of rows ``(i, j)`` of ``truth.x`` and ``estimates.x`` in the same step with
     ``|x_i - y_j| < c``, and ``|x_i - y_j|^2``; sorted by ``i``, then ``j``. Small steps in
@@ -527,13 +555,18 @@ def solve_partial(
 
 
 def _core(
-    truth: Frames, estimates: Frames, c: float, p: float
+    truth: Frames, estimates: Frames, c: float, p: float,
+    assignment: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> tuple[IntArray, IntArray, Array, IntArray, float, float]:
     c, p = _check_params(c, p)
     X = _check_frames("truth", truth)
     Y = _check_frames("estimates", estimates)
     _check_pair(X, Y, "truth", "estimates")
-    I, J, C = _assign(X, Y, c, p)
+    if assignment is None:
+        I, J, C = _assign(X, Y, c, p)
+    else:  # d^p by the kernel's own arithmetic: the same bits as the costs it returns
+        I, J = checked_assignment(assignment, X, Y)
+        C = _pow(_sqdist(np.ascontiguousarray(X.x.T), np.ascontiguousarray(Y.x.T), I, J), p)
     S = X.n_steps
     step = np.repeat(np.arange(S), X.sizes)[I]
     L = np.bincount(step, weights=C, minlength=S).astype(float)  # float even when empty
@@ -541,10 +574,14 @@ def _core(
     return X.sizes, Y.sizes, L, k, c, p
 
 
-def gospa_steps(truth: Frames, estimates: Frames, c: float, p: float = 2.0) -> SetDistance:
+def gospa_steps(truth: Frames, estimates: Frames, c: float, p: float = 2.0, *,
+                assignment: tuple[ArrayLike, ArrayLike] | None = None) -> SetDistance:
     """GOSPA (alpha = 2) of every step, ``(S,)`` arrays:
-    ``GOSPA^p = L + c^p/2 (n - k) + c^p/2 (m - k)`` (localisation, missed, false)."""
-    n, m, L, k, c, p = _core(truth, estimates, c, p)
+    ``GOSPA^p = L + c^p/2 (n - k) + c^p/2 (m - k)`` (localisation, missed, false).
+
+    ``assignment``: the rows ``(i, j)`` that ``assign(truth, estimates, c, p)`` returned,
+    when the caller has them (saves solving it again; the result is the same to the bit)."""
+    n, m, L, k, c, p = _core(truth, estimates, c, p, assignment)
     half = c**p / 2
     missed = half * (n - k)
     false = half * (m - k)
@@ -676,10 +713,8 @@ def track_counts(
     tk_, truth_run = _keys(run_of_step[xs], X.ids)  # truth key of each truth row
     jk_, track_run = _keys(run_of_step[ys], Y.ids)
 
-    if assignment is None:
-        I, J, _ = _assign(X, Y, c, p)
-    else:
-        I, J = (np.asarray(a, np.int64) for a in assignment)
+    I, J = (_assign(X, Y, c, p)[:2] if assignment is None
+            else checked_assignment(assignment, X, Y))
     pstep, pt, pj = xs[I], tk_[I], jk_[J]
     prun = run_of_step[pstep]
 
@@ -795,13 +830,33 @@ def _track_lives(jk_: IntArray, ys: IntArray, pt: IntArray, pj: IntArray, nJ: in
     np.maximum.at(last, jk_, ys)
     on = np.bincount(pj, minlength=nJ)
     false_ = on < min_assigned * life
-    pair_key, _ = _keys(pj, pt)  # (track, truth) combinations
-    combo_n = np.bincount(pair_key)
-    combo_track = np.zeros(combo_n.size, np.int64)
-    combo_track[pair_key] = pj
+    tracks, _, n = dominant_truths(pj, pt)
     dom = np.zeros(nJ, np.int64)
-    np.maximum.at(dom, combo_track, combo_n)
+    dom[tracks] = n
     return life, last, false_, dom / np.maximum(life, 1)
+
+
+def dominant_truths(track: ArrayLike, truth: ArrayLike) -> tuple[IntArray, IntArray, IntArray]:
+    """Each track's dominant truth over assigned pairs: pair e is track ``track[e]`` assigned
+    to truth ``truth[e]`` at one step (IDs or keys, integers), and a track's dominant truth
+    is the one it was assigned to most often, the lowest on a tie. Returns the tracks that
+    have a pair (ascending), their dominant truths and the number of pairs with it (a
+    track's purity is that number over its life)."""
+    trk, tru = np.asarray(track), np.asarray(truth)
+    if trk.ndim != 1 or trk.shape != tru.shape or not all(
+            np.issubdtype(a.dtype, np.integer) or a.size == 0 for a in (trk, tru)):
+        raise ValueError(f"track and truth have shapes {trk.shape} and {tru.shape}; expected "
+                         "integers (E,) each")
+    if trk.size == 0:
+        return (np.empty(0, np.int64),) * 3
+    o = np.lexsort((tru, trk))
+    a, b = trk[o].astype(np.int64), tru[o].astype(np.int64)
+    start = np.flatnonzero(np.r_[True, (a[1:] != a[:-1]) | (b[1:] != b[:-1])])
+    n = np.diff(np.r_[start, a.size])
+    a, b = a[start], b[start]  # the (track, truth) combinations, by track then truth
+    q = np.lexsort((-n, a))  # stable: among equal counts the lower truth stays first
+    first = q[np.r_[True, a[q[1:]] != a[q[:-1]]]]
+    return a[first], b[first], n[first]
 
 
 def track_summary(counts: TrackCounts) -> dict[str, float]:

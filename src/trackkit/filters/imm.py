@@ -54,8 +54,9 @@ returned :class:`~trackkit.belief.Innovation` is that of the moment-matched pred
 measurement, ``nu = sum_j c_j nu_j = z - zhat`` and
 ``S = sum_j c_j (S_j + (nu_j - nu)(nu_j - nu)^T)`` (``zhat_j - zhat = nu - nu_j``), so that
 gating and the multi-target tracker's association use the mixture's first two moments.
-``log_likelihood`` gives the mixture's exact ``log sum_j c_j N(nu_j; 0, S_j)`` and
-``merge_hypotheses`` the JPDA combination per model (used by the tracker).
+``log_likelihood`` gives the mixture's exact ``log sum_j c_j N(nu_j; 0, S_j)``,
+``measurement_prediction`` that innovation's predicted measurement and covariance without the
+update (for the tracker's gate), and ``merge_hypotheses`` the JPDA combination per model.
 
 When every model is linear with a ``KF`` inside and all share one state, the same equations
 run on a fast path for large batches (the end of this module); the general path above takes
@@ -70,6 +71,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation, moment_match
 from trackkit.filters.base import (
     Filter,
@@ -80,8 +82,8 @@ from trackkit.filters.base import (
     produced,
     register,
 )
-from trackkit.filters.kalman import KF, condition, linearize
-from trackkit.filters.kalman_fast import dot_rows, predict_matrices
+from trackkit.filters.kalman import EKF, KF, condition, jacobian_predict, linearize
+from trackkit.filters.kalman_fast import dot_rows, innovation_cov, predict_matrices
 from trackkit.linalg import (
     check_covariance,
     gaussian_loglik,
@@ -461,8 +463,13 @@ class IMM(Filter):
         preds = []
         for j in range(self.r):
             x0, P0j = self._part(X0, P0, j)
-            preds.append(self.filters[j].predict(Gaussian._make((x0, register(P0j))),
-                                                 motions[j], dt))
+            f, motion = self.filters[j], motions[j]
+            if type(f) is EKF and getattr(motion, "dim_x", None) == x0.shape[-1]:
+                # EKF.predict without re-checking the mixture of a belief checked above
+                check_dt(dt, "IMM.predict")
+                preds.append(jacobian_predict(x0, P0j, motion, dt))
+                continue
+            preds.append(f.predict(Gaussian._make((x0, register(P0j))), motion, dt))
         return self._assemble(c, preds)
 
     def update(self, belief: IMMBelief | Gaussian, z: ArrayLike,
@@ -484,6 +491,59 @@ class IMM(Filter):
         else:
             post = IMMBelief(mu, post.mean, post.cov)
         return post, Innovation(v, Sm)
+
+    def measurement_prediction(self, belief: IMMBelief | Gaussian,
+                               sensor: Any) -> tuple[Array, Array] | None:
+        """The predicted measurement ``zhat (..., m)`` and its covariance ``S (..., m, m)``:
+        the mixture's moments that :meth:`update` returns as its innovation, without the
+        update. For models with first-order inner filters (KF, EKF), per model j
+
+            zhat_j = h(x_j-),   S_j = H_j P_j- H_j^T + R,   nu_j = z0 - zhat_j
+
+        at ``z0 = h(x-)``, x- the combined prediction (angles wrapped in nu_j); then
+        ``nu = sum_j c_j nu_j``, ``S = sum_j c_j (S_j + (nu_j - nu)(nu_j - nu)^T)`` and
+        ``zhat = z0 - nu`` (angles wrapped): the update's ``z - innov.nu`` and
+        ``innov.cov`` at ``z = z0``, the same arithmetic to the last bit. None for other
+        inner filters or shapes (the caller takes the update at z0 instead)."""
+        b = self._belief(belief, "IMM.measurement_prediction")
+        R = sensor.noise
+        if not (all(type(f) is EKF and f.order == 1 or type(f) is KF for f in self.filters)
+                and (getattr(sensor, "linear", False) or not any(type(f) is KF
+                                                                 for f in self.filters))
+                and not (self._kf_only and getattr(sensor, "linear", False))
+                and type(R) is np.ndarray and R.dtype == np.float64):
+            return None
+        z0 = np.asarray(sensor.h(self._combined_mean(b)), dtype=float)
+        nus, Ss = [], []
+        for j in range(self.r):
+            x, Pj = self._part(b.mean, b.cov, j)
+            zhat, H = linearize(sensor, x)
+            S = innovation_cov(Pj, np.asarray(H, dtype=float), R)
+            if S is None:
+                return None
+            nus.append(sensor.residual(z0, zhat))
+            Ss.append(S)
+        m = z0.shape[-1]
+        batch = np.broadcast_shapes(*(np.shape(v)[:-1] for v in nus),
+                                    *(np.shape(s)[:-2] for s in Ss))
+        nu = np.stack([np.broadcast_to(v, batch + (m,)) for v in nus], -2)
+        S = np.stack([np.broadcast_to(s, batch + (m, m)) for s in Ss], -3)
+        v, Sm = mixture_innovation(b.mu, nu, S)
+        zhat = z0 - v
+        ang = np.asarray(getattr(sensor, "angular", (False,) * m))
+        if ang.any():
+            zhat[..., ang] = wrap(zhat[..., ang])
+        return zhat, Sm
+
+    def _combined_mean(self, b: IMMBelief) -> Array:
+        """``estimate(b).mean`` without the covariance (the same sums as :func:`combine`)."""
+        if self._carry.all() or self.fill == "zero":
+            return self.estimate(b).mean
+        x = np.einsum("...j,...jn->...n", b.mu, b.mean)
+        total = np.einsum("...j,jn->...n", b.mu, self._carry.astype(float))
+        if (total < _SMALL_WEIGHT).any():  # the limit of underflowed weights: combine's own
+            return self.estimate(b).mean
+        return x / total
 
     def log_likelihood(self, belief: IMMBelief | Gaussian, z: ArrayLike, sensor: Any) -> Array:
         """``log p(z) = log sum_j c_j N(nu_j; 0, S_j)``, the predicted measurement mixture's
@@ -644,7 +704,18 @@ class IMM(Filter):
         parts, nus, Ss = [], [], []
         for j in range(self.r):
             x, Pj = self._part(b.mean, b.cov, j)
-            g, innov = self.filters[j].update(Gaussian._make((x, register(Pj))), z, sensor)
+            f = self.filters[j]
+            if type(f) is EKF and f.order == 1:
+                # EKF.update without its checks of a belief and z checked above (z has no
+                # nan left): the residual at h(x-) and the Kalman update of kalman.condition
+                zhat, H = linearize(sensor, x)
+                nu = sensor.residual(z, zhat)
+                xn, Pn, S = condition(x, Pj, nu, H, sensor.noise)
+                parts.append(Gaussian._make((xn, Pn)))
+                nus.append(nu)
+                Ss.append(S)
+                continue
+            g, innov = f.update(Gaussian._make((x, register(Pj))), z, sensor)
             parts.append(g)
             nus.append(innov.nu)
             Ss.append(innov.cov)

@@ -44,14 +44,17 @@ def jacobian_predict(x: Array, P: Array, motion: MotionModel, dt: ArrayLike) -> 
 
     P- is exactly symmetric. A model whose F or Q is not n x n gets the formula as written.
     """
-    F = motion.jacobian(x, dt)
+    both = getattr(motion, "f_and_jacobian", None)  # a model that shares the work
+    fx, F = both(x, dt) if both is not None else (None, motion.jacobian(x, dt))
     Q = motion.noise(x, dt)
     # the fast path (kalman_fast): the Kronecker GEMM up to _KRON_MAX_N states, else sandwich
     Pp = predict_cov(F, P, Q)
+    if fx is None:
+        fx = motion.f(x, dt)
     if Pp is not None:
-        return Gaussian._make((motion.f(x, dt), register(Pp)))  # Pp exactly symmetric
+        return Gaussian._make((fx, register(Pp)))  # Pp exactly symmetric
     F, Q = np.asarray(F, dtype=float), np.asarray(Q, dtype=float)
-    return output(motion.f(x, dt), sandwich(F, P) + Q)
+    return output(fx, sandwich(F, P) + Q)
 
 
 def kalman_gain(P: Array, H: Array, R: Array) -> tuple[Array, Array, Array]:

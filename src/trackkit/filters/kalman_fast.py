@@ -417,15 +417,9 @@ def update_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
     tri = triu(n)
     i, j = tri.i, tri.j
     Pu = P2.reshape(N, n * n)[:, tri.flat]
+    A, S = _gain_terms(P2, H, R, batch)
     if m == 1:
-        h = H[..., 0, :] if H.ndim == 2 else _flat(H, batch, N, (1, n))[:, 0]
-        if h.ndim == 1:
-            A = P2.reshape(N * n, n).dot(h).reshape(N, n)
-            s = A.dot(h)
-        else:
-            A = np.einsum("nij,nj->ni", P2, h)
-            s = np.einsum("ni,ni->n", A, h)
-        s += R[..., 0, 0] if R.ndim == 2 else _flat(R, batch, N, (1, 1))[:, 0, 0]
+        s = S
         if not (s > 0).all():
             solve_psd(s.reshape(batch + (1, 1)), np.ones(batch + (1, 1)))  # raises
         u = 1.0 / s
@@ -437,13 +431,6 @@ def update_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
         Pu += g[:, None] * (A[:, i] * A[:, j])
         S = s.reshape(N, 1, 1)
     else:
-        H2 = H if H.ndim == 2 else _flat(H, batch, N, (m, n))
-        R2 = R if R.ndim == 2 else _flat(R, batch, N, (m, m))
-        if H2.ndim == 2:  # one GEMM over the flattened batch
-            A = P2.reshape(N * n, n).dot(H2.T).reshape(N, n, m)
-        else:
-            A = mmT(P2, H2)
-        S = symmetrize(mm(H2, A) + R2)
         K = solve_psd(S, A.mT).mT
         xn = x2 + np.einsum("nij,nj->ni", K, r2)
         W = A - mm(K, S)
@@ -454,3 +441,43 @@ def update_batch(x: Array, P: Array, r: Array, H: Array, R: Array):
         Pu -= E.reshape(N, n * n)[:, tri.flat]
     return (xn.reshape(batch + (n,)), mirror(Pu, n).reshape(batch + (n, n)),
             S.reshape(batch + (m, m)))
+
+
+def _gain_terms(P2: Array, H: Array, R: Array, batch: tuple[int, ...]) -> tuple[Array, Array]:
+    """``A = P H^T`` and ``S = H P H^T + R`` of :func:`update_batch` for ``P2 (N, n, n)``
+    (the batch flattened): for m = 1 ``A (N, n)`` and ``s (N,)``; for m >= 2 ``A (N, n, m)``
+    and ``S (N, m, m)``, symmetrised. An unbatched H is one GEMM over the flattened batch."""
+    N, n = P2.shape[0], P2.shape[-1]
+    m = H.shape[-2]
+    if m == 1:
+        h = H[..., 0, :] if H.ndim == 2 else _flat(H, batch, N, (1, n))[:, 0]
+        if h.ndim == 1:
+            A = P2.reshape(N * n, n).dot(h).reshape(N, n)
+            s = A.dot(h)
+        else:
+            A = np.einsum("nij,nj->ni", P2, h)
+            s = np.einsum("ni,ni->n", A, h)
+        s += R[..., 0, 0] if R.ndim == 2 else _flat(R, batch, N, (1, 1))[:, 0, 0]
+        return A, s
+    H2 = H if H.ndim == 2 else _flat(H, batch, N, (m, n))
+    R2 = R if R.ndim == 2 else _flat(R, batch, N, (m, m))
+    if H2.ndim == 2:
+        A = P2.reshape(N * n, n).dot(H2.T).reshape(N, n, m)
+    else:
+        A = mmT(P2, H2)
+    return A, symmetrize(mm(H2, A) + R2)
+
+
+def innovation_cov(P: Array, H: Array, R: Array) -> Array | None:
+    """``S = H P H^T + R`` ``(..., m, m)`` for a batch of P ``(..., n, n)``, computed as the
+    batched update (:func:`update_batch`) computes it, so that it equals the S the Kalman
+    update returns to the last bit; None where ``kalman.condition`` takes another kernel for
+    these shapes (one problem, the column kernel, more than ``FAST_MAX_M`` components)."""
+    n, m = P.shape[-1], H.shape[-2]
+    batch = np.broadcast_shapes(P.shape[:-2], H.shape[:-2], R.shape[:-2])
+    N = math.prod(batch)
+    if (P.ndim < 3 or m > FAST_MAX_M
+            or (N >= COLUMNS_MIN_ROWS and m <= 2 and H.ndim == 2 and R.ndim == 2)):
+        return None
+    _, S = _gain_terms(_flat(P, batch, N, (n, n)), H, R, batch)
+    return S.reshape(batch + (m, m))

@@ -103,6 +103,8 @@ class MotionBase:
     linear: bool = False
     #: which state components are angles (wrapped in residuals, averaged circularly)
     angular: tuple[bool, ...] | None = None
+    #: the state components' names where the model fixes them (None: not named)
+    state_names: ClassVar[tuple[str, ...] | None] = None
 
     def f(self, x: Array, dt: ArrayLike) -> Array:  # pragma: no cover - interface
         raise NotImplementedError
@@ -334,15 +336,23 @@ def turn_coefficients(w: Array, dt: Array) -> tuple[Array, Array, Array, Array, 
     small = np.abs(wt) < 1e-3
     ws = np.where(small, 1.0, w)  # safe divisor
     sin, cos = np.sin(wt), np.cos(wt)
-    s = np.where(small, dt - w**2 * dt**3 / 6, sin / ws)
-    c = np.where(small, w * dt**2 / 2 - w**3 * dt**4 / 24, (1 - cos) / ws)
-    ds = np.where(small, -w * dt**3 / 3 + w**3 * dt**5 / 30, (wt * cos - sin) / ws**2)
-    dc = np.where(small, dt**2 / 2 - w**2 * dt**4 / 8, (wt * sin - (1 - cos)) / ws**2)
+    w2, w3, dt2, dt3, dt4 = w**2, w**3, dt**2, dt**3, dt**4
+    versin, ws2 = 1 - cos, ws**2
+    s = np.where(small, dt - w2 * dt3 / 6, sin / ws)
+    c = np.where(small, w * dt2 / 2 - w3 * dt4 / 24, versin / ws)
+    ds = np.where(small, -w * dt3 / 3 + w3 * dt**5 / 30, (wt * cos - sin) / ws2)
+    dc = np.where(small, dt2 / 2 - w2 * dt4 / 8, (wt * sin - versin) / ws2)
     return s, c, ds, dc, cos, sin
 
 
 def turn_transition(w: Array, dt: Array) -> Array:
     s, c, _, _, cos, sin = turn_coefficients(w, dt)
+    return _turn_block(s, c, cos, sin)
+
+
+def _turn_block(s: Array, c: Array, cos: Array, sin: Array) -> Array:
+    """The 4 x 4 transition of [x, y, vx, vy] from the coefficients of
+    :func:`turn_coefficients`."""
     one, zero = np.ones_like(s), np.zeros_like(s)
     return np.stack(
         [
@@ -394,6 +404,7 @@ class CoordinatedTurn(MotionBase):
     q: ArrayLike = 1.0
     q_omega: float = 1e-4
     dim_x: int = field(default=5, init=False)
+    state_names: ClassVar[tuple[str, ...] | None] = ("x", "y", "vx", "vy", "turn_rate")
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", _per_axis(self.q, 2, "q"))
@@ -402,20 +413,39 @@ class CoordinatedTurn(MotionBase):
 
     def f(self, x: Array, dt: ArrayLike) -> Array:
         dt = _dt(dt)
+        return self._f(x, dt, turn_coefficients(x[..., 4], dt))
+
+    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
+        dt = _dt(dt)
+        return self._jacobian(x, dt, turn_coefficients(x[..., 4], dt))
+
+    def f_and_jacobian(self, x: Array, dt: ArrayLike) -> tuple[Array, Array]:
+        """``(f(x, dt), jacobian(x, dt))`` from one evaluation of the turn coefficients (a
+        subclass that overrides f or jacobian gets its own two)."""
+        t = type(self)
+        if t is not CoordinatedTurn and (t.f is not CoordinatedTurn.f
+                                         or t.jacobian is not CoordinatedTurn.jacobian):
+            return self.f(x, dt), self.jacobian(x, dt)
+        dt = _dt(dt)
+        k = turn_coefficients(x[..., 4], dt)
+        return self._f(x, dt, k), self._jacobian(x, dt, k)
+
+    @staticmethod
+    def _f(x: Array, dt: Array, k: tuple[Array, ...]) -> Array:
         px, py, vx, vy, w = (x[..., i] for i in range(5))
-        s, c, _, _, cos, sin = turn_coefficients(w, dt)
+        s, c, _, _, cos, sin = k
         return np.stack(
             [px + s * vx - c * vy, py + c * vx + s * vy, cos * vx - sin * vy,
              sin * vx + cos * vy, w + 0 * dt],
             -1,
         )
 
-    def jacobian(self, x: Array, dt: ArrayLike) -> Array:
-        dt = _dt(dt)
+    @staticmethod
+    def _jacobian(x: Array, dt: Array, k: tuple[Array, ...]) -> Array:
         vx, vy, w = x[..., 2], x[..., 3], x[..., 4]
-        s, c, ds, dc, cos, sin = turn_coefficients(w, dt)
+        s, c, ds, dc, cos, sin = k
         J = np.zeros(np.broadcast_shapes(w.shape, dt.shape) + (5, 5))
-        J[..., :4, :4] = turn_transition(w, dt)
+        J[..., :4, :4] = _turn_block(s, c, cos, sin)
         J[..., 0, 4] = ds * vx - dc * vy
         J[..., 1, 4] = dc * vx + ds * vy
         J[..., 2, 4] = -dt * (sin * vx + cos * vy)

@@ -85,9 +85,15 @@ _CLASSIFICATION_UNITS = (
 
 
 def finite_or_none(obj: Any) -> Any:
-    """JSON has no NaN/Infinity: non-finite floats become null."""
+    """JSON has no NaN/Infinity: non-finite floats become null, anywhere in nested dicts,
+    lists and tuples (tuples become lists, as JSON writes them); numpy scalars become
+    Python numbers first."""
     if isinstance(obj, dict):
         return {k: finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [finite_or_none(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj

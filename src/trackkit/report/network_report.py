@@ -46,6 +46,7 @@ from trackkit.report.files import (
     REPORT_HTML,
     RESULTS_JSON,
     TIMINGS_JSON,
+    finite_or_none,
     write_atomically,
     write_json,
 )
@@ -125,7 +126,7 @@ TOP_UNITS: dict[str, Any] = {
 
 def _list(x: Any) -> Any:
     """Nested lists of floats, None where a value is missing or not finite (JSON null;
-    ``_finite_or_none`` does not look inside lists)."""
+    ``finite_or_none`` does not look inside numpy arrays)."""
     if np.ndim(x) == 1:
         return [float(v) if math.isfinite(v) else None for v in np.asarray(x, dtype=float)]
     return [_list(v) for v in x]
@@ -138,17 +139,6 @@ def _curve_note(doc: dict) -> str:
         return ""
     return (" The agents were authenticated and encrypted with CURVE; "
             f"{ch['peers_refused']} other peers were refused.")
-
-
-def _json_safe(obj: Any) -> Any:
-    """Non-finite floats as None (JSON null) anywhere in nested dicts and lists."""
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -284,13 +274,13 @@ def network_results_document(mc: NetworkMonteCarlo, scenario,
     }
     if courses is not None:
         doc["courses"] = _courses_entry(*courses)
-    return _json_safe(doc)
+    return finite_or_none(doc)
 
 
 def network_timings_document(mc: NetworkMonteCarlo, scenario) -> dict[str, Any]:
     """The ``timings.json`` document: wall-clock seconds per run (they vary between
     machines and runs, so they are kept out of results.json)."""
-    return _json_safe({
+    return finite_or_none({
         "scenario": scenario.name, "runs": int(mc.runs), "seed": int(mc.seed),
         "units": {"network_s_per_run": "s (run_network: every agent's program and the "
                                        "centralised reference)",

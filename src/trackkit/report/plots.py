@@ -35,10 +35,14 @@ PLOT_FILES = {"geometry": "geometry.png", "rmse": "rmse.png", "nees": "nees.png"
 _DPI = 110
 
 
-def save_figure(fig: Figure, path: str | Path) -> Path:
+def save_figure(fig: Figure, path: str | Path, *, dpi: int = _DPI,
+                metadata: dict[str, Any] | None = None) -> Path:
+    """Write ``fig`` as a PNG at ``dpi``, rendered with Agg whatever the session's backend;
+    ``metadata`` goes to the PNG's text chunks (``{"Software": None}`` leaves out the
+    matplotlib version, for files that must not change with it)."""
     path = Path(path)
-    FigureCanvasAgg(fig)  # render with Agg whatever the session's backend
-    fig.savefig(path, dpi=_DPI, format="png")
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=dpi, format="png", metadata=metadata)
     return path
 
 

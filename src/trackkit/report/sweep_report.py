@@ -52,8 +52,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from trackkit.experiments.sweep import factor_of
-from trackkit.report.files import write_atomically
+from trackkit.report.files import write_atomically, write_json
 from trackkit.report.html import CSS, data_uri
+from trackkit.report.plots import save_figure
 from trackkit.report.tables import display_unit
 from trackkit.scenario.schema import PublishedSpec
 
@@ -241,14 +242,6 @@ def _figure(w: float, h: float):
     from matplotlib.figure import Figure
 
     return Figure(figsize=(w, h), layout="constrained")
-
-
-def _save(fig: Any, path: Path) -> Path:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=_DPI, format="png", metadata={"Software": None})
-    return path
 
 
 def _scaled(table: pa.Table, column: str) -> np.ndarray:
@@ -747,15 +740,15 @@ def write_sweep_report(campaign: Any, docs: Sequence[dict], out_dir: str | Path,
                    **ratio_figures(campaign, table, published)}
         images = {}
         for name, fig in figures.items():
-            images[name] = _save(fig, folder / f"{name}.png")
+            images[name] = save_figure(fig, folder / f"{name}.png", dpi=_DPI,
+                                       metadata={"Software": None})
             written[name] = images[name]
         written["html"] = folder / SWEEP_HTML
         written["html"].write_text(render_sweep_html(campaign, table, images, notes, rows,
                                                      published), encoding="utf-8")
-        written["timings"] = folder / SWEEP_TIMINGS
-        written["timings"].write_text(json.dumps(
-            _timings(campaign, timings or [None] * len(campaign.points)), indent=2,
-            allow_nan=False) + "\n", encoding="utf-8")
+        written["timings"] = write_json(
+            _timings(campaign, timings or [None] * len(campaign.points)),
+            folder / SWEEP_TIMINGS)
         return written
 
     return write_atomically(out_dir, write_all, sweep_outputs(out_dir))

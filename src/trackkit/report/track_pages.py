@@ -12,14 +12,17 @@
 Rows of ``tracks.parquet`` / ``tracks.csv``: one per live track per scan (tentative and
 confirmed): ``id, scan, time`` (s from the epoch), ``time_utc`` (when the epoch is known;
 a UTC timestamp in Parquet, ISO 8601 text with a ``Z`` in CSV), the state ``x, y, vx, vy``
-(m, m/s, x east, y north in the local frame; extra components as ``state_4...``), the
-covariance diagonal ``var_x, var_y, var_vx, var_vy`` (m^2, m^2/s^2), ``status``
+(m, m/s, x east, y north in the local frame), the extra components by the names the
+tracker's models give them (``turn_rate``, rad/s counter-clockwise, of the IMM's
+coordinated-turn model; else ``state_4 ...``), the covariance diagonal ``var_x, var_y,
+var_vx, var_vy`` (m^2, m^2/s^2; ``var_turn_rate`` ...), ``status``
 ("tentative" or "confirmed") and ``lat, lon`` (deg, WGS-84, when the frame is known: the
 ground point of the 2-D track, see :func:`ground_geodetic`; an aircraft's x, y far from the
 frame's origin are those of the point under it only to altitude x distance / earth radius,
 600 m for 10 km up at 400 km, so its lat, lon are off by as much). With the smoothed
 tracks (:mod:`trackkit.tracking.smoothing`, a Rauch-Tung-Striebel smoother over each track's
-whole life), after those: ``x_smooth, y_smooth, vx_smooth, vy_smooth``, their variances
+whole life), after those: ``x_smooth, y_smooth, vx_smooth, vy_smooth`` (and
+``turn_rate_smooth`` ...), their variances
 ``var_x_smooth ...`` and ``lat_smooth, lon_smooth``, row for row. Floats
 round-trip exactly in both files (Parquet is binary, the CSV writer prints the shortest
 decimal that reads back as the same double).
@@ -47,7 +50,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
@@ -61,11 +63,19 @@ from trackkit.eval.clear_mot import (
     id_scores,
     mota_steps,
 )
-from trackkit.eval.track_metrics import Frames, gospa_steps, track_counts, track_summary
+from trackkit.eval.track_metrics import Frames, assign, gospa_steps, track_counts, track_summary
 from trackkit.io.frames import EnuFrame, ground_geodetic
+from trackkit.io.layouts import LAYOUTS
 from trackkit.io.records import ReadReport
-from trackkit.report.files import REPORT_HTML, RESULTS_JSON, write_atomically
+from trackkit.report.files import (
+    REPORT_HTML,
+    RESULTS_JSON,
+    finite_or_none,
+    write_atomically,
+    write_json,
+)
 from trackkit.report.html import CSS, notes_and_figures
+from trackkit.report.plots import save_figure
 from trackkit.report.track_map import MAP_CSS, map_data, map_html
 from trackkit.report.track_table import track_table
 from trackkit.report.track_words import headline_figures, settings_in_words
@@ -102,7 +112,10 @@ NO_TRACK_CONFIRMED = (
     "detection probability and clutter options.")
 _STATUS = {int(s): s.name.lower() for s in TrackStatus}
 _STATE_NAMES = ("x", "y", "vx", "vy")
-_DPI = 110
+#: the units of the columns every history has
+_UNITS = ("x", "y", "vx", "vy", "var_x", "var_y", "var_vx", "var_vy", "lat", "lon")
+#: units of the extra state components a model names, and of their variances
+_EXTRA_UNITS = {"turn_rate": ("rad/s", "rad^2/s^2")}
 
 
 # --- the tables -------------------------------------------------------------------------------
@@ -128,7 +141,7 @@ def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
     scan = np.repeat(np.arange(h.times.size, dtype=np.int64), per_scan)
     t = h.times[scan]
     n = h.mean.shape[1]
-    names = [_STATE_NAMES[k] if k < 4 else f"state_{k}" for k in range(n)]
+    names = _state_names(h, n)
     cols: dict[str, Any] = {"id": np.asarray(h.ids, np.int64), "scan": scan, "time": t}
     if epoch is not None:
         cols["time_utc"] = pa.array(_utc(epoch, t)).cast(pa.timestamp("ns", tz="UTC"))
@@ -141,27 +154,30 @@ def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
     if frame is not None:
         cols["lat"], cols["lon"] = ground_geodetic(frame, h.mean[:, 0], h.mean[:, 1])
     if smoothed is not None:
-        cols.update(_smoothed_columns(smoothed, h.ids.size, frame))
+        cols.update(_smoothed_columns(smoothed, h.ids.size, frame, names))
     meta = {"epoch": None if epoch is None else str(epoch.astype("datetime64[ns]")),
             "frame": None if frame is None else [frame.lat0, frame.lon0, frame.alt0],
             "units": {"time": "s from epoch", "x": "m east", "y": "m north", "vx": "m/s",
                       "vy": "m/s", "var_x": "m^2", "var_y": "m^2", "var_vx": "m^2/s^2",
                       "var_vy": "m^2/s^2", "lat": "deg", "lon": "deg"}}
+    meta["units"].update({k: u for name in names[4:] if name in _EXTRA_UNITS
+                          for k, u in zip((name, f"var_{name}"), _EXTRA_UNITS[name],
+                                          strict=True)})
     if smoothed is not None:
         meta["units"].update({f"{k}_smooth": u for k, u in list(meta["units"].items())
-                              if k != "time"})
+                              if k != "time" and (k in _UNITS or f"{k}_smooth" in cols)})
     table = pa.table({k: v if isinstance(v, pa.Array) else pa.array(v) for k, v in cols.items()})
     return table.replace_schema_metadata({"trackkit": json.dumps(meta)})
 
 
-def _smoothed_columns(sm: SmoothedTracks, rows: int, frame: EnuFrame | None
-                      ) -> dict[str, Array]:
+def _smoothed_columns(sm: SmoothedTracks, rows: int, frame: EnuFrame | None,
+                      state: list[str]) -> dict[str, Array]:
     """``x_smooth ...``, ``var_x_smooth ...`` and ``lat_smooth, lon_smooth`` of the smoothed
-    components."""
+    components (named as the history's ``state`` components)."""
     if sm.mean.shape[0] != rows:
         raise ValueError(f"smoothed tracks have {sm.mean.shape[0]} rows; the history has "
                          f"{rows}: expected the smoothed tracks of this history")
-    names = [_STATE_NAMES[k] if k < 4 else f"state_{k}" for k in sm.dims.tolist()]
+    names = [state[k] if k < len(state) else f"state_{k}" for k in sm.dims.tolist()]
     cols = {f"{name}_smooth": np.asarray(sm.mean[:, i], float) for i, name in enumerate(names)}
     var = np.diagonal(sm.cov, axis1=-2, axis2=-1)
     cols.update({f"var_{name}_smooth": np.asarray(var[:, i], float)
@@ -170,6 +186,14 @@ def _smoothed_columns(sm: SmoothedTracks, rows: int, frame: EnuFrame | None
     if frame is not None and xy is not None:
         cols["lat_smooth"], cols["lon_smooth"] = ground_geodetic(frame, xy[:, 0], xy[:, 1])
     return cols
+
+
+def _state_names(h: TrackHistory, n: int) -> list[str]:
+    """The columns of the ``n`` state components: ``x, y, vx, vy``, then the history's
+    ``extra_names`` (``state_4 ...`` for one it does not name)."""
+    extra = tuple(h.extra_names)
+    return [_STATE_NAMES[k] if k < 4 else extra[k - 4] if k - 4 < len(extra)
+            else f"state_{k}" for k in range(n)]
 
 
 def _smoothed_xy(sm: SmoothedTracks) -> Array | None:
@@ -317,7 +341,9 @@ def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: floa
     ``false`` are the means over scans of its additive parts (p-th powers, m^p), so that
     ``rms = (localisation + missed + false)^(1/p)``; ``missed_per_scan`` and
     ``false_per_scan`` are the mean numbers of objects left unassigned and of confirmed
-    tracks assigned to none."""
+    tracks assigned to none. Keys that start with ``_`` are for the figures and the track
+    table, not written: the per-scan series and ``_assignment``, the rows of the GOSPA
+    assignment (``eval.track_metrics.assign``) that every score here is computed from."""
     conf = history.confirmed()
     ids_conf = np.unique(conf.ids)
     out: dict[str, Any] = {
@@ -328,7 +354,8 @@ def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: floa
     }
     if truth is None:
         return out
-    g = gospa_steps(truth, conf, c, p)
+    ab = assign(truth, conf, c, p)  # one solve serves every score below and the track table
+    g = gospa_steps(truth, conf, c, p, assignment=ab)
     half = c**p / 2
     out["gospa"] = {
         "c": float(c), "p": float(p), "mean": float(np.mean(g.distance)),
@@ -340,18 +367,20 @@ def track_metrics(history: TrackHistory, truth: Frames | None, c: float, p: floa
         "objects_per_scan": float(truth.sizes.mean()),
     }
     period = float(np.median(np.diff(history.times))) if history.times.size > 1 else 0.0
-    counts = track_counts(truth, conf, c, p=p, times=history.times, within=5 * period)
+    counts = track_counts(truth, conf, c, p=p, times=history.times, within=5 * period,
+                          assignment=ab)
     summary = track_summary(counts)
     out["tracks"] = {k: (v if isinstance(v, int) else float(v)) for k, v in summary.items()}
     out["tracks"]["confirmed_within_s"] = 5 * period
     out["_gospa_steps"] = g  # for the figure; not written
-    out.update(_identity(truth, conf, c, p, site, sigma_bearing))
+    out["_assignment"] = ab  # for the track table; not written
+    out.update(_identity(truth, conf, c, p, site, sigma_bearing, ab))
     return out
 
 
 def _identity(truth: Frames, conf: Frames, c: float, p: float,
-              site: tuple[float, float] | None, sigma_bearing: float | None
-              ) -> dict[str, Any]:
+              site: tuple[float, float] | None, sigma_bearing: float | None,
+              assignment: tuple[NDArray[np.int64], NDArray[np.int64]]) -> dict[str, Any]:
     """CLEAR-MOT, IDF1 and GOSPA with switching (``identity``) and their per-scan series
     (``_identity_steps``, not written). The CLEAR-MOT and IDF1 threshold is the GOSPA
     cut-off c: a track farther than c from an object is neither assigned to it by GOSPA
@@ -360,7 +389,7 @@ def _identity(truth: Frames, conf: Frames, c: float, p: float,
     cm = clear_mot(truth, conf, c)
     s = clear_mot_summary(cm)
     ids = id_scores(truth, conf, c)
-    gs = gospa_switching(truth, conf, c, p, switching_penalty=c)
+    gs = gospa_switching(truth, conf, c, p, switching_penalty=c, assignment=assignment)
     resolvable: int | None = None
     res_steps = None
     if site is not None and sigma_bearing is not None:
@@ -380,12 +409,6 @@ def _identity(truth: Frames, conf: Frames, c: float, p: float,
 
 
 # --- figures ----------------------------------------------------------------------------------
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=_DPI, format="png")
-    return path
 
 
 def track_figure(history: TrackHistory, *, background: Array | None = None,
@@ -520,24 +543,14 @@ def track_report(result: TrackingResult) -> TrackReport:
 def _input_document(read: ReadReport | None, source: str, fmt: str) -> dict[str, Any]:
     if read is None:
         return {"file": source, "format": fmt}
-    return {"file": read.path, "format": fmt, "records_read": read.rows_read,
+    return {"file": read.path, "format": fmt, "layout": read.layout or None,
+            "records_read": read.rows_read,
             "records_kept": read.rows_kept, "records_skipped": read.n_skipped,
             "skipped_by_reason": dict(read.skipped), "duplicates_dropped": read.duplicates,
             "out_of_order_sorted": read.out_of_order, "not_given": dict(read.not_given),
+            "set_missing": {k: dict(v) for k, v in read.set_missing.items()},
             "epoch_utc": None if read.epoch is None else
             str(read.epoch.astype("datetime64[ms]")) + "Z"}
-
-
-def _finite_or_none(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {k: _finite_or_none(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite_or_none(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, np.generic):
-        return _finite_or_none(obj.item())
-    return obj
 
 
 def results_document(rep: TrackReport, metrics: Mapping[str, Any]) -> dict[str, Any]:
@@ -546,7 +559,7 @@ def results_document(rep: TrackReport, metrics: Mapping[str, Any]) -> dict[str, 
            "config": {k: dict(v) for k, v in rep.config.items()},
            "results": {k: v for k, v in metrics.items() if not k.startswith("_")},
            "notes": list(rep.notes), "trackkit": __version__}
-    return _finite_or_none(doc)
+    return finite_or_none(doc)
 
 
 def _fmt(v: Any) -> str:
@@ -714,9 +727,18 @@ def _input_html(rep: TrackReport) -> list[str]:
               "skipped_by_reason": "skipped, by reason",
               "duplicates_dropped": "exact duplicates dropped",
               "out_of_order_sorted": "records out of time order (sorted)",
-              "not_given": "optional fields not given (kept as nan)", "epoch_utc": "t = 0 at"}
+              "not_given": "optional fields not given (kept as nan)", "epoch_utc": "t = 0 at",
+              "layout": "layout recognised"}
+    if inp.get("layout"):
+        inp["layout"] = _layout_title(inp["layout"])
+    missing = inp.pop("set_missing", None)
     parts = ["<h2>Input</h2>", _table([(labels.get(k, k), v) for k, v in inp.items()
                                       if v is not None])]
+    if missing:
+        parts.append(_table([(f"{name}: {reason}", n) for name, why in missing.items()
+                             for reason, n in sorted(why.items(), key=lambda kv: -kv[1])],
+                            caption="optional fields set missing (kept as nan), by field "
+                                    "and reason"))
     if rep.read is not None and rep.read.out_of_order:
         parts.append(f"<p>{rep.read.out_of_order} records were out of time order in the file; "
                      "they were sorted by time before tracking.</p>")
@@ -727,6 +749,12 @@ def _input_html(rep: TrackReport) -> list[str]:
         parts += [f"<li><code>{esc(str(b))}</code></li>" for b in shown]
         parts.append("</ul>")
     return parts
+
+
+def _layout_title(name: str) -> str:
+    """``NOAA MarineCadastre ... (noaa)``: the layout recognised, in words and by name."""
+    known = LAYOUTS.get(name)
+    return f"{known.title} ({name})" if known is not None else name
 
 
 def _map_section(rep: TrackReport, table: pa.Table | None) -> list[str]:
@@ -785,7 +813,8 @@ def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
     table = history_table(rep.history, epoch=rep.epoch, frame=rep.frame,
                           smoothed=rep.smoothed)
     summary = track_table(rep.history, truth=rep.truth, c=rep.gospa_c,
-                          object_ids=rep.object_ids, epoch=rep.epoch)
+                          object_ids=rep.object_ids, epoch=rep.epoch,
+                          assignment=metrics.get("_assignment"))
     out = {"parquet": write_tracks_parquet(table, folder / TRACKS_PARQUET),
            "csv": write_tracks_csv(table, folder / TRACKS_CSV)}
     out["summary"] = folder / TRACKS_SUMMARY_CSV
@@ -798,22 +827,20 @@ def _write_all(rep: TrackReport, folder: Path) -> dict[str, Path]:
     if rep.read is not None and (rep.read.n_skipped or rep.read.bad):
         out["skipped"] = write_skipped_csv(rep.read, folder / SKIPPED_CSV)
     images: dict[str, Path] = {}
-    images["tracks"] = _save(track_figure(rep.history, background=rep.background,
+    images["tracks"] = save_figure(track_figure(rep.history, background=rep.background,
                                           background_label=rep.background_label,
                                           site=rep.site, max_range=rep.max_range,
                                           title=rep.title), folder / TRACKS_PNG)
     g = metrics.get("_gospa_steps")
     if g is not None and rep.truth is not None:
-        images["gospa"] = _save(gospa_figure(rep.history.times, g, rep.truth.sizes,
+        images["gospa"] = save_figure(gospa_figure(rep.history.times, g, rep.truth.sizes,
                                              rep.history.confirmed().sizes, rep.gospa_c,
                                              epoch=rep.epoch), folder / GOSPA_PNG)
     out.update({f"{k}_png": v for k, v in images.items()})
     out["html"] = folder / REPORT_HTML
     out["html"].write_text(render_track_html(rep, metrics, images, summary), encoding="utf-8")
     doc = results_document(rep, metrics)
-    out["results"] = folder / RESULTS_JSON
-    out["results"].write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n",
-                              encoding="utf-8")
+    out["results"] = write_json(doc, folder / RESULTS_JSON)
     return out
 
 

@@ -29,9 +29,9 @@ from collections.abc import Sequence
 
 import numpy as np
 import pyarrow as pa
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from trackkit.eval.track_metrics import Frames, assign
+from trackkit.eval.track_metrics import Frames, assign, checked_assignment, dominant_truths
 from trackkit.tracking.history import TrackHistory
 from trackkit.tracking.logic import TrackStatus
 
@@ -91,24 +91,20 @@ def _steps(t: Array, pos: Array, speed: Array, ids: NDArray[np.int64]) -> Array:
 
 def _identities(history: TrackHistory, truth: Frames, c: float, p: float,
                 track_ids: NDArray[np.int64], life: NDArray[np.int64],
-                object_ids: Sequence[str] | None) -> tuple[list[str], Array]:
+                object_ids: Sequence[str] | None,
+                assignment: tuple[ArrayLike, ArrayLike] | None) -> tuple[list[str], Array]:
     """Per track (``track_ids``, sorted), the object it was assigned to most often and the
     share of its ``life`` (confirmed scans) assigned to that object."""
     conf = history.confirmed()
-    truth_rows, track_rows = assign(truth, conf, c, p)
+    truth_rows, track_rows = (assign(truth, conf, c, p) if assignment is None
+                              else checked_assignment(assignment, truth, conf))
     names = [""] * track_ids.size
     share = np.full(track_ids.size, np.nan)
-    if truth_rows.size == 0:
-        return names, share
     trk = np.searchsorted(track_ids, conf.ids[track_rows])
-    obj = np.asarray(truth.ids)[truth_rows]
-    # count (track, object) pairs; the first of the most frequent per track wins
-    pairs, counts = np.unique(np.stack([trk, obj], axis=1), axis=0, return_counts=True)
-    o = np.lexsort((pairs[:, 1], -counts, pairs[:, 0]))
-    first = o[np.r_[True, pairs[o[1:], 0] != pairs[o[:-1], 0]]]
-    for (k, code), n in zip(pairs[first].tolist(), counts[first].tolist(), strict=True):
+    tracks, codes, n = dominant_truths(trk, np.asarray(truth.ids)[truth_rows])
+    for k, code, count in zip(tracks.tolist(), codes.tolist(), n.tolist(), strict=True):
         names[k] = str(object_ids[code]) if object_ids is not None else str(code)
-        share[k] = n / life[k]
+        share[k] = count / life[k]
     return names, share
 
 
@@ -123,12 +119,15 @@ def _status(history: TrackHistory, last_row: NDArray[np.int64],
 
 def track_table(history: TrackHistory, *, truth: Frames | None = None, c: float = 500.0,
                 p: float = 2.0, object_ids: Sequence[str] | None = None,
-                epoch: np.datetime64 | None = None) -> pa.Table:
+                epoch: np.datetime64 | None = None,
+                assignment: tuple[ArrayLike, ArrayLike] | None = None) -> pa.Table:
     """One row per confirmed track (module docstring), sorted by id.
 
     With a ``truth`` (per scan the objects' positions, ``ids`` their codes), each track's
     identity is ``object_ids[code]`` of the object assigned to it on most of its scans
-    (the code itself without ``object_ids``)."""
+    (the code itself without ``object_ids``). ``assignment``: the rows ``(i, j)`` that
+    ``eval.track_metrics.assign(truth, history.confirmed(), c, p)`` returned, when the caller
+    has them (``report.track_pages.track_metrics`` keeps them as ``_assignment``)."""
     rows, scan = _confirmed(history)
     ids = history.ids[rows]
     t = history.times[scan]
@@ -142,7 +141,8 @@ def track_table(history: TrackHistory, *, truth: Frames | None = None, c: float 
     track_ids = ids[starts]
     cols: dict[str, object] = {"id": track_ids}
     if truth is not None:
-        names, share = _identities(history, truth, c, p, track_ids, life, object_ids)
+        names, share = _identities(history, truth, c, p, track_ids, life, object_ids,
+                                   assignment)
     else:
         names, share = [""] * starts.size, np.full(starts.size, np.nan)
     cols["identity"] = pa.array(names, pa.string())

@@ -27,7 +27,8 @@ class TrackHistory(NamedTuple):
     ``deleted``, and the JPDA clusters whose marginals were ``approximated``. ``cov (N, n,
     n)`` is the full covariance (what a smoother needs); ``hit (N,)`` whether the row's track
     was updated with a plot at that scan (a new track is, by its plot); either None in a
-    history made without it."""
+    history made without it. ``extra_names``: the names of the state's components after
+    ``x, y, vx, vy`` (``Tracker.extra_names``; empty: not named)."""
 
     times: Array
     offsets: NDArray[np.int64]
@@ -41,6 +42,7 @@ class TrackHistory(NamedTuple):
     approximated: NDArray[np.int64]
     cov: Array | None = None
     hit: NDArray[np.bool_] | None = None
+    extra_names: tuple[str, ...] = ()
 
     def confirmed(self, dims: tuple[int, ...] = (0, 1)) -> Frames:
         """The confirmed tracks per scan as ``Frames`` of the state components ``dims``
@@ -87,6 +89,7 @@ def run_tracker(tracker: Tracker, scans: Iterable[Scan], tracks: Tracks | None =
         approximated=np.array([r[8] for r in rows], np.int64),
         cov=np.concatenate([r[9] for r in rows]).reshape(-1, n, n),
         hit=np.concatenate([r[10] for r in rows]).astype(bool),
+        extra_names=tracker.extra_names,
     )
     return history, tracks
 

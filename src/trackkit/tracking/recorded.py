@@ -25,13 +25,16 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from trackkit.io import read_header
 
+if TYPE_CHECKING:
+    from trackkit.sim.virtual_radar import VirtualRadar
+
 __all__ = ["DEFAULT_SAMPLE", "TRACKER_REASONS", "TRACK_PROFILES", "Recording", "TrackOptions",
            "TrackProfile", "TrackingResult", "build_tracker", "open_recording",
-           "sample_sentence", "track_recording"]
+           "profile_radar", "sample_sentence", "track_recording"]
 
 Kind = Literal["ais", "opensky", "detections"]
 #: ``progress(stage, done, total)``: stage "reading" (bytes) or "tracking" (scans)
@@ -471,12 +474,25 @@ def _limit_scans(scans: Any, until: float | None, max_scans: int | None) -> Any:
     return Scans(scans.z[:off[-1]], off, scans.times[:n], scans.sensor[:n])
 
 
+def profile_radar(profile: TrackProfile, site: tuple[float, float] = (0.0, 0.0),
+                  max_gap: float | None = None) -> VirtualRadar:
+    """The virtual radar of an AIS or ADS-B ``profile`` at ``site`` (x east, y north in the
+    reports' frame, m), bridging reporting gaps up to ``max_gap`` (s; None: its default)."""
+    from trackkit.sim.virtual_radar import VirtualRadar
+
+    s = profile
+    return VirtualRadar(site=site, period=s.period, sigma_range=s.sigma_range,
+                        sigma_bearing=math.radians(s.sigma_bearing_deg), pd=s.pd,
+                        clutter=s.clutter, max_range=s.max_range,
+                        min_range=s.min_range, max_gap=max_gap)
+
+
 def _radar_job(rec: Recording, reports: Any, read: Any) -> dict[str, Any]:
     """The virtual radar's plots of AIS or ADS-B reports, and the truth to score against."""
     import numpy as np
 
     from trackkit.io.frames import ground_geodetic
-    from trackkit.sim.virtual_radar import VirtualRadar, virtual_radar
+    from trackkit.sim.virtual_radar import virtual_radar
 
     s, o = rec.settings, rec.options
     if len(reports) == 0:
@@ -488,10 +504,7 @@ def _radar_job(rec: Recording, reports: Any, read: Any) -> dict[str, Any]:
     else:
         x, y, _ = frame.to_enu(o.site_lat, o.site_lon, 0.0)
         site = (float(x), float(y))
-    radar = VirtualRadar(site=site, period=s.period, sigma_range=s.sigma_range,
-                         sigma_bearing=math.radians(s.sigma_bearing_deg), pd=s.pd,
-                         clutter=s.clutter, max_range=s.max_range,
-                         min_range=s.min_range, max_gap=o.max_gap)
+    radar = profile_radar(s, site, o.max_gap)
     until = None if o.until is None else float(reports.time[0]) + o.until
     run = virtual_radar(reports, radar, o.seed, until=until, max_scans=o.max_scans)
     lat, lon = ground_geodetic(frame, np.array([site[0]]), np.array([site[1]]))

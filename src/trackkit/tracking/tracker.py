@@ -19,7 +19,9 @@ One scan, for every live track at once (axis 0 of one batched belief is the trac
 ``zhat`` and ``S`` come from the filter itself: an update at ``z0 = h(x-)`` returns the
 residual ``z0 - zhat`` and the innovation covariance ``S`` of that filter (exactly
 ``h(x-)`` and ``H P H^T + R`` for the KF and EKF, the unscented ones for the UKF and CKF,
-the mixture's for an IMM), so the gate and the association use the filter's likelihood.
+the mixture's for an IMM), so the gate and the association use the filter's likelihood. A
+filter with a ``measurement_prediction`` (the IMM of first-order EKFs) gives the same two
+without the update.
 """
 
 from __future__ import annotations
@@ -282,6 +284,22 @@ class Tracker:
             return self.sensor[scan.sensor]
         return self.sensor
 
+    @property
+    def extra_names(self) -> tuple[str, ...]:
+        """The names of the state's extras: those the motion model (or the IMM's models, by
+        their state maps) gives its state, else ``state_4, state_5 ...``."""
+        n = 4 + len(self.extra_mean)
+        names = {k: f"state_{k}" for k in range(4, n)}
+        if self.motion is not None:
+            models, maps = [self.motion], [np.arange(getattr(self.motion, "dim_x", n))]
+        else:
+            models = list(getattr(self.filter, "models", ()))
+            maps = list(getattr(self.filter, "state_maps", ()))
+        for model, where in zip(models, maps, strict=False):
+            own = getattr(model, "state_names", None) or ()
+            names.update({int(k): name for k, name in zip(where, own, strict=False) if 4 <= k < n})
+        return tuple(names[k] for k in range(4, n))
+
     def init(self, time: float = 0.0) -> Tracks:
         """No tracks yet, at ``time``."""
         n = 4 + len(self.extra_mean)
@@ -302,6 +320,10 @@ class Tracker:
         if type(self.filter) in _FIRST_ORDER and getattr(self.filter, "order", 1) == 1:
             mp = predict_measurement(belief, sensor)
             return mp.zhat, mp.S
+        fast = getattr(self.filter, "measurement_prediction", None)
+        out = None if fast is None else fast(belief, sensor)
+        if out is not None:  # the filter's own, without an update (the IMM's)
+            return out
         z0 = np.asarray(sensor.h(self.estimate(belief).mean), dtype=float)
         _, innov = self.filter.update(belief, z0, sensor)
         zhat = z0 - innov.nu
