@@ -107,6 +107,15 @@ MissesOption = Annotated[int | None, typer.Option(
     "through (count); it is deleted at the next. Without it a detections file's track is "
     "deleted at Wald's SPRT threshold (the third miss at pd 0.9).",
     show_default=_profile_default("misses"))]
+HoldOption = Annotated[float | None, typer.Option(
+    "--hold", callback=number(0, open_lo=False), help="Time a lost track is held, unseen "
+    "(s): a track that missed more scans than --misses is no longer shown but kept, and a "
+    "new track within --rejoin of it continues it under its ID. 0: deleted when lost.",
+    show_default=_profile_default("hold"))]
+RejoinOption = Annotated[float | None, typer.Option(
+    "--rejoin", callback=number(0), help="How near a new track must be to a held one to "
+    "continue it (m), besides agreeing with it in position and velocity within their "
+    "covariances.", show_default=_profile_default("rejoin"))]
 TurnQOption = Annotated[float | None, typer.Option(
     "--turn-q", callback=number(0, open_lo=False), help="Turn-rate noise of the "
     "coordinated-turn model (rad^2/s^3; the turn rate's variance grows by turn_q dt): the "
@@ -169,6 +178,8 @@ def track(
     v_std: VStdOption = None,
     v_max: VMaxOption = None,
     misses: MissesOption = None,
+    hold: HoldOption = None,
+    rejoin: RejoinOption = None,
     turn_q: TurnQOption = None,
     turn_std_deg: TurnStdOption = None,
     gospa_c: GospaCOption = None,
@@ -198,7 +209,8 @@ def track(
                                sigma_bearing_deg=sigma_bearing_deg, sigma_pos=sigma_pos, pd=pd,
                                clutter=clutter, max_range=max_range, min_range=min_range, q=q,
                                v_std=v_std, gospa_c=gospa_c, turn_q=turn_q,
-                               turn_std_deg=turn_std_deg, misses=misses, v_max=v_max)
+                               turn_std_deg=turn_std_deg, misses=misses, v_max=v_max,
+                               hold=hold, rejoin=rejoin)
         options = TrackOptions(
             fmt=fmt.value if fmt else None, as_radar=as_radar, columns=columns, units=units,
             site_lat=site_lat, site_lon=site_lon, profile=profile,
@@ -232,6 +244,10 @@ def _check_used(given: TrackProfile, used: TrackProfile) -> None:
         raise ValueError(f"--turn-std-deg {given.turn_std_deg:g}: the filter here is "
                          "constant-velocity, with no turn rate; give --turn-q for the IMM of "
                          "constant velocity and coordinated turn")
+    if given.hold and (used.period is None or used.misses is None):
+        raise ValueError(f"--hold {given.hold:g}: a detections file's tracks are deleted at "
+                         "Wald's SPRT threshold, with no scan period to hold them by; give "
+                         "--misses, or track AIS or ADS-B with --as-radar")
 
 
 def _bars(bar: Any) -> Any:

@@ -90,6 +90,12 @@ class TrackProfile:
 #:   Coasting 3 scans (9 s) takes a vessel at 10 m/s 90 m, well inside its gate. An aircraft
 #:   coasts 2 scans (20 s, 5 km at 250 m/s, and up to 60 deg of turn): longer, the
 #:   prediction leaves the gate before the aircraft is seen again.
+#: - ``hold``, ``rejoin``: a vessel's AIS reports stop for minutes (a receiver's shadow, a
+#:   transponder off at a berth: gaps of 10 to 40 min in the Solent hour, an aircraft's for up
+#:   to a few minutes), and the radar, made from the reports, loses it. Its lost track is held
+#:   30 min (5 min for an aircraft) and a new track confirmed within 500 m of its prediction
+#:   (10 km: 40 s of flight) and agreeing in position and velocity continues it under its ID.
+#:   Held tracks are not shown and take no plot, so holding longer costs no false track.
 #: - ``v_max``: two plots of consecutive scans start a track only if they are no farther
 #:   apart than the fastest traffic moves (20 m/s, 39 kn: fast ferries and small craft; 350
 #:   m/s for aircraft): among closely packed slow vessels and 10 false plots a scan, this is
@@ -98,11 +104,11 @@ TRACK_PROFILES: dict[str, TrackProfile] = {
     "ais": TrackProfile(period=3.0, sigma_range=20.0, sigma_bearing_deg=0.5, pd=0.9,
                         clutter=10.0, max_range=40e3, min_range=50.0, q=0.05, v_std=10.0,
                         gospa_c=500.0, turn_q=1e-5, turn_std_deg=2.0, misses=3.0,
-                        v_max=20.0),
+                        v_max=20.0, hold=1800.0, rejoin=500.0),
     "opensky": TrackProfile(period=10.0, sigma_range=50.0, sigma_bearing_deg=0.1, pd=0.9,
                             clutter=10.0, max_range=400e3, min_range=500.0, q=100.0,
                             v_std=150.0, gospa_c=2000.0, turn_q=1e-4, turn_std_deg=1.5,
-                            misses=2.0, v_max=350.0),
+                            misses=2.0, v_max=350.0, hold=300.0, rejoin=10e3),
     "detections": TrackProfile(sigma_range=20.0, sigma_bearing_deg=0.5, sigma_pos=20.0, pd=0.9,
                                clutter=10.0, q=1.0, v_std=50.0, gospa_c=1000.0),
 }
@@ -115,11 +121,14 @@ TRACKER_REASONS: dict[str, str] = {
            "consecutive scans no farther apart than 20 m/s (39 kn) allows start a track, so "
            "the false plots seldom do; a track coasts through 3 missed scans (9 s), since at "
            "pd 0.9 deleting at the third miss would break about one vessel track in a "
-           "thousand scans.",
+           "thousand scans; a lost track is held unseen for 30 minutes, since AIS reports "
+           "stop for minutes, and a new track within 500 m of it continues it under its ID.",
     "opensky": "Aircraft fly straight legs and standard-rate turns (3 deg/s): the IMM's "
                "coordinated-turn model follows the turns; two plots no farther apart than "
                "350 m/s allows start a track; a track coasts through 2 missed scans (20 s, "
-               "5 km at 250 m/s), beyond which the prediction leaves the gate.",
+               "5 km at 250 m/s), beyond which the prediction leaves the gate; a lost track "
+               "is held unseen for 5 minutes, and a new track within 10 km of it continues it "
+               "under its ID.",
     "detections": "Nothing is known of the objects: a constant-velocity filter, a track at "
                   "every unassigned plot and Wald's SPRT thresholds.",
 }

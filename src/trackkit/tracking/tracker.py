@@ -418,9 +418,9 @@ class Tracker:
         with the positions no farther apart than ``rejoin_within`` (a held track's covariance
         grows without bound while it is unseen, so the test alone would join it to any new
         track in a wide area); the pairs of least ``d2 + ln det(P_new + P_held)`` (twice
-        the negative log likelihood of one object) are joined: the new track takes the held track's ID and
-        birth (``ids``, ``born`` in place), the held track is deleted. An object lost and
-        found again keeps its identity whether its lost track or a new one found it."""
+        the negative log likelihood of one object) are joined: the new track takes the held
+        track's ID and birth (``ids``, ``born`` in place), the held track is deleted. An
+        object lost and found again keeps its identity."""
         fresh = np.flatnonzero(confirmed(state) & ~confirmed(before) & ~held(before))
         lost = np.flatnonzero(held(state))
         if fresh.size == 0 or lost.size == 0:
