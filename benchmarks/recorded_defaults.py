@@ -7,8 +7,11 @@ same plots are tracked by
 - ``old``: the previous defaults, built explicitly here: a constant-velocity EKF,
   single-point initiation and Wald's SPRT thresholds (alpha 0.01, beta 0.001: deleted at
   the third missed scan);
+- ``new, no hold``: today's without holding lost tracks (a track is deleted after a few
+  missed scans), what it buys;
 - ``new``: today's ``TRACK_PROFILES`` (the IMM of constant velocity and coordinated turn,
-  two-point initiation, deletion after a few missed scans);
+  two-point initiation, a lost track held unseen for a new one to continue);
+- ``new, --misses 2`` (AIS): today's, shown coasting two missed scans rather than three;
 - ``new, deleted at the 3rd miss`` (``--coast``): today's, coasting no longer than the old
   (where today's coasts longer).
 
@@ -47,12 +50,16 @@ Scorer = Callable[[TrackHistory, VirtualRadarRun, float], dict[str, float]]
 
 
 def profiles(kind: str, coast: bool = False) -> dict[str, TrackProfile]:
-    """The settings compared: the previous defaults and today's, on the same radar; with
+    """The settings compared: the previous defaults, today's without the hold and today's, on
+    the same radar; with
     ``coast``, also today's deleting at the third missed scan as the old did (where they do
     not already): what coasting one scan longer costs and buys."""
     new = TRACK_PROFILES[kind]
-    old = replace(new, turn_q=None, turn_std_deg=None, misses=None, v_max=None)
-    out = {"old": old, "new": new}
+    old = replace(new, turn_q=None, turn_std_deg=None, misses=None, v_max=None, hold=None,
+                  rejoin=None)
+    out = {"old": old, "new, no hold": replace(new, hold=None, rejoin=None), "new": new}
+    if new.misses is not None and new.misses > 2:
+        out["new, --misses 2"] = replace(new, misses=2.0)
     if coast and new.misses != 2.0:
         out["new, deleted at the 3rd miss"] = replace(new, misses=2.0)
     return out

@@ -200,6 +200,20 @@ def test_smoothed_imm_tracks_are_closer_to_the_reports(solent, make):
     assert smoothed < 0.8 * filtered, (filtered, smoothed)
 
 
+def test_a_held_track_continued_by_another_is_smoothed_in_two_pieces():
+    """Rows of one ID over five scans: confirmed, confirmed, held, held, then confirmed (a
+    new track continuing the held one): held rows are not chained, so the pieces shown are
+    smoothed apart."""
+    L, C = TrackStatus.LOST, TrackStatus.CONFIRMED
+    n = 5
+    h = TrackHistory(times=np.arange(n, dtype=float), offsets=np.arange(n + 1),
+                     ids=np.full(n, 7), status=np.array([C, C, L, L, C], np.int8),
+                     mean=np.zeros((n, 4)), var=np.ones((n, 4)),
+                     pairs=np.zeros(n, np.int64), started=np.zeros(n, np.int64),
+                     deleted=np.zeros(n, np.int64), approximated=np.zeros(n, np.int64))
+    assert next_rows(h).tolist() == [1, -1, -1, -1, -1]
+
+
 def test_smoothing_needs_the_covariances(small):
     trk, scans = small
     h, _ = run_tracker(trk, scans[:5])

@@ -1,7 +1,8 @@
 """Smoothed tracks: a fixed-interval Rauch-Tung-Striebel smoother over every track's life.
 
 Each track of a :class:`~trackkit.tracking.history.TrackHistory` is a run of rows, one per
-scan from its start to its last scan alive (coasted scans included), with the filtered
+scan from its start to its last scan alive (coasted scans included; held scans, and the
+pieces of a track held and then continued by another, stand apart), with the filtered
 ``x_k = mean``, ``P_k = cov``. Backwards from its last row (where the smoothed estimate is the
 filtered one), with the one-step prediction ``x-_{k+1}, P-_{k+1}`` of ``(x_k, P_k)`` over the
 time between the two scans and the cross-covariance ``C_k = Cov(x_k, x_{k+1})`` (``P_k F^T``
@@ -38,6 +39,7 @@ from numpy.typing import NDArray
 
 from trackkit.filters.smoothers import rts_step
 from trackkit.tracking.history import TrackHistory
+from trackkit.tracking.logic import TrackStatus
 
 Array = NDArray[np.float64]
 
@@ -55,11 +57,16 @@ class SmoothedTracks(NamedTuple):
 
 
 def next_rows(history: TrackHistory) -> NDArray[np.int64]:
-    """Per row, the row of the same track at the next scan, or -1 at a track's last scan."""
+    """Per row, the row of the same track at the next scan, or -1 at a track's last scan and
+    wherever either row is held (LOST): held rows are predictions, never shown, over which
+    a smoothing model other than the filter's would drift, and a held track is continued by
+    another filter's track (``Tracker._rejoin``); the shown pieces are smoothed apart."""
     h = history
     scan = np.repeat(np.arange(h.times.size), np.diff(h.offsets))
     o = np.lexsort((scan, h.ids))
     follows = (h.ids[o][1:] == h.ids[o][:-1]) & (scan[o][1:] == scan[o][:-1] + 1)
+    lost = np.asarray(h.status)[o] == TrackStatus.LOST
+    follows &= ~(lost[:-1] | lost[1:])
     nxt = np.full(h.ids.size, -1, np.int64)
     nxt[o[:-1][follows]] = o[1:][follows]
     return nxt

@@ -225,7 +225,10 @@ def _join(a: Any, b: Any) -> Any:
 def _without_held(g: Gate, held_: NDArray[np.bool_]) -> Gate:
     """The gate without the pairs of held (lost, unseen) tracks: a held track's gate has
     grown with every missed scan, and a plot in it is as likely another object's; the object
-    found again starts a new track, which ``Tracker._rejoin`` tests against the held ones."""
+    found again starts a new track, which ``Tracker._rejoin`` tests against the held ones.
+    (Letting a held track take plots no other track gates while its position is still
+    known to within ``rejoin_within`` gave more breaks on the Solent recording, 29.5 against
+    18 over two radar seeds: in clusters of moored vessels it took a neighbour's plots.)"""
     if not held_.any():
         return g
     keep = ~held_[g.track]
