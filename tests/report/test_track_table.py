@@ -230,3 +230,16 @@ def test_page_shows_further_metrics(small):  # noqa: F811
     page = render_track_html(report_of(small), m, {})
     assert "<th>mota</th><td>0.8125</td>" in page and "<th>motp m</th><td>21.5</td>" in page
     assert "<th>idf1</th><td>0.9375</td>" in page and "<th>per scan</th>" not in page
+
+
+def test_a_track_held_at_the_end_is_held():
+    """Track 5 confirmed at scans 0-1, then lost and held (not shown) to the end: "held",
+    not "deleted"; track 6, deleted after scan 1, stays "deleted"."""
+    L = TrackStatus.LOST
+    rows = [[(5, C, 0, 0, 1, 0, True), (6, C, 500, 0, 1, 0, True)],
+            [(5, C, 1, 0, 1, 0, True), (6, C, 501, 0, 1, 0, True)],
+            [(5, L, 2, 0, 1, 0, False)],
+            [(5, L, 3, 0, 1, 0, False)]]
+    t = track_table(history_of(rows)).to_pydict()
+    assert t["id"] == [5, 6] and t["status"] == ["held", "deleted"]
+    assert t["end_s"] == [1.0, 1.0]  # the table describes the track as shown

@@ -16,7 +16,8 @@ state has none); ``mean_speed_m_s, max_speed_m_s``, of ``|v|`` over its confirme
 it with a plot to a later scan without one; 0 for a track hit at every scan, nan when the
 history does not record hits); and
 ``status`` at the end of the run: "tracking" (alive, hit at the last scan), "coasting" (alive,
-not hit at the last scan; "alive" when the history does not record hits) or "deleted".
+not hit at the last scan; "alive" when the history does not record hits), "held" (lost,
+kept unseen for a new track to continue it) or "deleted".
 
 The identity is the object a track was assigned to most often, per scan, by the optimal
 GOSPA assignment (Rahmathullah, Garcia-Fernandez and Svensson 2017) with cut-off ``c``, the
@@ -114,7 +115,10 @@ def _status(history: TrackHistory, last_row: NDArray[np.int64],
     if history.hit is None:
         return np.where(alive, "alive", "deleted").tolist()
     hit = np.asarray(history.hit, bool)[last_row]
-    return np.where(alive, np.where(hit, "tracking", "coasting"), "deleted").tolist()
+    status = np.where(alive, np.where(hit, "tracking", "coasting"), "deleted")
+    end = slice(history.offsets[-2], history.offsets[-1]) if history.times.size else slice(0)
+    lost = history.ids[end][history.status[end] == TrackStatus.LOST]
+    return np.where(np.isin(history.ids[last_row], lost), "held", status).tolist()
 
 
 def track_table(history: TrackHistory, *, truth: Frames | None = None, c: float = 500.0,

@@ -416,7 +416,10 @@ def _logic(s: TrackProfile, clutter_density: float) -> tuple[Any, dict[str, Any]
 
         T_delete = (misses + 1/2) ln(1 - pd)
 
-    below the score's maximum (each miss adds ln(1 - P_D))."""
+    below the score's maximum (each miss adds ln(1 - P_D)); with ``s.hold`` a confirmed track
+    is held (not shown) rather than deleted there, until ``hold / period`` more misses:
+
+        T_hold = T_delete + (hold / period) ln(1 - pd)."""
     from trackkit.tracking import ScoreLogic
 
     # one new object per hundred false plots: a track is confirmed after two or three hits
@@ -429,14 +432,16 @@ def _logic(s: TrackProfile, clutter_density: float) -> tuple[Any, dict[str, Any]
         logic = replace(logic, delete_threshold=(float(s.misses) + 0.5) * math.log1p(-s.pd))
         rule = (f"track score, confirmed at the SPRT threshold (alpha 0.01), deleted after "
                 f"{int(s.misses) + 1} consecutive missed scans")
-    if s.hold and s.period:
+    text = (f"{rule}: confirmed at a score of {logic.confirm_threshold:.3g}, deleted at a drop "
+            f"of {-logic.delete_threshold:.3g} below its maximum")
+    if s.hold and s.period and s.misses is not None:
         scans = round(s.hold / s.period)
         logic = replace(logic, hold_threshold=logic.delete_threshold
                         + scans * math.log1p(-s.pd))
-        rule += (f"; a confirmed track is then held unseen for {scans} more scans "
-                 f"({s.hold:g} s), taken up again by a plot in its gate")
-    text = (f"{rule}: confirmed at a score of {logic.confirm_threshold:.3g}, deleted at a drop "
-            f"of {-logic.delete_threshold:.3g} below its maximum")
+        near = "" if s.rejoin is None else f" within {s.rejoin:g} m"
+        text += (f"; a confirmed track is not deleted there but held, unseen, for {scans} "
+                 f"more missed scans ({s.hold:g} s), and a new track confirmed{near} of it "
+                 "and agreeing with it in position and velocity continues it under its ID")
     return logic, {"logic": text}
 
 
