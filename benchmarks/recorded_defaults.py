@@ -11,9 +11,7 @@ same plots are tracked by
   missed scans), what it buys;
 - ``new``: today's ``TRACK_PROFILES`` (the IMM of constant velocity and coordinated turn,
   two-point initiation, a lost track held unseen for a new one to continue);
-- ``new, --misses 2`` (AIS): today's, shown coasting two missed scans rather than three;
-- ``new, deleted at the 3rd miss`` (``--coast``): today's, coasting no longer than the old
-  (where today's coasts longer).
+- ``new, --misses 3`` (AIS): today's, shown coasting three missed scans rather than two;
 
 Every run is scored by one function, ``score(history, run, c) -> {name: value}`` (by default
 :func:`track_scores`: the figures of ``trackkit.eval.clear_mot.score_run``); another
@@ -22,7 +20,7 @@ table's columns. The table gives the mean and the standard deviation over the se
 figure, and the wall time of a run's tracking.
 
     python benchmarks/recorded_defaults.py [--solent FILE] [--opensky FILE] [--seeds 0-9]
-        [--max-scans N] [--scorer module:function] [--coast] [--only ais|opensky]
+        [--max-scans N] [--scorer module:function] [--only ais|opensky]
 
 The files default to ``shared/data`` beside the repository (as the tests find them).
 """
@@ -49,19 +47,15 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 Scorer = Callable[[TrackHistory, VirtualRadarRun, float], dict[str, float]]
 
 
-def profiles(kind: str, coast: bool = False) -> dict[str, TrackProfile]:
+def profiles(kind: str) -> dict[str, TrackProfile]:
     """The settings compared: the previous defaults, today's without the hold and today's, on
-    the same radar; with
-    ``coast``, also today's deleting at the third missed scan as the old did (where they do
-    not already): what coasting one scan longer costs and buys."""
+    the same radar (and for AIS today's coasting a scan longer)."""
     new = TRACK_PROFILES[kind]
     old = replace(new, turn_q=None, turn_std_deg=None, misses=None, v_max=None, hold=None,
                   rejoin=None)
     out = {"old": old, "new, no hold": replace(new, hold=None, rejoin=None), "new": new}
-    if new.misses is not None and new.misses > 2:
-        out["new, --misses 2"] = replace(new, misses=2.0)
-    if coast and new.misses != 2.0:
-        out["new, deleted at the 3rd miss"] = replace(new, misses=2.0)
+    if new.regain:
+        out["new, --misses 3"] = replace(new, misses=3.0)
     return out
 
 
@@ -96,10 +90,10 @@ def run_once(reports: Any, s: TrackProfile, vr: VirtualRadar, seed: int,
 
 
 def compare(kind: str, reports: Any, seeds: list[int], score: Scorer,
-            max_scans: int | None, coast: bool = False) -> dict[str, dict[str, list[float]]]:
+            max_scans: int | None) -> dict[str, dict[str, list[float]]]:
     """Per setting, per figure, the values over the seeds (and ``wall (s)``)."""
     out: dict[str, dict[str, list[float]]] = {}
-    for name, s in profiles(kind, coast).items():
+    for name, s in profiles(kind).items():
         vr = profile_radar(s)  # at the data's median position, as trackkit track
         rows: dict[str, list[float]] = {}
         for seed in seeds:
@@ -149,8 +143,6 @@ def main() -> None:
     ap.add_argument("--seeds", default="0-9", help="e.g. 0-9 or 100,101")
     ap.add_argument("--max-scans", type=int, default=None)
     ap.add_argument("--scorer", default=None, help="module:function (default track_scores)")
-    ap.add_argument("--coast", action="store_true",
-                    help="also today's settings deleting at the third missed scan")
     ap.add_argument("--only", choices=("ais", "opensky"), default=None)
     args = ap.parse_args()
     seeds, score = _seeds(args.seeds), _scorer(args.scorer)
@@ -160,7 +152,7 @@ def main() -> None:
         if args.only not in (None, kind):
             continue
         reports, _ = read(path)
-        results = compare(kind, reports, seeds, score, args.max_scans, args.coast)
+        results = compare(kind, reports, seeds, score, args.max_scans)
         print(table(f"{path.name} ({kind})", results), "\n", flush=True)
 
 

@@ -374,7 +374,7 @@ def test_the_tracker_options_reach_the_tracker(tmp_path):
     out = tmp_path / "o"
     ran = _invoke("solent-ais", "--as-radar", "--max-scans", "6", "--misses", "5", "--v-max",
                   "12", "--turn-q", "2e-5", "--turn-std-deg", "4", "--hold", "60",
-                  "--rejoin", "250", "--out", str(out))
+                  "--rejoin", "250", "--regain", "80", "--out", str(out))
     assert ran.exit_code == 0, ran.output
     tracker = json.loads((out / "results.json").read_text())["config"]["tracker"]
     assert tracker["v_max_m_s"] == 12.0 and "two-point" in tracker["initiator"]
@@ -383,6 +383,7 @@ def test_the_tracker_options_reach_the_tracker(tmp_path):
     assert "deleted after 6 consecutive missed scans" in tracker["logic"]
     assert "held, unseen, for 20 more missed scans (60 s)" in tracker["logic"]
     assert "confirmed within 250 m of it" in tracker["logic"]
+    assert "position std is within 80 m" in tracker["logic"]
     ran = _invoke("solent-ais", "--as-radar", "--max-scans", "6", "--hold", "0", "--out",
                   str(tmp_path / "h0"))
     assert ran.exit_code == 0, ran.output

@@ -328,10 +328,10 @@ def test_bad_input_is_named():
 # --- held tracks and track segment association -----------------------------------------------
 
 
-def _gap_scene(seed: int, jump: float = 0.0):
-    """Four constant-velocity targets seen for 30 scans, unseen for 15 (no plot of them: a
-    reporting gap), then seen again for 35; the last target comes back ``jump`` metres off
-    its course. Plots at pd 0.9 among 10 false plots a scan. Yields scans."""
+def _gap_scene(seed: int, jump: float = 0.0, gap: int = 15):
+    """Four constant-velocity targets seen for 30 scans, unseen for ``gap`` (no plot of them:
+    a reporting gap), then seen again to scan 80; the last target comes back ``jump`` metres
+    off its course. Plots at pd 0.9 among 10 false plots a scan. Yields scans."""
     rng = np.random.default_rng(seed)
     x = np.zeros((4, 4))
     x[:, :2] = rng.uniform(-5000, 5000, (4, 2))
@@ -339,9 +339,9 @@ def _gap_scene(seed: int, jump: float = 0.0):
     sd = np.sqrt(np.diag(RADAR.noise))
     for k in range(1, 81):
         x[:, :2] += x[:, 2:] * 2.0
-        if k == 46:
+        if k == 31 + gap:
             x[3, 0] += jump
-        seen = (k <= 30) | (k > 45)
+        seen = (k <= 30) | (k > 30 + gap)
         zt = RADAR.h(x) + rng.normal(size=(4, 2)) * sd
         zt = zt[(rng.random(4) < 0.9) & seen]
         nc = rng.poisson(10.0)
@@ -349,14 +349,15 @@ def _gap_scene(seed: int, jump: float = 0.0):
         yield Scan(k * 2.0, 0, np.concatenate([zt, zc]))
 
 
-def _held_tracker(hold_scans: int | None, rejoin: float = 1000.0) -> Tracker:
+def _held_tracker(hold_scans: int | None, rejoin: float = 1000.0,
+                  regain: float = 0.0) -> Tracker:
     logic = ScoreLogic.from_sprt(alpha=1e-2, beta=1e-3, pd=0.9, clutter_density=density(),
                                  new_target_density=density() / 100)
     if hold_scans is not None:
         logic = replace(logic, hold_threshold=logic.delete_threshold
                         + hold_scans * np.log(0.1))
     return tracker("EKF", RADAR, logic=logic, initiator=TwoPoint(v_max=20.0),
-                   rejoin_within=rejoin)
+                   rejoin_within=rejoin, regain_within=regain)
 
 
 def _confirmed_ids(trk: Tracker, scans) -> list[set[int]]:
@@ -403,3 +404,31 @@ def test_a_held_track_is_deleted_after_its_hold_and_never_confirmed_by_plots():
             assert ids <= set(tracks.ids.tolist())
             assert held(tracks.state)[np.isin(tracks.ids, list(ids))].all()
     assert not ids & set(tracks.ids.tolist())
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_narrow_held_track_takes_up_its_object_again(seed):
+    """A four-scan gap: the tracks are lost (more than two misses) and held. With a regain
+    bound wider than their position std they take the next plots themselves and are shown
+    again a scan or two later; with none, new tracks start and must be confirmed before they
+    rejoin them, later."""
+    logic = ScoreLogic.from_sprt(alpha=1e-2, beta=1e-3, pd=0.9, clutter_density=density(),
+                                 new_target_density=density() / 100)
+    logic = replace(logic, delete_threshold=2.5 * np.log(0.1),
+                    hold_threshold=(2.5 + 40) * np.log(0.1))
+
+    def run(regain: float) -> list[set[int]]:
+        trk = tracker("EKF", RADAR, logic=logic, initiator=TwoPoint(v_max=20.0),
+                      rejoin_within=1000.0, regain_within=regain)
+        tracks, out = trk.init(), []
+        for scan in _gap_scene(seed, gap=4):
+            tracks = trk.step(tracks, scan)
+            out.append(set(tracks.ids[tracks.confirmed].tolist()))
+        return out
+
+    def back(ids: list[set[int]]) -> int:  # the first scan with the four IDs shown again
+        return next((k for k in range(34, 80) if ids[k] == ids[29]), 80)
+
+    ids = run(1000.0)
+    assert len(ids[29]) == 4 and not ids[33]  # all lost in the gap
+    assert back(ids) <= 36 and back(ids) < back(run(0.0))

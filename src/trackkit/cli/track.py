@@ -116,6 +116,11 @@ RejoinOption = Annotated[float | None, typer.Option(
     "--rejoin", callback=number(0), help="How near a new track must be to a held one to "
     "continue it (m), besides agreeing with it in position and velocity within their "
     "covariances.", show_default=_profile_default("rejoin"))]
+RegainOption = Annotated[float | None, typer.Option(
+    "--regain", callback=number(0, open_lo=False), help="Position std (m) up to which a held "
+    "track takes plots no other track gates, shown again once its score recovers. 0: a held "
+    "track takes no plot (only --rejoin continues it).",
+    show_default=_profile_default("regain"))]
 TurnQOption = Annotated[float | None, typer.Option(
     "--turn-q", callback=number(0, open_lo=False), help="Turn-rate noise of the "
     "coordinated-turn model (rad^2/s^3; the turn rate's variance grows by turn_q dt): the "
@@ -180,6 +185,7 @@ def track(
     misses: MissesOption = None,
     hold: HoldOption = None,
     rejoin: RejoinOption = None,
+    regain: RegainOption = None,
     turn_q: TurnQOption = None,
     turn_std_deg: TurnStdOption = None,
     gospa_c: GospaCOption = None,
@@ -210,7 +216,7 @@ def track(
                                clutter=clutter, max_range=max_range, min_range=min_range, q=q,
                                v_std=v_std, gospa_c=gospa_c, turn_q=turn_q,
                                turn_std_deg=turn_std_deg, misses=misses, v_max=v_max,
-                               hold=hold, rejoin=rejoin)
+                               hold=hold, rejoin=rejoin, regain=regain)
         options = TrackOptions(
             fmt=fmt.value if fmt else None, as_radar=as_radar, columns=columns, units=units,
             site_lat=site_lat, site_lon=site_lon, profile=profile,

@@ -70,6 +70,7 @@ class TrackProfile:
     v_max: float | None = None  # top speed for two-point initiation (m/s)
     hold: float | None = None  # time a lost track is held, unseen, for a new one to continue
     rejoin: float | None = None  # how near a new track must be to a held one to continue it (m)
+    regain: float | None = None  # position std up to which a held track takes plots (m)
 
 
 #: defaults per input: a coastal marine radar over AIS traffic, an en-route air surveillance
@@ -84,18 +85,24 @@ class TrackProfile:
 #:   rudder order (1e-5 rad^2/s^3: 0.3 deg/s per 3 s scan); an airliner turns at up to the
 #:   standard rate of 3 deg/s (std 1.5 deg/s), rolling in within a few seconds (1e-4
 #:   rad^2/s^3: 1.8 deg/s per 10 s scan).
-#: - ``misses``: at pd 0.9 a held vessel misses k scans in a row with probability 0.1^k per
-#:   scan; the Solent hour has some 10^5 vessel-scans, so deleting at the third miss (the
-#:   SPRT's) breaks about a hundred tracks of vessels still there, at the fourth about ten.
-#:   Coasting 3 scans (9 s) takes a vessel at 10 m/s 90 m, well inside its gate. An aircraft
-#:   coasts 2 scans (20 s, 5 km at 250 m/s, and up to 60 deg of turn): longer, the
-#:   prediction leaves the gate before the aircraft is seen again.
+#: - ``misses``: a track is shown coasting while its object is more likely missed than gone.
+#:   At pd 0.9 an object still there misses k scans in a row with probability 0.1^k; an
+#:   object's reports end about once in a thousand scans (some 120 ends in the Solent hour's
+#:   10^5 vessel-scans), so after k misses it is still there with probability 0.1^k /
+#:   (0.1^k + k 1e-3): 0.99, 0.81, 0.22 for k = 1, 2, 3. Shown through 2 missed scans (6 s
+#:   for a vessel; 20 s, 5 km at 250 m/s, for an aircraft), then held.
+#: - ``regain``: a held vessel track whose position is still known to within 100 m (its
+#:   first half minute or so) takes a plot no other track gates and is shown again once
+#:   its score recovers: a vessel missed three scans in a row (once in a thousand scans) is
+#:   not lost for the scans a new track would take to confirm. An aircraft's position is
+#:   known no better than a few km after two missed 10 s scans: no regain, only rejoin.
 #: - ``hold``, ``rejoin``: a vessel's AIS reports stop for minutes (a receiver's shadow, a
 #:   transponder off at a berth: gaps of 10 to 40 min in the Solent hour, an aircraft's for up
 #:   to a few minutes), and the radar, made from the reports, loses it. Its lost track is held
 #:   30 min (5 min for an aircraft) and a new track confirmed within 500 m of its prediction
 #:   (10 km: 40 s of flight) and agreeing in position and velocity continues it under its ID.
-#:   Held tracks are not shown and take no plot, so holding longer costs no false track.
+#:   Held tracks are not shown (and past ``regain`` take no plot), so holding longer costs
+#:   no false track.
 #: - ``v_max``: two plots of consecutive scans start a track only if they are no farther
 #:   apart than the fastest traffic moves (20 m/s, 39 kn: fast ferries and small craft; 350
 #:   m/s for aircraft): among closely packed slow vessels and 10 false plots a scan, this is
@@ -103,8 +110,8 @@ class TrackProfile:
 TRACK_PROFILES: dict[str, TrackProfile] = {
     "ais": TrackProfile(period=3.0, sigma_range=20.0, sigma_bearing_deg=0.5, pd=0.9,
                         clutter=10.0, max_range=40e3, min_range=50.0, q=0.05, v_std=10.0,
-                        gospa_c=500.0, turn_q=1e-5, turn_std_deg=2.0, misses=3.0,
-                        v_max=20.0, hold=1800.0, rejoin=500.0),
+                        gospa_c=500.0, turn_q=1e-5, turn_std_deg=2.0, misses=2.0,
+                        v_max=20.0, hold=1800.0, rejoin=500.0, regain=100.0),
     "opensky": TrackProfile(period=10.0, sigma_range=50.0, sigma_bearing_deg=0.1, pd=0.9,
                             clutter=10.0, max_range=400e3, min_range=500.0, q=100.0,
                             v_std=150.0, gospa_c=2000.0, turn_q=1e-4, turn_std_deg=1.5,
@@ -119,10 +126,11 @@ TRACKER_REASONS: dict[str, str] = {
     "ais": "Vessels turn, stop and lie moored in clusters: the IMM's coordinated-turn model "
            "follows a turn that the constant-velocity model alone would lose; two plots of "
            "consecutive scans no farther apart than 20 m/s (39 kn) allows start a track, so "
-           "the false plots seldom do; a track coasts through 3 missed scans (9 s), since at "
-           "pd 0.9 deleting at the third miss would break about one vessel track in a "
-           "thousand scans; a lost track is held unseen for 30 minutes, since AIS reports "
-           "stop for minutes, and a new track within 500 m of it continues it under its ID.",
+           "the false plots seldom do; a track is shown coasting through 2 missed scans (6 "
+           "s): after a third in a row its vessel is more likely gone than missed at pd 0.9. "
+           "It is then held unseen for 30 minutes, since AIS reports stop for minutes: a "
+           "plot near it takes it up again while its position is known to within 100 m, "
+           "and later a new track within 500 m of it continues it under its ID.",
     "opensky": "Aircraft fly straight legs and standard-rate turns (3 deg/s): the IMM's "
                "coordinated-turn model follows the turns; two plots no farther apart than "
                "350 m/s allows start a track; a track coasts through 2 missed scans (20 s, "
@@ -381,7 +389,8 @@ def build_tracker(sensor: Any, s: TrackProfile, clutter_density: float, associat
     tracker = Tracker(filt_, motion, sensor, pd=s.pd, clutter_density=clutter_density,
                       associator=GNN() if associator == "gnn" else JPDA(),
                       logic=logic, initiator=initiator, **extra,
-                      rejoin_within=math.inf if s.rejoin is None else float(s.rejoin))
+                      rejoin_within=math.inf if s.rejoin is None else float(s.rejoin),
+                      regain_within=float(s.regain or 0.0))
     unit = "per_m_rad" if hasattr(sensor, "sigma_bearing") else "per_m2"
     desc = {"filter": filt.upper(), **motion_desc, "associator": associator.upper(),
             "gate": "the filter's own innovation covariance (the IMM's: its models' mixture)",
@@ -442,6 +451,9 @@ def _logic(s: TrackProfile, clutter_density: float) -> tuple[Any, dict[str, Any]
         text += (f"; a confirmed track is not deleted there but held, unseen, for {scans} "
                  f"more missed scans ({s.hold:g} s), and a new track confirmed{near} of it "
                  "and agreeing with it in position and velocity continues it under its ID")
+        if s.regain:
+            text += (f"; while its position std is within {s.regain:g} m a held track takes "
+                     "plots no other track gates, shown again once its score recovers")
     return logic, {"logic": text}
 
 

@@ -6,7 +6,7 @@ One scan, for every live track at once (axis 0 of one batched belief is the trac
     predict      x-, P- = f.predict(x, P, dt)                      one filter call
     measure      zhat, S from the filter's own innovation            one filter call
     gate         d2_ij = nu_ij^T S_i^-1 nu_ij <= gamma(P_G)         KD-tree pre-gate
-                 (a held track gates no plot)
+                 (a held track: only plots no other track gates, while narrow)
     associate    GNN (least cost, per cluster) or JPDA (marginals beta_ij, beta_i0)
     update       GNN: f.update(x-, z_assigned)  (nan: a missed track keeps x-)
                  JPDA: every gated hypothesis updated as one batch, then the mixture
@@ -222,16 +222,19 @@ def _join(a: Any, b: Any) -> Any:
     return type(a)._make(np.concatenate([x, y]) for x, y in zip(a, b, strict=True))
 
 
-def _without_held(g: Gate, held_: NDArray[np.bool_]) -> Gate:
-    """The gate without the pairs of held (lost, unseen) tracks: a held track's gate has
-    grown with every missed scan, and a plot in it is as likely another object's; the object
-    found again starts a new track, which ``Tracker._rejoin`` tests against the held ones.
-    (Letting a held track take plots no other track gates while its position is still
-    known to within ``rejoin_within`` gave more breaks on the Solent recording, 29.5 against
-    18 over two radar seeds: in clusters of moored vessels it took a neighbour's plots.)"""
+def _held_pairs(g: Gate, held_: NDArray[np.bool_], wide: NDArray[np.bool_]) -> Gate:
+    """The gate with a held (lost, unseen) track's pairs only where no other track gates the
+    plot, and none at all for a ``wide`` held track: a plot a seen track could explain is
+    never given to one unseen for a while, and a held track whose position is no longer
+    known to within ``Tracker.regain_within`` takes no plot (one in its grown gate is as
+    likely another object's; the object found again starts a new track, which
+    ``Tracker._rejoin`` tests against the held ones)."""
     if not held_.any():
         return g
-    keep = ~held_[g.track]
+    by_held = held_[g.track]
+    near_seen = np.zeros(g.n_dets, dtype=bool)
+    near_seen[g.det[~by_held]] = True
+    keep = ~(by_held & (near_seen[g.det] | wide[g.track]))
     return g._replace(track=g.track[keep], det=g.det[keep], d2=g.d2[keep],
                       loglik=g.loglik[keep], nu=g.nu[keep])
 
@@ -249,7 +252,9 @@ class Tracker:
     The state is ``[x, y, vx, vy]`` with any extras after (e.g. a turn rate), which new tracks
     get with ``extra_mean`` and ``extra_std``. With a score logic that holds lost tracks
     (``ScoreLogic.hold_threshold``), a newly confirmed track within ``rejoin_within`` (m) of
-    a held one continues it under its ID (``_rejoin``).
+    a held one continues it under its ID (``_rejoin``), and a held track whose position std
+    is still within ``regain_within`` (m; 0: never) takes plots no other track gates, shown
+    again once its score is back within the logic's deletion threshold of its maximum.
     """
 
     filter: Any
@@ -264,6 +269,7 @@ class Tracker:
     extra_mean: tuple[float, ...] = ()
     extra_std: tuple[float, ...] = ()
     rejoin_within: float = np.inf
+    regain_within: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.pd <= 1.0:
@@ -376,7 +382,8 @@ class Tracker:
             zhat, S = self.measurement_prediction(belief, sensor)
             g = gate(zhat, S, z, self.p_gate, angular=getattr(sensor, "angular", None),
                      threshold=self._gate_threshold())
-            g = _without_held(g, held(state))
+            held_ = held(state)
+            g = _held_pairs(g, held_, self._wide(belief, held_))
             info["pairs"] = g.size
             if isinstance(self.associator, JPDA):
                 belief, hit, ll, claimed = self._jpda(belief, g, z, sensor, info)
@@ -410,6 +417,15 @@ class Tracker:
             # PSD by construction): spare the next predict its full check of a user's input
             register(belief.cov)
         return Tracks(belief, ids, state, born, float(scan.time), counter, waiting, step_info)
+
+    def _wide(self, belief: Any, held_: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """The held tracks whose position std ``sqrt(P_xx + P_yy)`` exceeds
+        ``regain_within`` (all of them when it is 0)."""
+        wide = held_.copy()
+        if held_.any() and self.regain_within > 0:
+            P = np.asarray(self.estimate(_take(belief, np.flatnonzero(held_))).cov)
+            wide[held_] = np.sqrt(P[:, 0, 0] + P[:, 1, 1]) > self.regain_within
+        return wide
 
     def _rejoin(self, belief: Any, before: Any, state: Any, ids: NDArray[np.int64],
                 born: Array) -> tuple[Any, NDArray[np.int64]]:
