@@ -444,10 +444,11 @@ class Tracker:
         lost = np.flatnonzero(held(state))
         if fresh.size == 0 or lost.size == 0:
             return state, np.zeros(0, np.int64)
-        g = self.estimate(belief)
+        g = self.estimate(_take(belief, np.concatenate([fresh, lost])))
         x, P = np.asarray(g.mean)[:, :4], np.asarray(g.cov)[:, :4, :4]
-        dx = x[fresh][:, None] - x[lost][None]
-        C = P[fresh][:, None] + P[lost][None]
+        f = fresh.size
+        dx = x[:f, None] - x[None, f:]
+        C = P[:f, None] + P[None, f:]
         d2 = np.einsum("abi,abi->ab", dx, np.linalg.solve(C, dx[..., None])[..., 0])
         near = np.hypot(dx[..., 0], dx[..., 1]) <= self.rejoin_within
         cost = np.where(near & (d2 <= chi2.ppf(self.p_gate, 4)),
