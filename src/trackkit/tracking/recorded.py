@@ -48,10 +48,13 @@ class TrackProfile:
     ``turn_q`` None gives a constant-velocity filter, else an IMM of nearly constant velocity
     and coordinated turn (the CT model's acceleration noise is ``q`` too); ``misses`` None
     deletes a track at Wald's SPRT threshold (alpha 0.01, beta 0.001: three missed scans at
-    pd 0.9), else after ``misses + 1`` consecutive missed scans; ``v_max`` None starts a
-    track at every unassigned plot (single point, velocity std ``v_std``), else from two
-    plots of consecutive scans closer than ``v_max dt`` plus three standard deviations of the
-    plots' separation at the edge of the radar's range (two-point differencing)."""
+    pd 0.9), else after ``misses + 1`` consecutive missed scans, or with ``hold`` (s) holds
+    it there, unseen, for a new track within ``rejoin`` (m) to continue (and while its
+    position std is within ``regain`` (m) lets it take plots no other track gates);
+    ``v_max`` None starts a track at every unassigned plot (single point, velocity std
+    ``v_std``), else from two plots of consecutive scans closer than ``v_max dt`` plus three
+    standard deviations of the plots' separation at the edge of the radar's range (two-point
+    differencing)."""
 
     period: float | None = None  # scan period of the virtual radar (s)
     sigma_range: float | None = None  # range noise std (m)
