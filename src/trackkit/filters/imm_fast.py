@@ -82,8 +82,8 @@ def sensor_params(sensor: Any) -> SensorParams | None:
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _wrap(a):  # pragma: no cover
-    """``angles.wrap`` on one float."""
+def wrap_angle(a: float) -> float:  # pragma: no cover
+    """``angles.wrap`` on one float, the same operations (compiled, for kernels)."""
     w = a - _TWO_PI * math.ceil((a - math.pi) / _TWO_PI)
     if w > math.pi:
         w -= _TWO_PI
@@ -224,7 +224,7 @@ def _innovation_cov(Pj, H, R, A, S):  # pragma: no cover
 @numba.njit(cache=True, error_model="numpy")
 def _residual(z, zhat, kind, nu):  # pragma: no cover
     nu[0] = z[0] - zhat[0]
-    nu[1] = z[1] - zhat[1] if kind == 1 else _wrap(z[1] - zhat[1])
+    nu[1] = z[1] - zhat[1] if kind == 1 else wrap_angle(z[1] - zhat[1])
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -270,7 +270,7 @@ def prediction_kernel(mu, X, P, R, kind, origin, nautical):  # pragma: no cover
             _residual(z0, zj, kind, nus[j])
         _mixture(mu[t], nus, Ss, v, Sm[t])
         zh[t, 0] = z0[0] - v[0]
-        zh[t, 1] = z0[1] - v[1] if kind == 1 else _wrap(z0[1] - v[1])
+        zh[t, 1] = z0[1] - v[1] if kind == 1 else wrap_angle(z0[1] - v[1])
     return zh, Sm
 
 
