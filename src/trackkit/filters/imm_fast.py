@@ -139,8 +139,11 @@ def predict_kernel(mu, X, P, p, dt, Fcv, Qcv, Qct):  # pragma: no cover
     P0 = np.zeros((5, 5))
     F = np.zeros((5, 5))
     for t in range(N):
-        Xa[:, :] = X[t]
-        Pa[:, :, :] = P[t]
+        for i in range(2):  # (element loops: slice assignments cost seconds of compile)
+            for a in range(5):
+                Xa[i, a] = X[t, i, a]
+                for b in range(5):
+                    Pa[i, a, b] = P[t, i, a, b]
         for j in range(2):
             n = 4 + j
             cj = p[0, j] * mu[t, 0] + p[1, j] * mu[t, 1]
@@ -174,8 +177,9 @@ def predict_kernel(mu, X, P, p, dt, Fcv, Qcv, Qct):  # pragma: no cover
                 Xp[t, 1, 2] = cs * vx - sn * vy
                 Xp[t, 1, 3] = sn * vx + cs * vy
                 Xp[t, 1, 4] = x0[4] + 0 * dt
-                F[:, :] = 0.0
-                F[0, 0] = F[1, 1] = F[4, 4] = 1.0
+                for a in range(5):
+                    for b in range(5):
+                        F[a, b] = 1.0 if a == b and (a < 2 or a == 4) else 0.0
                 F[0, 2], F[0, 3], F[1, 2], F[1, 3] = s_, -c_, c_, s_
                 F[2, 2], F[2, 3], F[3, 2], F[3, 3] = cs, -sn, sn, cs
                 F[0, 4] = ds * vx - dc * vy
@@ -343,10 +347,11 @@ def update_kernel(mu, X, P, z, R, kind, origin, nautical):  # pragma: no cover
         top = max(a0, a1)
         e0, e1 = math.exp(a0 - top), math.exp(a1 - top)
         mu_o[t, 0], mu_o[t, 1] = e0 / (e0 + e1), e1 / (e0 + e1)
-        X_o[t, 0, :4] = xs[0, :4]
-        X_o[t, 1] = xs[1]
-        P_o[t, 0, :4, :4] = Ps[0, :4, :4]
-        P_o[t, 1] = Ps[1]
+        for j in range(2):  # (element loops: slice assignments cost seconds of compile)
+            for a in range(4 + j):
+                X_o[t, j, a] = xs[j, a]
+                for b in range(4 + j):
+                    P_o[t, j, a, b] = Ps[j, a, b]
     return mu_o, X_o, P_o, v, Sm, bad
 
 
