@@ -73,6 +73,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, Innovation, moment_match
+from trackkit.filters import imm_fast
 from trackkit.filters.base import (
     Filter,
     check_belief,
@@ -379,6 +380,9 @@ class IMM(Filter):
         self._prefix = tuple(bool(np.array_equal(a, np.arange(a.size))) for a in maps)
         # every model a KF on the whole state: the fast path (end of the module) may apply
         self._kf_only = all(type(f) is KF for f in filters) and bool(carry.all())
+        # CV nested in CT with first-order EKFs: the compiled kernels (imm_fast)
+        self._compiled = imm_fast.configuration(self)
+        self._ct_noise: dict[float, Array] = {}
 
     # -- shapes ---------------------------------------------------------------------------
 
@@ -432,6 +436,9 @@ class IMM(Filter):
     def estimate(self, belief: IMMBelief) -> Gaussian:
         """The moment-matched Gaussian of the union state (module docstring)."""
         b = self._belief(belief, "IMM.estimate")
+        if self._compiled:
+            x, P = self._rows(imm_fast.estimate_kernel, b)
+            return output(x, P, symmetric=True)
         if self._carry.all():  # one state for all: the same sums on the upper triangles
             batch = b.mu.shape[:-1]
             r, n = self._carry.shape
@@ -448,6 +455,9 @@ class IMM(Filter):
         its filter. ``motion``: None for the IMM's own models, or a sequence of r models
         used instead of them for this step."""
         b = self._belief(belief, "IMM.predict")
+        if self._compiled and motion is None and type(dt) in (float, int):
+            check_dt(dt, "IMM.predict")
+            return self._compiled_predict(b, float(dt))
         motions = self._motions(motion)
         if self._kf_only and all(getattr(m, "linear", False) for m in motions):
             check_dt(dt, "IMM.predict")
@@ -478,6 +488,10 @@ class IMM(Filter):
         mixture's innovation (module docstring); rows with nan in z keep the prediction
         and ``mu = c``, and their residual is nan."""
         b = self._belief(belief, "IMM.update")
+        params = imm_fast.sensor_params(sensor) if self._compiled else None
+        fast = self._compiled_update(b, z, params) if params is not None else None
+        if fast is not None:
+            return fast
         post, nu, S, loglik, miss = self._update_models(b, z, sensor)
         c = b.mu
         mu = mode_probabilities(c, loglik)
@@ -506,6 +520,10 @@ class IMM(Filter):
         ``innov.cov`` at ``z = z0``, the same arithmetic to the last bit. None for other
         inner filters or shapes (the caller takes the update at z0 instead)."""
         b = self._belief(belief, "IMM.measurement_prediction")
+        params = imm_fast.sensor_params(sensor) if self._compiled else None
+        if params is not None:
+            return self._rows(imm_fast.prediction_kernel, b, params.R, params.kind,
+                              params.origin, params.nautical)
         R = sensor.noise
         if not (all(type(f) is EKF and f.order == 1 or type(f) is KF for f in self.filters)
                 and (getattr(sensor, "linear", False) or not any(type(f) is KF
@@ -658,6 +676,48 @@ class IMM(Filter):
             self._place(X, P, j, g.mean, g.cov)
         mu = np.array(np.broadcast_to(mu, batch + (r,)))
         return IMMBelief(mu, X, register(P))
+
+    def _rows(self, kernel: Any, b: IMMBelief, *args: Any) -> tuple[Array, ...]:
+        """A compiled kernel (``imm_fast``) on the belief's batch flattened to rows; every
+        output reshaped back to the batch."""
+        batch = b.mu.shape[:-1]
+        r, n = self._carry.shape
+        N = int(np.prod(batch))
+        out = kernel(np.ascontiguousarray(b.mu.reshape(N, r)),
+                     np.ascontiguousarray(b.mean.reshape(N, r, n)),
+                     np.ascontiguousarray(b.cov.reshape(N, r, n, n)), *args)
+        return tuple(a.reshape(batch + a.shape[1:]) if isinstance(a, np.ndarray) else a
+                     for a in out)
+
+    def _compiled_predict(self, b: IMMBelief, dt: float) -> IMMBelief:
+        """Mixing and both EKF predictions by ``imm_fast.predict_kernel``."""
+        cv, ct = self.models
+        Qct = self._ct_noise.get(dt)
+        if Qct is None:
+            if len(self._ct_noise) > 64:
+                self._ct_noise.clear()
+            Qct = self._ct_noise[dt] = np.asarray(ct.noise(None, dt), dtype=float)
+        Fcv = np.asarray(cv.jacobian(None, dt), dtype=float)
+        Qcv = np.asarray(cv.noise(None, dt), dtype=float)
+        c, X, P = self._rows(imm_fast.predict_kernel, b, self.transition, dt, Fcv, Qcv, Qct)
+        return IMMBelief(c, X, register(P))
+
+    def _compiled_update(self, b: IMMBelief, z: ArrayLike, params: Any
+                         ) -> tuple[IMMBelief, Innovation] | None:
+        """:meth:`update` by ``imm_fast.update_kernel`` (nan rows of z: missed); None when
+        z has more batch rows than the belief."""
+        batch = b.mu.shape[:-1]
+        z = check_measurement(z, 2, "IMM.update", batch)
+        if np.broadcast_shapes(z.shape[:-1], batch) != batch:
+            return None
+        N = int(np.prod(batch))
+        zf = np.ascontiguousarray(np.broadcast_to(z, batch + (2,)).reshape(N, 2))
+        mu, X, P, v, Sm, bad = self._rows(imm_fast.update_kernel, b, zf, params.R,
+                                          params.kind, params.origin, params.nautical)
+        if bad >= 0:
+            raise ValueError(f"IMM.update: innovation covariance is not positive definite in "
+                             f"row {bad}")
+        return IMMBelief(mu, X, register(P)), Innovation(v, Sm)
 
     def _fast_update(self, b: IMMBelief, z: Array, sensor: Any, batch: tuple[int, ...]):
         """The fast path's update (every model a KF); None when the sensor's H or R is not

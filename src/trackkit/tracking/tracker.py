@@ -32,7 +32,6 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian, moment_match
@@ -48,7 +47,13 @@ from trackkit.tracking.association import (
     loglik_costs,
     saturating_costs,
 )
-from trackkit.tracking.gating import GATE_PROBABILITY, Gate, gate, predict_measurement
+from trackkit.tracking.gating import (
+    GATE_PROBABILITY,
+    Gate,
+    gate,
+    gate_threshold,
+    predict_measurement,
+)
 from trackkit.tracking.initiate import convert_range_bearing, single_point, two_point
 from trackkit.tracking.logic import (
     HistoryLogic,
@@ -451,7 +456,7 @@ class Tracker:
         C = P[:f, None] + P[None, f:]
         d2 = np.einsum("abi,abi->ab", dx, np.linalg.solve(C, dx[..., None])[..., 0])
         near = np.hypot(dx[..., 0], dx[..., 1]) <= self.rejoin_within
-        cost = np.where(near & (d2 <= chi2.ppf(self.p_gate, 4)),
+        cost = np.where(near & (d2 <= gate_threshold(self.p_gate, 4)),
                         d2 + np.linalg.slogdet(C)[1], np.inf)
         i, j = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e300))
         ok = np.isfinite(cost[i, j])
