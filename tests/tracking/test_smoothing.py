@@ -133,6 +133,31 @@ def test_rts_of_every_track_is_filterpys(small):
     assert not np.allclose(sm.mean[~last], h.mean[~last])
 
 
+def test_fixed_lag_is_the_textbook_rts_over_the_next_lag_rows(small):
+    """Each row smoothed with a fixed lag L equals the textbook RTS run back from the
+    filtered estimate L rows later (or the track's end); a lag past the longest track is
+    the fixed-interval smoother."""
+    trk, scans = small
+    h, _ = run_tracker(trk, scans[:80])
+    motion, filt, dims = smoothing_model(trk, 3.0)
+    full = smooth_tracks(h, motion, filt, dims)
+    assert_close(smooth_tracks(h, motion, filt, dims, lag=200).mean, full.mean, 1e3)
+    lag = 7
+    sm = smooth_tracks(h, motion, filt, dims, lag=lag)
+    scan = np.repeat(np.arange(h.times.size), np.diff(h.offsets))
+    checked = 0
+    for r in track_rows(h).values():
+        for k in range(0, r.size, 5):
+            w = r[k:k + lag + 1]
+            xs, Ps = textbook_rts(h.mean[w], h.cov[w], h.times[scan[w]], motion)
+            assert_close(sm.mean[r[k]], xs[0], 1e3)
+            assert_close(sm.cov[r[k]], Ps[0], 1e3)
+            checked += 1
+    assert checked > 100
+    with pytest.raises(ValueError, match="lag"):
+        smooth_tracks(h, motion, filt, dims, lag=0)
+
+
 @pytest.mark.parametrize("make, model, dims", [
     (cv_ct, "ConstantVelocity", [0, 1, 2, 3]),
     (cv_ncp, "ConstantVelocity", [0, 1, 2, 3]),

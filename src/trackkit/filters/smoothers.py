@@ -21,7 +21,7 @@ from trackkit.filters.base import Filter, check_belief, register
 from trackkit.linalg import solve_psd, symmetrize
 from trackkit.models.protocols import MotionModel
 
-__all__ = ["rts_step", "smooth"]
+__all__ = ["rts_gain", "rts_step", "rts_update", "smooth"]
 
 
 def smooth(f: Filter, filtered: Gaussian, motion: MotionModel | Sequence[MotionModel],
@@ -49,14 +49,29 @@ def smooth(f: Filter, filtered: Gaussian, motion: MotionModel | Sequence[MotionM
     return Gaussian._make((xs, register(Ps)))
 
 
+def rts_gain(f: Filter, x: np.ndarray, P: np.ndarray, motion: MotionModel, dt: ArrayLike
+             ) -> tuple[Gaussian, np.ndarray]:
+    """The one-step prediction ``x-_{k+1}, P-_{k+1}`` of the filtered ``(x_k, P_k)`` and the
+    smoother gain ``G_k = C_k (P-_{k+1})^{-1}`` (module docstring), batched."""
+    pred, C = f.predict_with_cross(Gaussian._make((x, register(P))), motion, dt)
+    G = np.swapaxes(solve_psd(pred.cov, np.swapaxes(C, -1, -2), "predicted covariance"),
+                    -1, -2)
+    return pred, G
+
+
+def rts_update(x: np.ndarray, P: np.ndarray, pred: Gaussian, G: np.ndarray,
+               xs_next: np.ndarray, Ps_next: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``xs_k = x_k + G_k (xs_{k+1} - x-_{k+1})``, ``Ps_k = P_k + G_k (Ps_{k+1} - P-_{k+1})
+    G_k^T``, batched."""
+    xs = x + (G @ (xs_next - pred.mean)[..., None])[..., 0]
+    Ps = symmetrize(P + G @ (Ps_next - pred.cov) @ np.swapaxes(G, -1, -2))
+    return xs, Ps
+
+
 def rts_step(f: Filter, x: np.ndarray, P: np.ndarray, xs_next: np.ndarray,
              Ps_next: np.ndarray, motion: MotionModel, dt: ArrayLike
              ) -> tuple[np.ndarray, np.ndarray]:
     """One backward step (module docstring), batched: the filtered ``x_k (..., n)``,
     ``P_k (..., n, n)`` and the smoothed ``xs_{k+1}``, ``Ps_{k+1}`` give ``(xs_k, Ps_k)``."""
-    pred, C = f.predict_with_cross(Gaussian._make((x, register(P))), motion, dt)
-    G = np.swapaxes(solve_psd(pred.cov, np.swapaxes(C, -1, -2), "predicted covariance"),
-                    -1, -2)
-    xs = x + (G @ (xs_next - pred.mean)[..., None])[..., 0]
-    Ps = symmetrize(P + G @ (Ps_next - pred.cov) @ np.swapaxes(G, -1, -2))
-    return xs, Ps
+    pred, G = rts_gain(f, x, P, motion, dt)
+    return rts_update(x, P, pred, G, xs_next, Ps_next)

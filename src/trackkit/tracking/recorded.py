@@ -37,6 +37,11 @@ __all__ = ["DEFAULT_SAMPLE", "TRACKER_REASONS", "TRACK_PROFILES", "Recording", "
            "profile_radar", "sample_sentence", "track_recording"]
 
 Kind = Literal["ais", "opensky", "detections"]
+#: scans of plots after each estimate that smooth it: an IMM's estimates smoothed with one of
+#: its models (``smoothing_model``) let the backward pass drift over the thousands of scans
+#: of a moored vessel (on the whole Solent file, fixed-interval: 46 km RMSE; a lag of 20: the
+#: smoothed tracks closer to the reports than the filtered)
+SMOOTHING_LAG = 20
 #: ``progress(stage, done, total)``: stage "reading" (bytes) or "tracking" (scans)
 Progress = Callable[[str, float, float], None]
 
@@ -316,9 +321,9 @@ def _smooth(tracker: Any, history: Any, desc: dict[str, Any]) -> Any:
 
     period = float(np.median(np.diff(history.times))) if history.times.size > 1 else 1.0
     motion, filt, dims = smoothing_model(tracker, period)
-    desc["smoother"] = (f"Rauch-Tung-Striebel over each track's life, "
+    desc["smoother"] = (f"Rauch-Tung-Striebel with a fixed lag of {SMOOTHING_LAG} scans, "
                         f"{type(motion).__name__} model")
-    return smooth_tracks(history, motion, filt, dims)
+    return smooth_tracks(history, motion, filt, dims, lag=SMOOTHING_LAG)
 
 
 def _mapping(text: str | None, option: str, allowed: tuple[str, ...]) -> dict[str, str | None]:
