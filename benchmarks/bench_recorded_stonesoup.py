@@ -9,8 +9,11 @@ This script calls the same library function (``tracking.recorded.track_recording
 seed, so trackkit's plots and tracks are exactly the command's, and hands the same plots to a
 standard Stone Soup 1.9 tracker built from the same numbers (the input kind's profile,
 ``TRACK_PROFILES``): the radar's site, range and bearing noise, pd, clutter density
-``clutter / ((max_range - min_range) 2 pi)`` per metre radian, gate probability 0.99, the
-constant-velocity process noise q (m^2/s^3) and the velocity std of a new track.
+``clutter / ((max_range - min_range) 2 pi)`` per metre radian, gate probability 0.99 and the
+velocity std of a new track; its one constant-velocity model takes the process noise q
+(m^2/s^3) that trackkit's single-model tracker used (``SINGLE_MODEL_Q``: 0.05 for AIS, 100
+for ADS-B), since trackkit's IMM now has a quiet mode (AIS q 0.0025) and a manoeuvring one
+(0.5) that one model cannot be both of.
 
 Stone Soup's tracker. A ``MultiTargetTracker`` with
 
@@ -223,6 +226,12 @@ def stonesoup_scans(scans: Any, model: Any) -> list[tuple[datetime, set]]:
 # --- Stone Soup's tracker -----------------------------------------------------------------------
 
 
+#: Stone Soup's one constant-velocity model must cover quiet and manoeuvring motion alike: it
+#: takes the single-model compromise trackkit's constant-velocity tracker used (m^2/s^3), not
+#: the quiet mode's q of trackkit's IMM (with which one model would lose every manoeuvre)
+SINGLE_MODEL_Q = {"ais": 0.05, "opensky": 100.0}
+
+
 def stonesoup_tracker(setting: Setting, result: TrackingResult, detector: list) -> Any:
     """The ``MultiTargetTracker`` of ``setting`` with the run's radar and tracker numbers."""
     from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
@@ -244,7 +253,7 @@ def stonesoup_tracker(setting: Setting, result: TrackingResult, detector: list) 
 
     s = result.recording.settings
     model = measurement_model(result.sensor)
-    cv = ConstantVelocity(s.q)
+    cv = ConstantVelocity(SINGLE_MODEL_Q.get(result.recording.kind, s.q))
     predictor = ExtendedKalmanPredictor(CombinedLinearGaussianTransitionModel([cv, cv]))
     updater = ExtendedKalmanUpdater(model)
     if setting.hypothesiser == "pda":

@@ -4,17 +4,21 @@ Each recording (the Solent AIS file, 85 min, and the OpenSky ADS-B file, 6 min) 
 radar plots by the virtual radar of its profile (``TRACK_PROFILES``), once per seed, and the
 same plots are tracked by
 
-- ``old``: the previous defaults, built explicitly here: a constant-velocity EKF,
-  single-point initiation and Wald's SPRT thresholds (alpha 0.01, beta 0.001: deleted at
-  the third missed scan);
+- ``old``: the first defaults, built explicitly here: a constant-velocity EKF (q 0.05
+  m^2/s^3 for AIS), single-point initiation and Wald's SPRT thresholds (alpha 0.01, beta
+  0.001: deleted at the third missed scan);
+- ``previous`` (AIS): today's with one process noise for both of the IMM's models (0.05)
+  and a 30 min hold, the defaults before the IMM had a quiet and a manoeuvring mode;
 - ``new, no hold``: today's without holding lost tracks (a track is deleted after a few
   missed scans), what it buys;
-- ``new``: today's ``TRACK_PROFILES`` (the IMM of constant velocity and coordinated turn,
-  two-point initiation, a lost track held unseen for a new one to continue);
+- ``new``: today's ``TRACK_PROFILES`` (the IMM of a quiet constant-velocity model and a
+  manoeuvring coordinated-turn one, two-point initiation, a lost track held unseen for a
+  new one to continue);
 - ``new, --misses 3`` (AIS): today's, shown coasting three missed scans rather than two;
 
 Every run is scored by one function, ``score(history, run, c) -> {name: value}`` (by default
-:func:`track_scores`: the figures of ``trackkit.eval.clear_mot.score_run``); another
+:func:`track_scores`: the figures of ``trackkit.eval.clear_mot.score_run``, and the mean
+purity of the tracks cut into 5-minute pieces, :func:`pieces`); another
 is given as ``--scorer module:function`` with the same signature, and its names become the
 table's columns. The table gives the mean and the standard deviation over the seeds of each
 figure, and the wall time of a run's tracking.
@@ -39,6 +43,7 @@ import numpy as np
 
 from trackkit import io as tio
 from trackkit.eval.clear_mot import score_run
+from trackkit.eval.track_metrics import Frames
 from trackkit.sim.virtual_radar import VirtualRadar, VirtualRadarRun, virtual_radar
 from trackkit.tracking.history import TrackHistory, run_tracker
 from trackkit.tracking.recorded import TRACK_PROFILES, TrackProfile, build_tracker, profile_radar
@@ -47,13 +52,20 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 Scorer = Callable[[TrackHistory, VirtualRadarRun, float], dict[str, float]]
 
 
+#: the single constant-velocity model's process noise of the previous defaults (m^2/s^3)
+OLD_Q = {"ais": 0.05, "opensky": 100.0}
+
+
 def profiles(kind: str) -> dict[str, TrackProfile]:
-    """The settings compared: the previous defaults, today's without the hold and today's, on
-    the same radar (and for AIS today's coasting a scan longer)."""
+    """The settings compared: the first and the previous defaults, today's without the hold
+    and today's, on the same radar (and for AIS today's coasting a scan longer)."""
     new = TRACK_PROFILES[kind]
-    old = replace(new, turn_q=None, turn_std_deg=None, misses=None, v_max=None, hold=None,
-                  rejoin=None)
-    out = {"old": old, "new, no hold": replace(new, hold=None, rejoin=None), "new": new}
+    old = replace(new, q=OLD_Q[kind], turn_q=None, turn_std_deg=None, manoeuvre_q=None,
+                  misses=None, v_max=None, hold=None, rejoin=None)
+    out = {"old": old}
+    if new.manoeuvre_q is not None:
+        out["previous"] = replace(new, q=OLD_Q[kind], manoeuvre_q=None, hold=1800.0)
+    out |= {"new, no hold": replace(new, hold=None, rejoin=None), "new": new}
     if new.regain:
         out["new, --misses 3"] = replace(new, misses=3.0)
     return out
@@ -69,13 +81,37 @@ FIGURES = {"tracks_per_object": "tracks per object", "breaks": "breaks",
            "rmse": "RMSE (m)"}
 
 
+#: the length of the pieces the tracks are cut into for purity at equal length (s)
+PIECE = 300.0
+
+
 def track_scores(history: TrackHistory, run: VirtualRadarRun, c: float) -> dict[str, float]:
     """The figures of one run as ``trackkit track`` reports them (``score_run``: CLEAR-MOT
     ID switches, those between objects the radar resolves, IDF1, MOTA, GOSPA with and
-    without the switching penalty c, the track counts)."""
-    got = score_run(history.confirmed(), run.truth, tuple(run.radar.site),
-                    run.radar.sigma_bearing, c)
-    return {label: got[key] for key, label in FIGURES.items()}
+    without the switching penalty c, the track counts), and the mean purity of the tracks
+    cut into pieces of ``PIECE`` seconds (``pieces``)."""
+    tracks, site, sb = history.confirmed(), tuple(run.radar.site), run.radar.sigma_bearing
+    got = score_run(tracks, run.truth, site, sb, c)
+    cut = score_run(pieces(tracks, round(PIECE / run.radar.period)), run.truth, site, sb, c)
+    return {**{label: got[key] for key, label in FIGURES.items()},
+            "mean purity, 5 min pieces": cut["mean_purity"],
+            "mean track life (scans)": float(np.mean(np.unique(tracks.ids,
+                                                               return_counts=True)[1]))}
+
+
+def pieces(tracks: Frames, n: int) -> Frames:
+    """The tracks cut into pieces of ``n`` scans from each track's first scan, a new ID per
+    piece: the same positions, only shorter lives. A track's purity (the share of its life
+    on its dominant object) falls with its life, since one swap costs all the rest of it, so
+    the mean purity of trackers whose tracks live for different times is compared at one
+    length."""
+    step = np.repeat(np.arange(tracks.n_steps), tracks.sizes)
+    ids = np.asarray(tracks.ids, np.int64)
+    order = np.lexsort((step, ids))
+    first = np.empty_like(step)
+    head = np.r_[True, ids[order][1:] != ids[order][:-1]]
+    first[order] = step[order][head][np.cumsum(head) - 1]
+    return tracks._replace(ids=ids * (tracks.n_steps // n + 1) + (step - first) // n)
 
 
 def run_once(reports: Any, s: TrackProfile, vr: VirtualRadar, seed: int,

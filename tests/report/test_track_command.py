@@ -373,12 +373,13 @@ def test_no_file_tracks_the_bundled_sample_and_says_so(tmp_path):
 def test_the_tracker_options_reach_the_tracker(tmp_path):
     out = tmp_path / "o"
     ran = _invoke("solent-ais", "--as-radar", "--max-scans", "6", "--misses", "5", "--v-max",
-                  "12", "--turn-q", "2e-5", "--turn-std-deg", "4", "--hold", "60",
+                  "12", "--turn-q", "2e-5", "--turn-std-deg", "4", "--manoeuvre-q", "0.3",
+                  "--hold", "60",
                   "--rejoin", "250", "--regain", "80", "--out", str(out))
     assert ran.exit_code == 0, ran.output
     tracker = json.loads((out / "results.json").read_text())["config"]["tracker"]
     assert tracker["v_max_m_s"] == 12.0 and "two-point" in tracker["initiator"]
-    assert tracker["turn_rate_noise_rad2_s3"] == 2e-5
+    assert tracker["turn_rate_noise_rad2_s3"] == 2e-5 and tracker["turn_model_q_m2_s3"] == 0.3
     assert tracker["initial_turn_rate_std_deg_s"] == pytest.approx(4.0, rel=1e-12)
     assert "deleted after 6 consecutive missed scans" in tracker["logic"]
     assert "held, unseen, for 20 more missed scans (60 s)" in tracker["logic"]
@@ -408,6 +409,7 @@ def test_a_tracker_option_the_tracker_would_not_use_is_refused(tmp_path):
              ["--v-std 5", "two-point initiation", "--v-max (20 m/s)"]),
             ([str(f), "--v-max", "30", "--v-std", "5"], ["--v-std 5", "--v-max (30 m/s)"]),
             ([str(f), "--turn-std-deg", "3"], ["--turn-std-deg 3", "--turn-q"]),
+            ([str(f), "--manoeuvre-q", "0.5"], ["--manoeuvre-q 0.5", "--turn-q"]),
             ([str(f), "--hold", "60"], ["--hold 60", "--misses"]),
             ([str(f), "--misses", "-1"], ["--misses", "-1"])):
         res = _invoke(*args, "--out", str(tmp_path / "never"))

@@ -19,8 +19,9 @@ AIS_HEADER = "Time,MMSI,Latitude_degrees,Longitude_degrees,COG_degrees,SOG_knots
 # the AIS tracker's IMM carries the turn rate (rad/s) as a fifth state component
 TRACK_COLUMNS = ["id", "scan", "time", "time_utc", "x", "y", "vx", "vy", "turn_rate", "var_x",
                  "var_y", "var_vx", "var_vy", "var_turn_rate", "status", "lat", "lon",
-                 "x_smooth", "y_smooth", "vx_smooth", "vy_smooth", "var_x_smooth",
-                 "var_y_smooth", "var_vx_smooth", "var_vy_smooth", "lat_smooth", "lon_smooth"]
+                 "x_smooth", "y_smooth", "vx_smooth", "vy_smooth", "turn_rate_smooth",
+                 "var_x_smooth", "var_y_smooth", "var_vx_smooth", "var_vy_smooth",
+                 "var_turn_rate_smooth", "lat_smooth", "lon_smooth"]
 RADAR_FILES = {"tracks.parquet", "tracks.csv", "tracks.geojson", "tracks.png", "gospa.png",
                "tracks_summary.csv", "report.html", "results.json", "manifest.json"}
 

@@ -48,6 +48,18 @@ def test_hand_computed():
         _ = tk.Innovation(g.nu, S).residual
 
 
+def test_take_keeps_the_pairs_asked_for():
+    S = np.array([[[4.0, 0.0], [0.0, 1.0]], [[1.0, 0.0], [0.0, 1.0]]])
+    z = np.array([[2.0, 0.0], [0.0, 1.0], [0.5, 0.5]])
+    g = gate(np.zeros((2, 2)), S, z, 0.99)
+    keep = np.array([k % 2 == 0 for k in range(g.size)])
+    sub = g.take(keep)
+    for name in ("track", "det", "d2", "loglik", "nu"):
+        np.testing.assert_array_equal(getattr(sub, name), getattr(g, name)[keep])
+    assert (sub.n_tracks, sub.n_dets, sub.threshold) == (g.n_tracks, g.n_dets, g.threshold)
+    _same(g.take(np.arange(g.size)), g)
+
+
 def test_correlated_S_and_threshold():
     S = np.array([[[2.0, 1.0], [1.0, 2.0]]])
     z = np.array([[1.0, 1.0], [1.0, -1.0]])  # d2 = 2/3 and 2

@@ -109,7 +109,7 @@ def test_the_profiles_build_the_trackers_they_describe():
 
 
 def test_the_profile_given_makes_the_tracker():
-    given = TrackProfile(misses=5, v_max=12.0, turn_q=2e-5, turn_std_deg=4.0)
+    given = TrackProfile(misses=5, v_max=12.0, turn_q=2e-5, turn_std_deg=4.0, manoeuvre_q=0.3)
     s = open_recording(samples.path("solent-ais"),
                        TrackOptions(as_radar=True, profile=given)).settings
     trk, _ = build_tracker(RangeBearing(sigma_range=20.0, sigma_bearing=0.01), s, 1e-5,
@@ -118,6 +118,7 @@ def test_the_profile_given_makes_the_tracker():
     assert 5 * miss > trk.logic.delete_threshold > 6 * miss
     assert trk.initiator.v_max == 12.0
     assert trk.filter.models[1].q_omega == 2e-5
+    assert np.all(trk.filter.models[0].q == s.q) and np.all(trk.filter.models[1].q == 0.3)
     assert trk.extra_std == (math.radians(4.0),)
 
 

@@ -127,6 +127,10 @@ TurnQOption = Annotated[float | None, typer.Option(
     "filter is an IMM of constant velocity and coordinated turn. Given for a detections "
     "file, it replaces the constant-velocity filter.",
     show_default=_profile_default("turn_q"))]
+ManoeuvreQOption = Annotated[float | None, typer.Option(
+    "--manoeuvre-q", callback=number(0, open_lo=False), help="Acceleration noise of the "
+    "IMM's coordinated-turn model, its manoeuvring mode (m^2/s^3; --q is the quiet "
+    "constant-velocity model's). Default: --q.", show_default=_profile_default("manoeuvre_q"))]
 TurnStdOption = Annotated[float | None, typer.Option(
     "--turn-std-deg", callback=number(0), help="Turn-rate std of a new track (deg/s), in "
     "the IMM's coordinated-turn model.",
@@ -188,6 +192,7 @@ def track(
     regain: RegainOption = None,
     turn_q: TurnQOption = None,
     turn_std_deg: TurnStdOption = None,
+    manoeuvre_q: ManoeuvreQOption = None,
     gospa_c: GospaCOption = None,
     on_bad: Annotated[OnBad, typer.Option(
         "--on-bad", help="Skip bad records (counted, and listed in skipped.csv) or stop at "
@@ -215,7 +220,8 @@ def track(
                                sigma_bearing_deg=sigma_bearing_deg, sigma_pos=sigma_pos, pd=pd,
                                clutter=clutter, max_range=max_range, min_range=min_range, q=q,
                                v_std=v_std, gospa_c=gospa_c, turn_q=turn_q,
-                               turn_std_deg=turn_std_deg, misses=misses, v_max=v_max,
+                               turn_std_deg=turn_std_deg, manoeuvre_q=manoeuvre_q,
+                               misses=misses, v_max=v_max,
                                hold=hold, rejoin=rejoin, regain=regain)
         options = TrackOptions(
             fmt=fmt.value if fmt else None, as_radar=as_radar, columns=columns, units=units,
@@ -246,10 +252,12 @@ def _check_used(given: TrackProfile, used: TrackProfile) -> None:
         raise ValueError(f"--v-std {given.v_std:g}: tracks here start by two-point "
                          "initiation, which takes the velocity from the two plots and does not "
                          f"use --v-std; its speed limit is --v-max ({used.v_max:g} m/s)")
-    if given.turn_std_deg is not None and used.turn_q is None:
-        raise ValueError(f"--turn-std-deg {given.turn_std_deg:g}: the filter here is "
-                         "constant-velocity, with no turn rate; give --turn-q for the IMM of "
-                         "constant velocity and coordinated turn")
+    for flag, value in (("--turn-std-deg", given.turn_std_deg),
+                        ("--manoeuvre-q", given.manoeuvre_q)):
+        if value is not None and used.turn_q is None:
+            raise ValueError(f"{flag} {value:g}: the filter here is constant-velocity, with "
+                             "no coordinated-turn model; give --turn-q for the IMM of "
+                             "constant velocity and coordinated turn")
     if given.hold and (used.period is None or used.misses is None):
         raise ValueError(f"--hold {given.hold:g}: a detections file's tracks are deleted at "
                          "Wald's SPRT threshold, with no scan period to hold them by; give "

@@ -287,9 +287,7 @@ def gnn_assign(g: Gate, costs: Costs,
     elif method == "dense":
         det = _gnn_dense(t, d, c, miss, T, D)
     elif method == "clusters":
-        sub = g._replace(track=t, det=d, d2=g.d2[ok], loglik=g.loglik[ok],
-                         nu=g.nu[ok])
-        det = _gnn_clusters(sub, c, miss)
+        det = _gnn_clusters(g.take(ok), c, miss)
     else:
         raise ValueError(f"method = {method!r}; expected 'auto', 'dense', 'sparse' or "
                          "'clusters'")

@@ -89,6 +89,12 @@ class Gate(NamedTuple):
     def size(self) -> int:
         return int(self.track.shape[0])
 
+    def take(self, pairs: NDArray[np.bool_] | Index) -> Gate:
+        """The gate with only ``pairs`` (a mask or indices over the pairs, in order), the
+        problem's sizes and threshold unchanged."""
+        return self._replace(track=self.track[pairs], det=self.det[pairs], d2=self.d2[pairs],
+                             loglik=self.loglik[pairs], nu=self.nu[pairs])
+
 
 class MeasurementPrediction(NamedTuple):
     """Predicted measurement ``zhat (T, m)``, innovation covariance ``S (T, m, m)`` and

@@ -51,7 +51,8 @@ class TrackProfile:
     """The radar, tracker and scoring numbers of one kind of input (None: not used by it).
 
     ``turn_q`` None gives a constant-velocity filter, else an IMM of nearly constant velocity
-    and coordinated turn (the CT model's acceleration noise is ``q`` too); ``misses`` None
+    and coordinated turn (the CT model's acceleration noise is ``manoeuvre_q``, by default
+    ``q``); ``misses`` None
     deletes a track at Wald's SPRT threshold (alpha 0.01, beta 0.001: three missed scans at
     pd 0.9), else after ``misses + 1`` consecutive missed scans, or with ``hold`` (s) holds
     it there, unseen, for a new track within ``rejoin`` (m) to continue (and while its
@@ -74,6 +75,7 @@ class TrackProfile:
     gospa_c: float | None = None  # GOSPA cut-off (m)
     turn_q: float | None = None  # turn-rate noise of the coordinated-turn model (rad^2/s^3)
     turn_std_deg: float | None = None  # turn-rate std of a new track (deg/s)
+    manoeuvre_q: float | None = None  # acceleration noise of the CT model (m^2/s^3; None: q)
     misses: float | None = None  # consecutive missed scans a track coasts through
     v_max: float | None = None  # top speed for two-point initiation (m/s)
     hold: float | None = None  # time a lost track is held, unseen, for a new one to continue
@@ -86,8 +88,15 @@ class TrackProfile:
 #: Why the tracker's numbers (checked on the Solent AIS and OpenSky recordings over ten radar
 #: seeds, benchmarks/recorded_defaults.py):
 #:
-#: - ``q``: a vessel's speed changes by a few tenths of a m/s over a minute (0.05 m^2/s^3:
-#:   0.4 m/s of velocity std per 3 s scan); an airliner's by a few m/s (100 m^2/s^3).
+#: - ``q``, ``manoeuvre_q``: the IMM has a quiet mode and a manoeuvring one. A vessel on a
+#:   steady course or moored changes its speed by a few tenths of a m/s over a minute (the
+#:   CV model's q 0.0025 m^2/s^3: 0.39 m/s of velocity std per minute, so a moored vessel's
+#:   track settles on it rather than wandering among its neighbours); one stopping, going
+#:   astern or turning hard changes it by a m/s within a scan or two (the CT model's
+#:   acceleration noise 0.5 m^2/s^3: 1.2 m/s per 3 s scan). With one q for both (0.05, the
+#:   single-model compromise) tracks lagged behind decelerating vessels, lost them and broke
+#:   (a third of the Solent breaks). An airliner's speed changes by a few m/s in either mode
+#:   (100 m^2/s^3).
 #: - ``turn_q``, ``turn_std_deg``: turns are the CT model's. A ship's rate of turn is at
 #:   most a few deg/s (a new track's std 2 deg/s) and builds up over tens of seconds after a
 #:   rudder order (1e-5 rad^2/s^3: 0.3 deg/s per 3 s scan); an airliner turns at up to the
@@ -100,15 +109,17 @@ class TrackProfile:
 #:   (0.1^k + k 1e-3): 0.99, 0.81, 0.22 for k = 1, 2, 3. Shown through 2 missed scans (6 s
 #:   for a vessel; 20 s, 5 km at 250 m/s, for an aircraft), then held.
 #: - ``regain``: a held vessel track whose position is still known to within 100 m (its
-#:   first half minute or so) takes a plot no other track gates and is shown again once
+#:   first scans unseen) takes a plot no other track gates and is shown again once
 #:   its score recovers: a vessel missed three scans in a row (once in a thousand scans) is
 #:   not lost for the scans a new track would take to confirm. An aircraft's position is
 #:   known no better than a few km after two missed 10 s scans: no regain, only rejoin.
 #: - ``hold``, ``rejoin``: a vessel's AIS reports stop for minutes (a receiver's shadow, a
 #:   transponder off at a berth: gaps of 10 to 40 min in the Solent hour, an aircraft's for up
 #:   to a few minutes), and the radar, made from the reports, loses it. Its lost track is held
-#:   30 min (5 min for an aircraft) and a new track confirmed within 500 m of its prediction
-#:   (10 km: 40 s of flight) and agreeing in position and velocity continues it under its ID.
+#:   1 h, longer than those gaps (30 min: 24.5 breaks in the Solent file per radar seed
+#:   against 22.1; 5 min for an aircraft), and a new track confirmed within 500 m of its
+#:   prediction (10 km: 40 s of flight) and agreeing in position and velocity continues it
+#:   under its ID.
 #:   Held tracks are not shown (and past ``regain`` take no plot), so holding longer costs
 #:   no false track.
 #: - ``v_max``: two plots of consecutive scans start a track only if they are no farther
@@ -117,9 +128,9 @@ class TrackProfile:
 #:   what keeps clutter from starting tracks. Confirmation waits one scan longer.
 TRACK_PROFILES: dict[str, TrackProfile] = {
     "ais": TrackProfile(period=3.0, sigma_range=20.0, sigma_bearing_deg=0.5, pd=0.9,
-                        clutter=10.0, max_range=40e3, min_range=50.0, q=0.05, v_std=10.0,
-                        gospa_c=500.0, turn_q=1e-5, turn_std_deg=2.0, misses=2.0,
-                        v_max=20.0, hold=1800.0, rejoin=500.0, regain=100.0),
+                        clutter=10.0, max_range=40e3, min_range=50.0, q=0.0025, v_std=10.0,
+                        gospa_c=500.0, turn_q=1e-5, turn_std_deg=2.0, manoeuvre_q=0.5,
+                        misses=2.0, v_max=20.0, hold=3600.0, rejoin=500.0, regain=100.0),
     "opensky": TrackProfile(period=10.0, sigma_range=50.0, sigma_bearing_deg=0.1, pd=0.9,
                             clutter=10.0, max_range=400e3, min_range=500.0, q=100.0,
                             v_std=150.0, gospa_c=2000.0, turn_q=1e-4, turn_std_deg=1.5,
@@ -131,12 +142,14 @@ TRACK_PROFILES: dict[str, TrackProfile] = {
 
 #: the reasons for each kind's tracker, in words, for the report (the comment above in full)
 TRACKER_REASONS: dict[str, str] = {
-    "ais": "Vessels turn, stop and lie moored in clusters: the IMM's coordinated-turn model "
-           "follows a turn that the constant-velocity model alone would lose; two plots of "
+    "ais": "Vessels turn, stop and lie moored in clusters: the IMM's quiet constant-velocity "
+           "model keeps a moored or steady vessel's track still, and its manoeuvring "
+           "coordinated-turn model follows a turn or a stop that the quiet model would lose; "
+           "two plots of "
            "consecutive scans no farther apart than 20 m/s (39 kn) allows start a track, so "
            "the false plots seldom do; a track is shown coasting through 2 missed scans (6 "
            "s): after a third in a row its vessel is more likely gone than missed at pd 0.9. "
-           "It is then held unseen for 30 minutes, since AIS reports stop for minutes: a "
+           "It is then held unseen for an hour, since AIS reports stop for minutes: a "
            "plot near it takes it up again while its position is known to within 100 m, "
            "and later a new track within 500 m of it continues it under its ID.",
     "opensky": "Aircraft fly straight legs and standard-rate turns (3 deg/s): the IMM's "
@@ -409,7 +422,8 @@ def build_tracker(sensor: Any, s: TrackProfile, clutter_density: float, associat
 
 
 def _motion(f: Any, s: TrackProfile) -> tuple[Any, Any, dict[str, Any], dict[str, Any]]:
-    """The filter and motion model: CV, or the IMM of CV and CT (``s.turn_q``)."""
+    """The filter and motion model: CV, or the IMM of CV and CT (``s.turn_q``; the CT
+    model's acceleration noise ``s.manoeuvre_q``, by default ``s.q``)."""
     from trackkit.filters import IMM
     from trackkit.models import ConstantVelocity, CoordinatedTurn
 
@@ -417,11 +431,13 @@ def _motion(f: Any, s: TrackProfile) -> tuple[Any, Any, dict[str, Any], dict[str
         return f, ConstantVelocity(dim=2, q=s.q), {}, {"motion": "constant velocity",
                                                         "q_m2_s3": s.q}
     p = IMM_SWITCH
-    imm = IMM([ConstantVelocity(dim=2, q=s.q), CoordinatedTurn(q=s.q, q_omega=s.turn_q)], f,
-              [[1 - p, p], [p, 1 - p]], mu0=IMM_MU0)
+    q_turn = s.q if s.manoeuvre_q is None else s.manoeuvre_q
+    imm = IMM([ConstantVelocity(dim=2, q=s.q), CoordinatedTurn(q=q_turn, q_omega=s.turn_q)],
+              f, [[1 - p, p], [p, 1 - p]], mu0=IMM_MU0)
     omega_std = math.radians(s.turn_std_deg if s.turn_std_deg is not None else 1.0)
     desc = {"motion": "IMM of nearly constant velocity and coordinated turn",
-            "q_m2_s3": s.q, "turn_rate_noise_rad2_s3": s.turn_q,
+            "q_m2_s3": s.q, "turn_model_q_m2_s3": q_turn,
+            "turn_rate_noise_rad2_s3": s.turn_q,
             "initial_turn_rate_std_deg_s": math.degrees(omega_std),
             "model_switch_probability_per_scan": p}
     return imm, None, {"extra_mean": (0.0,), "extra_std": (omega_std,)}, desc

@@ -240,8 +240,7 @@ def _held_pairs(g: Gate, held_: NDArray[np.bool_], wide: NDArray[np.bool_]) -> G
     near_seen = np.zeros(g.n_dets, dtype=bool)
     near_seen[g.det[~by_held]] = True
     keep = ~(by_held & (near_seen[g.det] | wide[g.track]))
-    return g._replace(track=g.track[keep], det=g.det[keep], d2=g.d2[keep],
-                      loglik=g.loglik[keep], nu=g.nu[keep])
+    return g.take(keep)
 
 
 # --- the tracker ----------------------------------------------------------------------------
