@@ -113,7 +113,12 @@ from scipy.stats import chi2
 from trackkit.eval.clear_mot import clear_mot, score_run
 from trackkit.eval.track_metrics import Frames, assign
 from trackkit.tracking.gating import GATE_PROBABILITY
-from trackkit.tracking.recorded import TrackingResult, TrackOptions, track_recording
+from trackkit.tracking.recorded import (
+    SINGLE_MODEL_Q,
+    TrackingResult,
+    TrackOptions,
+    track_recording,
+)
 
 T0 = datetime(2000, 1, 1)  # Stone Soup wants datetimes: scan time t s is T0 + t
 TURN_DEG = 20.0  # heading change over the TURN_WINDOW_S before a break that makes it a turn
@@ -226,10 +231,9 @@ def stonesoup_scans(scans: Any, model: Any) -> list[tuple[datetime, set]]:
 # --- Stone Soup's tracker -----------------------------------------------------------------------
 
 
-#: Stone Soup's one constant-velocity model must cover quiet and manoeuvring motion alike: it
-#: takes the single-model compromise trackkit's constant-velocity tracker used (m^2/s^3), not
-#: the quiet mode's q of trackkit's IMM (with which one model would lose every manoeuvre)
-SINGLE_MODEL_Q = {"ais": 0.05, "opensky": 100.0}
+# Stone Soup's one constant-velocity model must cover quiet and manoeuvring motion alike: it
+# takes SINGLE_MODEL_Q, not the quiet mode's q of trackkit's IMM (with which one model would
+# lose every manoeuvre)
 
 
 def stonesoup_tracker(setting: Setting, result: TrackingResult, detector: list) -> Any:

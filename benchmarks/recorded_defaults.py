@@ -46,25 +46,27 @@ from trackkit.eval.clear_mot import score_run
 from trackkit.eval.track_metrics import Frames
 from trackkit.sim.virtual_radar import VirtualRadar, VirtualRadarRun, virtual_radar
 from trackkit.tracking.history import TrackHistory, run_tracker
-from trackkit.tracking.recorded import TRACK_PROFILES, TrackProfile, build_tracker, profile_radar
+from trackkit.tracking.recorded import (
+    SINGLE_MODEL_Q,
+    TRACK_PROFILES,
+    TrackProfile,
+    build_tracker,
+    profile_radar,
+)
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 Scorer = Callable[[TrackHistory, VirtualRadarRun, float], dict[str, float]]
-
-
-#: the single constant-velocity model's process noise of the previous defaults (m^2/s^3)
-OLD_Q = {"ais": 0.05, "opensky": 100.0}
 
 
 def profiles(kind: str) -> dict[str, TrackProfile]:
     """The settings compared: the first and the previous defaults, today's without the hold
     and today's, on the same radar (and for AIS today's coasting a scan longer)."""
     new = TRACK_PROFILES[kind]
-    old = replace(new, q=OLD_Q[kind], turn_q=None, turn_std_deg=None, manoeuvre_q=None,
+    old = replace(new, q=SINGLE_MODEL_Q[kind], turn_q=None, turn_std_deg=None, manoeuvre_q=None,
                   misses=None, v_max=None, hold=None, rejoin=None)
     out = {"old": old}
     if new.manoeuvre_q is not None:
-        out["previous"] = replace(new, q=OLD_Q[kind], manoeuvre_q=None, hold=1800.0)
+        out["previous"] = replace(new, q=SINGLE_MODEL_Q[kind], manoeuvre_q=None, hold=1800.0)
     out |= {"new, no hold": replace(new, hold=None, rejoin=None), "new": new}
     if new.regain:
         out["new, --misses 3"] = replace(new, misses=3.0)

@@ -1006,3 +1006,44 @@ def test_cv_array_dt_with_batch_axes_works_and_is_not_cached():
     for idx in np.ndindex(3, 4):
         Fi = cv.jacobian(X[idx], float(dts[idx[0], 0]))
         _close(Yb[idx], Fi @ X[idx], 4 * EPS * (np.abs(Fi) @ np.abs(X[idx])), tol=1.0)
+
+
+# --- the fixed-lag smoother's compiled walk (filters.smoothers_fast) ----------------------
+
+def _lag_problem(rng, N, n):
+    """N rows in chains of random lengths (links to a later row, -1 at each chain's end),
+    filtered covariances with condition numbers <= 1e3 and gains near the identity (as a
+    smoother's are: eigenvalues near 1)."""
+    x = rng.normal(size=(N, n)) * 100.0
+    U = np.linalg.qr(rng.normal(size=(N, n, n)))[0]
+    P = linalg.symmetrize(U @ (rng.uniform(1.0, 1e3, (N, n))[..., None] * U.mT))
+    pc = P + np.eye(n) * rng.uniform(0.1, 10.0, (N, 1, 1))
+    pm = x + rng.normal(size=(N, n))
+    G = np.eye(n) * 0.95 + rng.normal(size=(N, n, n)) * 0.02
+    nxt = np.full(N, -1, np.int64)
+    order = rng.permutation(N)
+    ends = np.sort(rng.choice(N, N // 15, replace=False))
+    follows = np.ones(N - 1, bool)
+    follows[ends[ends < N - 1]] = False
+    nxt[order[:-1][follows]] = order[1:][follows]
+    return x, P, pm, pc, G, nxt
+
+
+@pytest.mark.parametrize("n", [2, 4, 5, 6])
+@pytest.mark.parametrize("lag", [1, 3, 20, 400])
+def test_fixed_lag_kernel_equals_the_numpy_sweeps(n, lag, monkeypatch):
+    # the compiled walk (one kernel per n) against lag numpy passes of rts_update over every
+    # row; a lag past the longest chain (400) is the fixed-interval smoother
+    from trackkit.belief import Gaussian
+    from trackkit.filters import smoothers
+    rng = np.random.default_rng(60 + n + lag)
+    x, P, pm, pc, G, nxt = _lag_problem(rng, 600, n)
+    pred = Gaussian(pm, pc)
+    assert smoothers.SWEEP_KERNEL_MIN_ROWS <= 600  # the kernel's side
+    xs, Ps = smoothers.fixed_lag_sweeps(x, P, pred, G, nxt, lag)
+    monkeypatch.setattr(smoothers, "SWEEP_KERNEL_MIN_ROWS", 10**9)  # the textbook side
+    xt, Pt = smoothers.fixed_lag_sweeps(x, P, pred, G, nxt, lag)
+    assert np.array_equal(xs[nxt < 0], x[nxt < 0]) and not np.allclose(xs, x)
+    np.testing.assert_allclose(xs, xt, rtol=0, atol=1e-12 * np.abs(xt).max())
+    np.testing.assert_allclose(Ps, Pt, rtol=0, atol=1e-12 * np.abs(Pt).max())
+    assert np.array_equal(Ps, Ps.mT)

@@ -61,7 +61,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from trackkit.eval.manoeuvres import (
     Criterion,
@@ -71,6 +70,7 @@ from trackkit.eval.manoeuvres import (
     turning_metrics,
     zigzag_metrics,
 )
+from trackkit.eval.metrics import chi2_ppf
 from trackkit.identify import (
     DEFAULT_NOISE,
     DEFAULT_SUBSTEPS,
@@ -129,7 +129,7 @@ _MAX_TRIAL_S = 600.0
 
 def nees_band(dof: int = N_THETA, confidence: float = 0.95) -> tuple[float, float]:
     """The two-sided chi-square band of the NEES with ``dof`` degrees of freedom."""
-    lo, hi = chi2.ppf([(1 - confidence) / 2, (1 + confidence) / 2], dof)
+    lo, hi = chi2_ppf([(1 - confidence) / 2, (1 + confidence) / 2], dof)
     return float(lo), float(hi)
 
 

@@ -60,7 +60,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import optimize, stats
+from scipy import optimize
+from scipy.special import chdtrc, chdtri  # chi2.sf, chi2.isf, without scipy.stats (0.5 s)
 
 from trackkit.belief import Gaussian, Innovation
 from trackkit.filters.base import register
@@ -134,7 +135,7 @@ def _factor(value: float, name: str, owner: str) -> float:
 def chi2_threshold(pfa: float, dof: int) -> float:
     """The ``1 - pfa`` quantile of chi-square(dof) (``isf``, accurate for small pfa)."""
     pfa = _probability(pfa, "pfa", "chi2_threshold")
-    return float(stats.chi2.isf(pfa, _count(dof, "dof", "chi2_threshold")))
+    return float(chdtri(_count(dof, "dof", "chi2_threshold"), pfa))
 
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(10)  # nodes per panel of a quarter period
@@ -233,7 +234,7 @@ def weighted_chi2_sf(x: ArrayLike, weights: ArrayLike, dof: int) -> Array:
         raise ValueError(f"weighted_chi2_sf: x has entries <= 0 (min {float(np.min(x))!r}); "
                          "expected x > 0")
     if lam.size == 1:
-        return np.asarray(stats.chi2.sf(x / lam[0], dof))
+        return np.asarray(chdtrc(dof, x / lam[0]))
     q = _Imhof(np.sort(lam)[::-1], float(dof), float(np.min(x)), float(np.max(x)), 1e-16)
     return q.sf(x.ravel()).reshape(x.shape)
 
@@ -250,7 +251,7 @@ def _satterthwaite(pfa: float, lam: Array, dof: int) -> float:
     """``c chi2_nu`` with the mean ``dof sum lam`` and variance ``2 dof sum lam^2`` of the sum:
     ``c = sum lam^2 / sum lam``, ``nu = dof (sum lam)^2 / sum lam^2``."""
     s1, s2 = float(lam.sum()), float((lam * lam).sum())
-    return s2 / s1 * float(stats.chi2.isf(pfa, dof * s1 * s1 / s2))
+    return s2 / s1 * float(chdtri(dof * s1 * s1 / s2, pfa))
 
 
 def _chernoff_bound(p: float, lam: Array, dof: int) -> float:
@@ -277,7 +278,7 @@ def _imhof_quantiles(pfa: float, alpha: float, dof: int, startup: bool) -> tuple
     for the ages at which using ``t_inf`` instead would lower the false-alarm probability by
     more than 0.1%; ``(t_inf,)`` without start-up handling."""
     lam_inf = _fading_weights(alpha, None, dof)
-    x_lo = float(stats.chi2.isf(pfa, dof))  # rho >= eps(k): every quantile is above this
+    x_lo = float(chdtri(dof, pfa))  # rho >= eps(k): every quantile is above this
     x_hi = _chernoff_bound(pfa, lam_inf, dof)
     eps = 1e-10 * pfa
     t_inf = _quantile(_Imhof(lam_inf, float(dof), x_lo, x_hi, eps), pfa, x_lo, x_hi)
@@ -315,10 +316,10 @@ def fading_threshold(pfa: float, dof: int, alpha: float, n: int | None = None,
         raise ValueError(f"fading_threshold: method = {method!r}; expected 'imhof' or "
                          "'satterthwaite'")
     if lam.size == 1:
-        return float(stats.chi2.isf(pfa, dof))
+        return float(chdtri(dof, pfa))
     if n is None:
         return _imhof_quantiles(pfa, a, dof, False)[-1]
-    x_lo = float(stats.chi2.isf(pfa, dof))
+    x_lo = float(chdtri(dof, pfa))
     x_hi = _chernoff_bound(pfa, lam, dof)
     return _quantile(_Imhof(lam, float(dof), x_lo, x_hi, 1e-10 * pfa), pfa, x_lo, x_hi)
 
@@ -903,7 +904,7 @@ def run_variable_order(
     b_cv = Gaussian(mean0.reshape((N, n)) if mean0.ndim > 1 else mean0,
                     cov0.reshape((N, n, n)) if cov0.ndim > 2 else cov0)
     run = _VariableOrder(z.reshape(K, N, m), steps, b_cv, sensor, d, q_cv, q_ca, s, p,
-                         accel_var, float(stats.chi2.isf(end_pfa, p * d)))
+                         accel_var, float(chdtri(p * d, end_pfa)))
     ds = detector.init((N,))
     for k in range(K):
         ds = run.step(k, detector, ds)

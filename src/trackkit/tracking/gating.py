@@ -34,10 +34,10 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
-from scipy.stats import chi2
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
+from trackkit.eval.metrics import chi2_ppf
 from trackkit.filters.imm_fast import wrap_angle
 from trackkit.filters.kalman import kalman_gain
 from trackkit.linalg import cholesky
@@ -111,7 +111,7 @@ def gate_threshold(p_gate: float, m: int) -> float:
     target's detections."""
     if not 0.0 < p_gate < 1.0:
         raise ValueError(f"p_gate = {p_gate!r}; expected 0 < P_G < 1")
-    return float(chi2.ppf(p_gate, m))
+    return float(chi2_ppf(p_gate, m))
 
 
 def predict_measurement(belief: Gaussian, sensor: SensorModel) -> MeasurementPrediction:

@@ -32,8 +32,8 @@ from trackkit.io import read_header
 if TYPE_CHECKING:
     from trackkit.sim.virtual_radar import VirtualRadar
 
-__all__ = ["DEFAULT_SAMPLE", "TRACKER_REASONS", "TRACK_PROFILES", "Recording", "TrackOptions",
-           "TrackProfile", "TrackingResult", "build_tracker", "open_recording",
+__all__ = ["DEFAULT_SAMPLE", "SINGLE_MODEL_Q", "TRACKER_REASONS", "TRACK_PROFILES", "Recording",
+           "TrackOptions", "TrackProfile", "TrackingResult", "build_tracker", "open_recording",
            "profile_radar", "sample_sentence", "track_recording"]
 
 Kind = Literal["ais", "opensky", "detections"]
@@ -94,8 +94,10 @@ class TrackProfile:
 #:   track settles on it rather than wandering among its neighbours); one stopping, going
 #:   astern or turning hard changes it by a m/s within a scan or two (the CT model's
 #:   acceleration noise 0.5 m^2/s^3: 1.2 m/s per 3 s scan). With one q for both (0.05, the
-#:   single-model compromise) tracks lagged behind decelerating vessels, lost them and broke
-#:   (a third of the Solent breaks). An airliner's speed changes by a few m/s in either mode
+#:   single-model compromise, ``SINGLE_MODEL_Q``) tracks lagged behind decelerating vessels,
+#:   lost them and broke: half of the Solent breaks (17 of 34, seed 0) came a scan or two
+#:   after the vessel's last scan on its old track, six of them traced to lag behind a stop
+#:   or a turn. An airliner's speed changes by a few m/s in either mode
 #:   (100 m^2/s^3).
 #: - ``turn_q``, ``turn_std_deg``: turns are the CT model's. A ship's rate of turn is at
 #:   most a few deg/s (a new track's std 2 deg/s) and builds up over tens of seconds after a
@@ -138,6 +140,12 @@ TRACK_PROFILES: dict[str, TrackProfile] = {
     "detections": TrackProfile(sigma_range=20.0, sigma_bearing_deg=0.5, sigma_pos=20.0, pd=0.9,
                                clutter=10.0, q=1.0, v_std=50.0, gospa_c=1000.0),
 }
+
+#: the process noise (m^2/s^3) of one constant-velocity model that must cover quiet and
+#: manoeuvring motion alike, the single-model compromise: both of the AIS IMM's models had
+#: it before the quiet and the manoeuvring modes, and a single-model tracker compared with
+#: the IMM takes it (benchmarks/)
+SINGLE_MODEL_Q: dict[str, float] = {"ais": 0.05, "opensky": 100.0}
 
 
 #: the reasons for each kind's tracker, in words, for the report (the comment above in full)

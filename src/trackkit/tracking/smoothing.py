@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackkit.belief import Gaussian
-from trackkit.filters.smoothers import rts_gain, rts_step, rts_update
+from trackkit.filters.smoothers import fixed_lag_sweeps, rts_gain, rts_step
 from trackkit.tracking.history import TrackHistory
 from trackkit.tracking.logic import TrackStatus
 
@@ -109,37 +109,20 @@ def smooth_tracks(history: TrackHistory, motion: Any, filt: Any,
 def fixed_lag(h: TrackHistory, x: Array, P: Array, nxt: NDArray[np.int64], motion: Any,
               filt: Any, lag: int) -> tuple[Array, Array]:
     """Fixed-lag RTS: each row smoothed back from the filtered estimate ``lag`` rows later
-    (or its piece's last row). With the gains ``G_k`` of one pass, ``lag`` sweeps of
-
-        xs_k <- x_k + G_k (xs_{k+1} - x-_{k+1})      (xs = x at first)
-
-    over every row at once leave in row k the recursion unrolled over k+1 .. k+lag. When the
-    smoothing model is not the filter's (an IMM's mixture, smoothed with one of its models)
-    the backward recursion need not contract (``G_k`` with eigenvalues just above 1 over
-    thousands of scans of a moored vessel), and a fixed lag bounds what the mismatch can
-    accumulate."""
+    (or its piece's last row), with the gains ``G_k`` of one batched pass over every row
+    (:func:`trackkit.filters.smoothers.fixed_lag_sweeps`). When the smoothing model is not
+    the filter's (an IMM's mixture, smoothed with one of its models) the backward recursion
+    need not contract (``G_k`` with eigenvalues just above 1 over thousands of scans of a
+    moored vessel), and a fixed lag bounds what the mismatch can accumulate."""
     if lag < 1:
         raise ValueError(f"lag = {lag!r}; expected a number of scans >= 1")
     scan = np.repeat(np.arange(h.times.size), np.diff(h.offsets))
     rows = np.flatnonzero(nxt >= 0)
-    after = nxt[rows]
-    pm, pc = np.empty_like(x[rows]), np.empty_like(P[rows])
-    G = np.empty_like(P[rows])
-    starts = np.searchsorted(scan[rows], np.arange(h.times.size + 1))
-    for s in range(h.times.size - 1):
-        sl = slice(starts[s], starts[s + 1])
-        if sl.start < sl.stop:
-            r = rows[sl]
-            pred, G[sl] = rts_gain(filt, x[r], P[r], motion,
-                                   float(h.times[s + 1] - h.times[s]))
-            pm[sl], pc[sl] = pred.mean, pred.cov
-    pred = Gaussian._make((pm, pc))
-    xs, Ps = x.copy(), P.copy()
-    for _ in range(lag):
-        xs_r, Ps_r = rts_update(x[rows], P[rows], pred, G, xs[after], Ps[after])
-        xs, Ps = x.copy(), P.copy()
-        xs[rows], Ps[rows] = xs_r, Ps_r
-    return xs, Ps
+    dt = np.diff(np.asarray(h.times, float))[scan[rows]]
+    pred, G_r = rts_gain(filt, x[rows], P[rows], motion, dt)
+    pm, pc, G = np.zeros_like(x), np.zeros_like(P), np.zeros_like(P)
+    pm[rows], pc[rows], G[rows] = pred.mean, pred.cov, G_r
+    return fixed_lag_sweeps(x, P, Gaussian._make((pm, pc)), G, nxt, lag)
 
 
 def smoothing_model(tracker: Any, dt: float) -> tuple[Any, Any, NDArray[np.intp] | None]:
