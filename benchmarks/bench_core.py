@@ -86,7 +86,7 @@ def time_filterpy_ekf(motion, observer, zs, prior) -> float:
     for k in range(zs.shape[0]):
         hx, H = fns[k]
         ekf.predict()
-        ekf.update(zs[k, 0], H, hx)
+        ekf.update(zs[k, 0].reshape(1, 1), H, hx)  # z as FilterPy keeps x: (m, 1)
     return time.perf_counter() - t0
 
 

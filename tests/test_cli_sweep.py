@@ -203,9 +203,10 @@ def test_a_block_that_always_fails_stops_the_campaign_naming_point_and_block(
 
 
 def test_the_readme_sweep_command_plans():
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    readme = "\n".join((REPO / p).read_text(encoding="utf-8")
+                       for p in ("README.md", "docs/tour.md"))
     lines = [x.split("#")[0] for x in readme.splitlines() if x.startswith("trackkit sweep ")]
-    assert lines, "the README shows no trackkit sweep command"
+    assert lines, "the README and the tour show no trackkit sweep command"
     from trackkit.scenario import bundled, load
 
     for line in lines:

@@ -132,8 +132,8 @@ def test_the_private_name_check_finds_one(tmp_path):
                                                      "trackkit.linalg._triu"]
 
 
-def test_the_readme_layout_names_every_package_and_module():
-    readme = (ROOT / "README.md").read_text()
+def test_the_layout_names_every_package_and_module():
+    readme = (ROOT / "docs" / "architecture.md").read_text()
     block = readme[readme.index("```\nsrc/trackkit/"):]
     block = block[:block.index("\n```\n")]
     missing = []
@@ -147,7 +147,7 @@ def test_the_readme_layout_names_every_package_and_module():
             missing.append(f"{rel.parts[0]}/")
         if p.name not in block:
             missing.append(str(rel))
-    assert not missing, f"README.md's layout does not name: {sorted(set(missing))}"
+    assert not missing, f"docs/architecture.md's layout does not name: {sorted(set(missing))}"
 
 
 def test_no_two_modules_share_a_name_for_different_jobs():

@@ -1,4 +1,5 @@
-"""The README's examples work as pasted on a fresh clone: every ```python block runs in a
+"""The README's examples, and those of the site's tour (``docs/tour.md``, where the README's
+longer examples live), work as pasted on a fresh clone: every ```python block runs in a
 fresh interpreter without an error or a warning, and every ``trackkit ...`` command of its
 ```bash blocks runs through the real command (``python -m trackkit.cli``), in order, in one
 temporary directory (``tests/fixtures`` reachable there, as in a clone), with ``>``
@@ -26,13 +27,15 @@ from tests.cli_helpers import trackkit
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
+TOUR = REPO / "docs" / "tour.md"
+PAGES = (README, TOUR)
 RUNS = "2"  # Monte Carlo runs of a shortened command
 SCANS = "20"  # scans tracked of a shortened recording
 
 
-def blocks(lang: str) -> list[str]:
-    """The fenced ```LANG blocks of the README, in order."""
-    text = README.read_text(encoding="utf-8")
+def blocks(lang: str, pages: tuple[Path, ...] = PAGES) -> list[str]:
+    """The fenced ```LANG blocks of the README and the tour, in order."""
+    text = "\n".join(p.read_text(encoding="utf-8") for p in pages)
     return re.findall(rf"^```{lang}\n(.*?)^```", text, re.S | re.M)
 
 
@@ -86,6 +89,8 @@ def _run_dir(tmp: Path) -> Path:
 
 
 def test_the_readme_has_its_examples():
+    assert len(blocks("python", (README,))) >= 2
+    assert len(blocks("bash", (README,))) >= 3
     assert len(blocks("python")) >= 5
     assert len(commands()) >= 20
 

@@ -14,16 +14,31 @@ from typing import TYPE_CHECKING, Any
 __version__ = "0.1.0"
 
 __all__ = ["Gaussian", "Particles", "Innovation", "check_gaussian", "angles", "linalg", "models",
-           "filters", "optimize", "tracking", "network"]
+           "filters", "optimize", "tracking", "network", "belief", "eval", "io", "sim",
+           "identify", "scenario", "experiments", "report"]
 
 # Submodules load on first use (PEP 562): the command line starts, and answers Ctrl-C, before
 # numpy and scipy are imported, and tk.tracking's scipy.stats and KD-tree cost nothing until
 # they are used.
-_SUBMODULES = {"angles", "linalg", "models", "filters", "optimize", "tracking", "network"}
+_SUBMODULES = {"angles", "linalg", "models", "filters", "optimize", "tracking", "network",
+               "belief", "eval", "io", "sim", "identify", "scenario", "experiments", "report"}
 _FROM_BELIEF = {"Gaussian", "Particles", "Innovation", "check_gaussian"}
 
-if TYPE_CHECKING:
-    from trackkit import angles, filters, linalg, models, network, optimize, tracking
+if TYPE_CHECKING:  # the layers above experiments stay out: they import trackkit themselves
+    from trackkit import (
+        angles,
+        belief,
+        eval,
+        filters,
+        identify,
+        io,
+        linalg,
+        models,
+        network,
+        optimize,
+        sim,
+        tracking,
+    )
     from trackkit.belief import Gaussian, Innovation, Particles, check_gaussian
 
 

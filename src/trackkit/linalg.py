@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "symmetrize",
     "cholesky",
+    "cholesky_t",
     "solve_psd",
     "check_covariance",
     "gaussian_loglik",

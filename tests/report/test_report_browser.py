@@ -5,51 +5,19 @@ tracks drawn) and offer the time slider. ``.ci/run`` installs ``chromium`` when 
 
 from __future__ import annotations
 
-import os
 import re
-import shutil
-import signal
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.browser import CHROMIUM, HEIGHT, WIDTH, open_in_chromium
 from trackkit.io import samples
 from trackkit.report.track_map import PALETTE
 from trackkit.report.track_pages import track_report, write_track_report
 from trackkit.tracking.recorded import TrackOptions, track_recording
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium on this machine "
                                 "(.ci/run installs it)")
-WIDTH, HEIGHT = 1200, 1400
-CONSOLE = re.compile(r":CONSOLE[:(]\d*\)?\]? (.*)")
-
-
-def open_in_chromium(page: Path, tmp: Path) -> tuple[str, list[str], Path]:
-    """Load ``page`` headless, offline, in a fresh profile: its DOM after the scripts ran,
-    the console messages and a screenshot. The browser's whole process group is killed
-    afterwards, whatever happened."""
-    shot = tmp / "shot.png"
-    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-           "--no-first-run", "--disable-background-networking", "--disable-component-update",
-           "--disable-sync", f"--user-data-dir={tmp / 'profile'}",
-           "--host-resolver-rules=MAP * ~NOTFOUND",  # no name resolves: no network
-           "--enable-logging=stderr", "--v=0", f"--window-size={WIDTH},{HEIGHT}",
-           "--hide-scrollbars", f"--screenshot={shot}", "--dump-dom", page.as_uri()]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, cwd=tmp)
-    try:
-        out, err = proc.communicate(timeout=60)  # a guard; it takes 2-5 s
-    finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.wait()
-    assert proc.returncode == 0, err[-2000:]
-    return out, [m.group(1) for m in map(CONSOLE.search, err.splitlines()) if m], shot
 
 
 def test_console_messages_are_seen(tmp_path):

@@ -1,4 +1,4 @@
-"""Identity-aware tracking scores: CLEAR-MOT, the ID measures, GOSPA with its switching
+r"""Identity-aware tracking scores: CLEAR-MOT, the ID measures, GOSPA with its switching
 penalty and a classification of ID switches by whether a radar could resolve the objects.
 
 Input: the truth and the confirmed tracks as ``Frames`` with integer IDs, one step per scan
@@ -10,24 +10,37 @@ Input: the truth and the confirmed tracks as ``Frames`` with integer IDs, one st
   if h is present and within c (when two truths claim one track, the lower truth ID keeps
   it); the rest are matched by the maximum-cardinality assignment of least total distance.
   A match of o to a track other than its last one is an ID switch (IDSW); unmatched truths
-  are misses (FN), unmatched tracks false positives (FP). With GT the number of truth-steps::
+  are misses (FN), unmatched tracks false positives (FP). With GT the number of truth-steps,
+  and MOTP in metres:
 
-      MOTA = 1 - (FN + FP + IDSW) / GT,     MOTP = sum of |x_track - x_truth| / matches (m)
+  .. math::
+
+      \mathrm{MOTA} = 1 - \frac{\mathrm{FN} + \mathrm{FP} + \mathrm{IDSW}}{\mathrm{GT}},
+      \qquad
+      \mathrm{MOTP} = \frac{\sum_{\text{matches}} \lVert \mathbf{x}_{\text{track}}
+          - \mathbf{x}_{\text{truth}} \rVert}{\text{number of matches}}
 
   A fragmentation is a truth going from matched to missed and being matched again later.
 * ID measures (Ristani, Solera, Zou, Cucchiara & Tomasi 2016): truths and tracks are paired
   one-to-one over the whole run so that IDTP, the number of steps at which paired truth and
-  track are within c, is largest; with P the number of track-steps::
+  track are within c, is largest; with P the number of track-steps:
 
-      IDP = IDTP / P,   IDR = IDTP / GT,   IDF1 = 2 IDTP / (GT + P)
+  .. math::
+
+      \mathrm{IDP} = \frac{\mathrm{IDTP}}{P}, \qquad
+      \mathrm{IDR} = \frac{\mathrm{IDTP}}{\mathrm{GT}}, \qquad
+      \mathrm{IDF1} = \frac{2\, \mathrm{IDTP}}{\mathrm{GT} + P}
 
 * GOSPA with switching (Stone Soup's ``GOSPAMetric(c, p, switching_penalty=gamma)``): per
   step, the GOSPA assignment (``track_metrics.assign``); a truth's assignment changing from
   one track to another is a full switch, to or from no track a half switch (a truth counts
-  only from its first assignment on). With s_k the full switches plus half the half switches
-  at step k::
+  only from its first assignment on). With :math:`s_k` the full switches plus half the half
+  switches at step k:
 
-      switching_k = gamma s_k^(1/p),    distance_k = (GOSPA_k^2 + switching_k^2)^(1/2)
+  .. math::
+
+      \mathrm{switching}_k = \gamma\, s_k^{1/p}, \qquad
+      \mathrm{distance}_k = \bigl(\mathrm{GOSPA}_k^2 + \mathrm{switching}_k^2\bigr)^{1/2}
 
   (Stone Soup's combination; for p = 2 it is the trajectory GOSPA's switching cost of
   Garcia-Fernandez, Rahmathullah & Svensson 2020, gamma^2 per full switch inside GOSPA^2).
@@ -81,7 +94,7 @@ class ClearMot(NamedTuple):
     switches: IntArray  #: IDSW
     transfers: IntArray  #: a track matched to another truth than before (py-motmetrics)
     fragmentations: IntArray  #: at the step a fragment's miss starts
-    distance: Array  #: sum over the matches of |x_track - x_truth| (m)
+    distance: Array  #: sum over the matches of ``|x_track - x_truth|`` (m)
     switch_step: IntArray  #: step of each ID switch, by step, then truth ID
     switch_truth: IntArray  #: truth ID of each ID switch
     transfer_step: IntArray  #: step of each transfer, by step, then truth ID

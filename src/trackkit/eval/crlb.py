@@ -1,14 +1,28 @@
-"""Posterior Cramer-Rao lower bound (PCRLB) for additive-Gaussian models, batched over truths.
+r"""Posterior Cramer-Rao lower bound (PCRLB) for additive-Gaussian models, batched over truths.
 
-For ``x_{k+1} = f(x_k) + w_k``, ``w_k ~ N(0, Q)`` and ``z_k = h(x_k) + v_k``, ``v_k ~ N(0, R)``,
-Tichavsky, Muravchik and Nehorai (IEEE TSP 46(5), 1998) give the Fisher information ``J_k`` of
-``x_k`` by the recursion (J_0 = P0^{-1}, P0 the prior covariance of the truth)::
+For :math:`\mathbf{x}_{k+1} = f(\mathbf{x}_k) + \mathbf{w}_k`,
+:math:`\mathbf{w}_k \sim \mathcal{N}(0, Q)` and
+:math:`\mathbf{z}_k = h(\mathbf{x}_k) + \mathbf{v}_k`, :math:`\mathbf{v}_k \sim \mathcal{N}(0, R)`,
+Tichavsky, Muravchik and Nehorai (IEEE TSP 46(5), 1998) give the Fisher information
+:math:`J_k` of :math:`\mathbf{x}_k` by the recursion (:math:`J_0 = P_0^{-1}`, :math:`P_0` the
+prior covariance of the truth)
 
-    J_{k+1} = D22 - D21 (J_k + D11)^{-1} D12
-    D11 = E[F^T Q^{-1} F],  D12 = D21^T = -E[F^T] Q^{-1},  D22 = Q^{-1} + E[H^T R^{-1} H]
+.. math::
 
-with ``F = df/dx (x_k)`` and ``H = dh/dx (x_{k+1})`` at the true states. The bound is
-``E[(xhat_k - x_k)(xhat_k - x_k)^T] >= J_k^{-1}`` for every estimator. The expectations are
+    J_{k+1} &= D^{22} - D^{21} (J_k + D^{11})^{-1} D^{12}, \\
+    D^{11} &= E[F^\top Q^{-1} F], \qquad D^{12} = (D^{21})^\top = -E[F^\top]\, Q^{-1}, \qquad
+    D^{22} = Q^{-1} + E[H^\top R^{-1} H]
+
+with :math:`F = \partial f / \partial \mathbf{x}\,(\mathbf{x}_k)` and
+:math:`H = \partial h / \partial \mathbf{x}\,(\mathbf{x}_{k+1})` at the true states. The bound
+holds for every estimator :math:`\hat{\mathbf{x}}_k`:
+
+.. math::
+
+    E\bigl[(\hat{\mathbf{x}}_k - \mathbf{x}_k)(\hat{\mathbf{x}}_k - \mathbf{x}_k)^\top\bigr]
+        \succeq J_k^{-1}
+
+The expectations are
 means over a batch of simulated truths: the first axis of ``truths`` (shape ``(runs, ..., n)``)
 is the Monte Carlo axis that is averaged; further axes (targets, scenarios) are kept, so the
 bound has shape ``(..., n, n)``.
@@ -16,10 +30,15 @@ bound has shape ``(..., n, n)``.
 Which form is used (``form="auto"``):
 
 * **covariance form**, when F and Q are the same for every run (linear motion, or one truth):
-  by the matrix inversion lemma the recursion equals ``J_{k+1} = (F J_k^{-1} F^T + Q)^{-1} +
-  E[H^T R^{-1} H]``, the information filter. It needs no ``Q^{-1}``, so it is exact for a zero
-  or singular Q as long as ``F J_k^{-1} F^T + Q`` is invertible (F invertible suffices); for
-  ``Q = 0`` it is ``J_{k+1} = F^{-T} J_k F^{-1} + E[H^T R^{-1} H]``. For a linear-Gaussian
+  by the matrix inversion lemma the recursion equals the information filter,
+
+  .. math::
+
+      J_{k+1} = (F J_k^{-1} F^\top + Q)^{-1} + E[H^\top R^{-1} H]
+
+  It needs no :math:`Q^{-1}`, so it is exact for a zero or singular Q as long as
+  :math:`F J_k^{-1} F^\top + Q` is invertible (F invertible suffices); for :math:`Q = 0` it is
+  :math:`J_{k+1} = F^{-\top} J_k F^{-1} + E[H^\top R^{-1} H]`. For a linear-Gaussian
   problem the bound is the Kalman filter's covariance.
 * **information form** (the recursion above, expectations over runs), when F or Q vary over
   the runs and every Q is positive definite. Q is treated as independent of the state (its

@@ -53,6 +53,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
+#: The caveat shown with the IMO manoeuvring criteria: they apply to ships of 100 m and over.
 IMO_NOTE = ("IMO MSC.137(76) applies to ships of 100 m and over; for a craft this small it is "
             "shown for reference only")
 

@@ -1,12 +1,24 @@
-"""Streamed Monte Carlo metrics: per-step sums over runs, mergeable exactly across chunks.
+r"""Streamed Monte Carlo metrics: per-step sums over runs, mergeable exactly across chunks.
 
 ``MonteCarloMetrics`` keeps, for every time step k, the sums over runs of
 
-* the squared error ``|e_g|^2`` of each error group g (``e = x_true - x_hat``, angle state
-  components wrapped), giving ``MSE_k = sum |e_g|^2 / N_k`` and ``RMSE_k = sqrt(MSE_k)``;
-* the NEES ``e^T P^{-1} e`` (P the estimate covariance), giving the average NEES;
-* the NIS ``r^T S^{-1} r`` of the innovations (rows with a ``nan`` residual, i.e. a missing
-  measurement, are not counted), giving the average NIS;
+* the squared error :math:`\lVert \mathbf{e}_g \rVert^2` of each error group g
+  (:math:`\mathbf{e} = \mathbf{x}_{\text{true}} - \hat{\mathbf{x}}`, angle state components
+  wrapped), giving, over the :math:`N_k` runs counted at step k,
+
+  .. math::
+
+      \mathrm{MSE}_k = \frac{1}{N_k} \sum_{\text{runs}} \lVert \mathbf{e}_g \rVert^2, \qquad
+      \mathrm{RMSE}_k = \sqrt{\mathrm{MSE}_k}
+
+* the NEES (P the estimate covariance), giving the average NEES;
+* the NIS of the innovations :math:`\mathbf{r}` with covariance S (rows with a ``nan``
+  residual, i.e. a missing measurement, are not counted), giving the average NIS:
+
+  .. math::
+
+      \mathrm{NEES} = \mathbf{e}^\top P^{-1} \mathbf{e}, \qquad
+      \mathrm{NIS} = \mathbf{r}^\top S^{-1} \mathbf{r}
 
 and the counts N_k and chi-square degrees of freedom behind them. Nothing is kept per run and
 step beyond a window of a few thousand run-steps: memory is O(steps) plus three small per-run
@@ -14,7 +26,13 @@ counters for the divergence rule.
 
 Consistency bounds: if the filter is consistent, N times the average NEES of N independent
 runs is chi-square with N n degrees of freedom, so the two-sided ``confidence`` interval of the
-average is ``[chi2.ppf(a/2, N n) / N, chi2.ppf(1 - a/2, N n) / N]`` with ``a = 1 - confidence``
+average is, with :math:`a = 1 - \text{confidence}` and :math:`F^{-1}_{\chi^2_\nu}` the
+chi-square quantile (``chi2.ppf``),
+
+.. math::
+
+    \Bigl[\tfrac1N F^{-1}_{\chi^2_{Nn}}(a/2), \;\; \tfrac1N F^{-1}_{\chi^2_{Nn}}(1 - a/2)\Bigr]
+
 (likewise NIS with the measurement dimension m; see ``chi2_bounds``).
 
 Summation, and what is bit-identical. One accumulator takes one fixed batch of runs (in the

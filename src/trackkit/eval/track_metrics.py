@@ -1,4 +1,4 @@
-"""Multi-target metrics: OSPA, GOSPA and track-level counts, over ragged per-step point sets.
+r"""Multi-target metrics: OSPA, GOSPA and track-level counts, over ragged per-step point sets.
 
 Input format (``Frames``): the point sets of S steps are stacked as one ragged array, step s
 holding rows ``offsets[s]:offsets[s + 1]`` of ``x (N, d)`` (and of ``ids (N,)``, the integer
@@ -7,30 +7,38 @@ the R K steps of R runs laid one run after another; the distances are computed p
 the track counts per run (``run_offsets``), each independently of what else is in the batch,
 so a result is bit-identical however runs are chunked.
 
-Distances between a truth set X = {x_1..x_n} and an estimate set Y = {y_1..y_m}, cut-off
-c > 0, order 1 <= p < inf, d(x, y) = |x - y| (Euclidean), d_c = min(d, c). Both share one
-assignment problem,
+Distances between a truth set :math:`X = \{\mathbf{x}_1, \dots, \mathbf{x}_n\}` and an
+estimate set :math:`Y = \{\mathbf{y}_1, \dots, \mathbf{y}_m\}`, cut-off :math:`c > 0`, order
+:math:`1 \le p < \infty`, :math:`d(\mathbf{x}, \mathbf{y}) = \lVert \mathbf{x} - \mathbf{y}
+\rVert` (Euclidean), :math:`d_c = \min(d, c)`. Both share one assignment problem, over the
+one-to-one partial assignments :math:`\gamma` of truths to estimates,
 
-    A = min over one-to-one partial assignments g of  sum_{(i,j) in g} d_c(x_i, y_j)^p
-        + c^p (min(n, m) - |g|)
+.. math::
+
+    A = \min_\gamma \sum_{(i,j) \in \gamma} d_c(\mathbf{x}_i, \mathbf{y}_j)^p
+        + c^p \bigl(\min(n, m) - |\gamma|\bigr)
 
 (a pair at distance >= c costs the same as leaving both points unassigned, so only pairs
-within c are ever assigned; ``assigned`` = k is the number of those). With L the sum of
-d(x_i, y_j)^p over the k assigned pairs:
+within c are ever assigned; ``assigned`` = k is the number of those). With
+:math:`L = \sum d(\mathbf{x}_i, \mathbf{y}_j)^p` over the k assigned pairs:
 
-* GOSPA, alpha = 2 (Rahmathullah, Garcia-Fernandez & Svensson 2017)::
+* GOSPA, :math:`\alpha = 2` (Rahmathullah, Garcia-Fernandez & Svensson 2017), localisation
+  plus missed plus false (the parts are in units of :math:`d^p`):
 
-      GOSPA^p = L + c^p/2 (n - k) + c^p/2 (m - k)
-              = localisation + missed + false          (the parts are in units of d^p)
+  .. math::
 
-* OSPA (Schuhmacher, Vo & Vo 2008), n or m > 0::
+      \mathrm{GOSPA}^p = L + \frac{c^p}{2} (n - k) + \frac{c^p}{2} (m - k)
 
-      OSPA^p = (A + c^p |m - n|) / max(n, m)
-             = localisation + missed + false,   localisation = A / max(n, m),
-               missed = c^p max(n - m, 0) / max(n, m),  false = c^p max(m - n, 0) / max(n, m)
+* OSPA (Schuhmacher, Vo & Vo 2008), n or m > 0, again localisation plus missed plus false:
+
+  .. math::
+
+      \mathrm{OSPA}^p = \frac{A + c^p\, |m - n|}{\max(n, m)}
+          = \frac{A}{\max(n, m)} + \frac{c^p \max(n - m, 0)}{\max(n, m)}
+          + \frac{c^p \max(m - n, 0)}{\max(n, m)}
 
   (the paper's components are ``localisation^(1/p)`` and ``(missed + false)^(1/p)``);
-  OSPA({}, {}) = 0.
+  :math:`\mathrm{OSPA}(\emptyset, \emptyset) = 0`.
 
 p = inf is not supported. The parts are p-th powers so that they add up (and sum exactly
 over Monte Carlo runs). Stone Soup's ``GOSPAMetric`` reports the same parts (its
@@ -138,7 +146,7 @@ class TrackCounts(NamedTuple):
     breaks: IntArray  #: a truth's track ends, and the truth is later assigned another track
     truth_switches: IntArray  #: changes of a truth's assigned track ID (breaks included)
     id_switches: IntArray  #: changes of a track's assigned truth ID
-    sq_error: Array  #: sum over assigned pairs of |x_track - x_truth|^2
+    sq_error: Array  #: sum over assigned pairs of ``|x_track - x_truth|^2``
 
 
 # ---------------------------------------------------------------------------------------------
@@ -694,7 +702,7 @@ def track_counts(
       associates by distance, several tracks per truth; here one-to-one per step);
     * along each track's assigned steps, an *ID switch* is a change of its truth ID (the track
       ID moving from one truth to another; MATLAB's swap count);
-    * ``sq_error`` sums |x_track - x_truth|^2 over assigned pairs (RMSE = sqrt(sq_error /
+    * ``sq_error`` sums ``|x_track - x_truth|^2`` over assigned pairs (RMSE = sqrt(sq_error /
       assigned_steps)), and ``assigned_steps / truth_steps`` is SIAP's completeness.
 
     ``assignment``: the rows ``(i, j)`` that ``assign(truth, tracks, c, p)`` returned, when the

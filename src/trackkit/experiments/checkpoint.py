@@ -48,8 +48,10 @@ from trackkit.experiments import safestore
 __all__ = ["CampaignStore", "CampaignMismatch", "CheckpointError", "atomic_write",
            "code_version", "MANIFEST", "POINTS_DIR", "STORE_FORMAT"]
 
+#: The file of a campaign directory holding the campaign's identity.
 MANIFEST = "campaign.json"
 SCENARIO_TOML = "scenario.toml"
+#: The folder of a campaign directory holding one folder per point.
 POINTS_DIR = "points"
 POINT_JSON = "point.json"
 RESULT_JSON = "result.json"

@@ -18,6 +18,7 @@ from typing import Any
 
 __all__ = ["execute", "dask_client", "PROGRESS_TOPIC"]
 
+#: The Dask event topic on which workers report the progress of their tasks.
 PROGRESS_TOPIC = "trackkit-progress"
 
 Task = list[int]

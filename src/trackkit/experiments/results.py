@@ -39,7 +39,7 @@ class FilterResult:
     #: missing measurements (scenario [gaps], filter gaps handlers): "handler" (label or
     #: None), per-run sums of squared errors per group over the gap steps "gap_sse" and the
     #: steps after them "after_sse" ({group: (runs,)}), "pseudo_steps" (steps,) the runs fed
-    #: a pseudo-measurement at each step; see :class:`GapReport`
+    #: a pseudo-measurement at each step; see :func:`~trackkit.report.tables.gap_summary`
     gaps: dict = field(default_factory=dict)
     #: a filter that classifies (JTC, MultiFilterJTC): "names" its classes, "mean" (steps, C)
     #: each class's probability per step averaged over runs, "final" (runs, C) each run's last

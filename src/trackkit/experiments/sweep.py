@@ -82,6 +82,7 @@ __all__ = ["Param", "Point", "Campaign", "BlockFailed", "Listener", "parse_param
            "run_campaign", "point_document", "truth_values", "factor_of", "DESIGNS",
            "ATTEMPTS"]
 
+#: The campaign designs: the full grid, uniform random points, a Latin hypercube.
 DESIGNS = ("grid", "random", "lhs")
 #: times a block is tried before the campaign stops
 ATTEMPTS = 3

@@ -556,8 +556,9 @@ def inputs_at_substeps(inputs: MeasuredInputs, t: Array, dt: float, substeps: in
 
 def _inputs_resolve_substeps(inputs: MeasuredInputs, dt: float) -> bool:
     """Whether the inputs are logged at least every ``dt / 5`` (median interval): fine enough
-    to follow the nozzle's starts and stops between grid samples."""
-    return inputs.t.size > 1 and float(np.median(np.diff(inputs.t))) <= dt / 5
+    to follow the nozzle's starts and stops between grid samples. A log at exactly ``dt / 5``
+    counts, whatever the rounding of its times' differences (0.2 s as 0.20000000000000107)."""
+    return inputs.t.size > 1 and float(np.median(np.diff(inputs.t))) <= dt / 5 * (1 + 1e-9)
 
 
 def identify_recorded(m: BodyMeasurements, inputs: MeasuredInputs, *, filter: str = "ekf",

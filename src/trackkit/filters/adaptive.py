@@ -1,11 +1,17 @@
-"""Adaptive filters of Hashemi and Alfi (2019) (Doppler-bearing tracking):
+r"""Adaptive filters of Hashemi and Alfi (2019) (Doppler-bearing tracking):
 the modified-covariance EKF, its second-order Jacobian term, the innovation-based R and the
 new Q adaptation (the proposed AMCEKF), and a Sage-Husa adaptive EKF as the paper's
 baseline [16].
 
-Notation follows the paper: prediction ``x- = x(t|t-1)``, ``P- = P(t|t-1)``; update
-``x+ = x(t|t)``, ``P+ = P(t|t)``; innovation ``nu = z - h(x-)`` (bearing wrapped to (-pi, pi]
-by ``sensor.residual``), ``S = H P- H^T + R``. Equation numbers are the paper's.
+Notation follows the paper: prediction :math:`\mathbf{x}^- = \mathbf{x}(t|t-1)`,
+:math:`P^- = P(t|t-1)`; update :math:`\mathbf{x}^+ = \mathbf{x}(t|t)`, :math:`P^+ = P(t|t)`;
+innovation and its covariance (the bearing wrapped to (-pi, pi] by ``sensor.residual``)
+
+.. math::
+
+    \nu = \mathbf{z} - h(\mathbf{x}^-), \qquad S = H P^- H^\top + R
+
+Equation numbers are the paper's.
 
 Memory lives in the belief: :class:`AdaptiveBelief` for the AMCEKF (R and Q scale factors and
 the innovation window), :class:`SageHusaBelief` for the AEKF (the estimated R and Q). Build it
@@ -119,16 +125,20 @@ class SageHusaBelief(NamedTuple):
 
 
 def second_order_jacobian(sensor: SensorModel, x: Array) -> Array:
-    """The paper's eq. 12 "Jacobian with a second-order term", read element-wise:
+    r"""The paper's eq. 12 "Jacobian with a second-order term", read element-wise:
 
-    ``H_ij = dh_i/dx_j + 1/2 d2h_i/dx_j^2``, i.e. ``J_h(x) + 1/2 diag(Hess h_i(x))`` row by row,
-    which keeps the m x n shape. The paper writes ``H = dh/dx + d2h/(2 dx^2)`` without saying
-    how the second derivative becomes an m x n matrix; this is
-    the most plausible reading. It is NOT the second-order EKF of Athans, Wishner and Bertolini
-    (``EKF(order=2)``), which corrects the predicted measurement and S with the full Hessians.
-    Note that the added term is not dimensionally a derivative: it is the paper's heuristic.
-    For the DBT sensor at a few km it is about 1e-4 of the Jacobian's entries, so its effect
-    on the estimates is negligible there.
+    .. math::
+
+        H_{ij} = \frac{\partial h_i}{\partial x_j}
+            + \frac12 \frac{\partial^2 h_i}{\partial x_j^2}
+
+    i.e. ``J_h(x) + 1/2 diag(Hess h_i(x))`` row by row, which keeps the m x n shape. The paper
+    writes ``H = dh/dx + d2h/(2 dx^2)`` without saying how the second derivative becomes an m x
+    n matrix; this is the most plausible reading. It is NOT the second-order EKF of Athans,
+    Wishner and Bertolini (``EKF(order=2)``), which corrects the predicted measurement and S
+    with the full Hessians. Note that the added term is not dimensionally a derivative: it is
+    the paper's heuristic. For the DBT sensor at a few km it is about 1e-4 of the Jacobian's
+    entries, so its effect on the estimates is negligible there.
     """
     J = np.asarray(sensor.jacobian(x))
     Hs = np.asarray(sensor.hessian(x))
@@ -156,10 +166,15 @@ def _mc_update(x: Array, P: Array, r: Array, H: Array, R: Array, sensor: SensorM
 
 
 def window_covariance(residuals: Array, count: ArrayLike) -> Array:
-    """Eq. 15, ``C_r(t) = (1/N) sum_{i=t-N+1}^{t} r_i r_i^T``, from the ring buffer.
+    r"""Eq. 15, from the ring buffer:
+
+    .. math::
+
+        C_r(t) = \frac1N \sum_{i=t-N+1}^{t} \mathbf{r}_i \mathbf{r}_i^\top
 
     Before N innovations have been seen, the average is over the k = count available ones,
-    ``C_r = (1/k) sum_{i=1}^{k} r_i r_i^T`` (empty slots hold zeros); ``count = 0`` gives 0.
+    :math:`C_r = \frac1k \sum_{i=1}^{k} \mathbf{r}_i \mathbf{r}_i^\top` (empty slots hold
+    zeros); ``count = 0`` gives 0.
     """
     N = residuals.shape[-2]
     k = np.maximum(np.minimum(np.asarray(count), N), 1)
@@ -200,8 +215,13 @@ def push_innovation(residuals: Array, count: ArrayLike, r: Array, keep: Array, w
 
 
 def r_factor(residuals: Array, count: ArrayLike, S: Array) -> Array:
-    """Eq. 18, ``alpha(t) = trace(C_r(t)) / trace(S(t))`` with C_r of eq. 15
-    (:func:`window_covariance`): the innovation-covariance matching ratio (eq. 17)."""
+    r"""Eq. 18, the innovation-covariance matching ratio (eq. 17), with :math:`C_r` of eq. 15
+    (:func:`window_covariance`):
+
+    .. math::
+
+        \alpha(t) = \frac{\operatorname{tr} C_r(t)}{\operatorname{tr} S(t)}
+    """
     N = residuals.shape[-2]
     k = np.maximum(np.minimum(np.asarray(count), N), 1)
     tr_C = (residuals * residuals).sum((-2, -1)) / k
@@ -219,7 +239,7 @@ def _mean_square(delta: Array, inverse: bool) -> Array:
 
 def q_factor(delta: Array, P: Array, form: str = "normalised", K: Array | None = None,
              H: Array | None = None) -> Array:
-    """The Q factor lambda(t) of eq. 21 from ``delta = x+ - x-`` (eq. 20).
+    r"""The Q factor lambda(t) of eq. 21 from ``delta = x+ - x-`` (eq. 20).
 
     - ``"mean-square"``: ``lambda = (1/n) sum_i delta_i^2``, the most literal reading of the
       garbled eq. 21. It has units (m^2, (m/s)^2, Hz^2 mixed), so ``Q <- lambda Q``
@@ -227,11 +247,17 @@ def q_factor(delta: Array, P: Array, form: str = "normalised", K: Array | None =
     - ``"inverse-mean-square"``: ``lambda = 1 / ((1/n) sum_i delta_i^2)``, the other reading
       allowed by the extra "1" token in the printed equation; as unit-laden as the first.
     - ``"normalised"`` (default): ``lambda = delta^T P-^{-1} delta / tr(K H)``. Dimensionless,
-      and equal to 1 on average for a consistent filter: ``delta = K r`` with
-      ``E[r r^T] = S`` gives ``E[delta^T P-^{-1} delta] = tr(P-^{-1} K S K^T)
-      = tr(S^{-1} H P- H^T) = tr(K H) = m - tr(S^{-1} R)`` (at most m, not n). So Q grows when
-      the estimate moves more than P- predicts and shrinks when it moves less. Needs the
-      state-update gain K and Jacobian H.
+      and equal to 1 on average for a consistent filter: :math:`\delta = K \mathbf{r}` with
+      :math:`E[\mathbf{r} \mathbf{r}^\top] = S` gives (at most m, not n)
+
+      .. math::
+
+          E[\delta^\top (P^-)^{-1} \delta] = \operatorname{tr}\bigl((P^-)^{-1} K S K^\top\bigr)
+              = \operatorname{tr}(S^{-1} H P^- H^\top) = \operatorname{tr}(K H)
+              = m - \operatorname{tr}(S^{-1} R)
+
+      So Q grows when the estimate moves more than P- predicts and shrinks when it moves
+      less. Needs the state-update gain K and Jacobian H.
     - ``"normalised-n"``: ``lambda = (1/n) delta^T P-^{-1} delta``. Dimensionless, but its mean
       is ``tr(K H)/n <= m/n`` (2/5 for DBT), so it drives Q down to its lower bound; kept for
       comparison only.
@@ -269,8 +295,13 @@ def _q_factor_update(form: str, delta: Array, r: Array, S: Array, R: Array) -> A
 
 
 def sage_husa_weight(b: float, k: ArrayLike) -> Array:
-    """Fading-memory weight of the k-th update (k = 0, 1, ...):
-    ``d_k = (1 - b) / (1 - b^(k+1))``, so ``d_0 = 1`` and ``d_k -> 1 - b``."""
+    r"""Fading-memory weight of the k-th update (k = 0, 1, ...),
+
+    .. math::
+
+        d_k = \frac{1 - b}{1 - b^{k+1}}
+
+    so :math:`d_0 = 1` and :math:`d_k \to 1 - b`."""
     k = np.asarray(k)
     return (1.0 - b) / (1.0 - b ** (k + 1.0))
 
@@ -320,16 +351,18 @@ def _keep_mask(miss: Array | None, batch: tuple[int, ...]) -> Array:
 
 
 class MCEKF(Linearised):
-    """Modified-covariance EKF (Hashemi and Alfi 2019, eqs. 10-11).
+    r"""Modified-covariance EKF (Hashemi and Alfi 2019, eqs. 10-11).
 
-    Prediction as the EKF: ``x- = f(x)``, ``P- = F P F^T + Q``. Update::
+    Prediction as the EKF: :math:`\mathbf{x}^- = f(\mathbf{x})`, :math:`P^- = F P F^\top + Q`.
+    Update (eq. 9; eq. 10 re-linearises at the update; eq. 11), with :math:`J_h` the Jacobian
+    of h:
 
-        H  = J_h(x-)                          (eq. 9)
-        K  = P- H^T (H P- H^T + R)^{-1}
-        x+ = x- + K (z - h(x-))
-        H+ = J_h(x+)                          (eq. 10: re-linearised at the update)
-        K+ = P- H+^T (H+ P- H+^T + R)^{-1}
-        P+ = (I - K+ H+) P- (I - K+ H+)^T + K+ R K+^T      (eq. 11)
+    .. math::
+
+        H &= J_h(\mathbf{x}^-), \qquad K = P^- H^\top (H P^- H^\top + R)^{-1}, \qquad
+        \mathbf{x}^+ = \mathbf{x}^- + K \bigl(\mathbf{z} - h(\mathbf{x}^-)\bigr), \\
+        H^+ &= J_h(\mathbf{x}^+), \qquad K^+ = P^- H^{+\top} (H^+ P^- H^{+\top} + R)^{-1}, \\
+        P^+ &= (I - K^+ H^+) P^- (I - K^+ H^+)^\top + K^+ R K^{+\top}
 
     The paper prints the innovation as ``z - H x-``; for a nonlinear h the meaningful
     innovation is ``z - h(x-)``, used here (bearing wrapped). The paper writes eq. 11 as
@@ -373,19 +406,22 @@ class MCEKF(Linearised):
 
 
 class AMCEKF(Filter):
-    """Adaptive modified-covariance EKF, the filter proposed by Hashemi and Alfi (2019).
+    r"""Adaptive modified-covariance EKF, the filter proposed by Hashemi and Alfi (2019).
 
     MC-EKF update (eqs. 10-13, :class:`MCEKF`) with ``R_t = r_scale R0`` and
-    ``Q_t = q_scale Q0``, then, per row with a measurement::
+    ``Q_t = q_scale Q0``, then, per row with a measurement (eqs. 14-16, 18-21; lambda as
+    ``q_form`` says, :func:`q_factor`):
 
-        r      = z - h(x-)                                  (14)
-        C_r    = (1/N) sum_{i=t-N+1}^{t} r_i r_i^T          (15)
-        S      = H P- H^T + R(t)                            (16)
-        alpha  = trace(C_r) / trace(S)                      (18)
-        R(t+1) = alpha R(t)        i.e. r_scale <- alpha r_scale           (19)
-        delta  = x+ - x- = K r                              (20)
-        lambda = see q_form                                  (21)
-        Q(t+1) = lambda Q(t)       i.e. q_scale <- lambda q_scale          (21)
+    .. math::
+
+        \mathbf{r} &= \mathbf{z} - h(\mathbf{x}^-), \qquad
+        C_r = \frac1N \sum_{i=t-N+1}^{t} \mathbf{r}_i \mathbf{r}_i^\top, \qquad
+        S = H P^- H^\top + R(t), \\
+        \alpha &= \frac{\operatorname{tr} C_r}{\operatorname{tr} S}, \qquad
+        R(t+1) = \alpha R(t) \quad (\texttt{r\_scale} \leftarrow \alpha\, \texttt{r\_scale}),
+        \\
+        \delta &= \mathbf{x}^+ - \mathbf{x}^- = K \mathbf{r}, \qquad
+        Q(t+1) = \lambda Q(t) \quad (\texttt{q\_scale} \leftarrow \lambda\, \texttt{q\_scale})
 
     Both updates compound, as in the paper; alpha and lambda from step t apply from step t+1.
 
@@ -514,24 +550,31 @@ class AMCEKF(Filter):
 
 
 class AEKF(Filter):
-    """Adaptive EKF baseline (stands for the paper's ref. [16]): the Sage-Husa noise
+    r"""Adaptive EKF baseline (stands for the paper's ref. [16]): the Sage-Husa noise
     estimator with fading memory.
 
     The paper's [16] tunes Q and R online by steepest descent but gives no equations, so
     any documented adaptive EKF will do. This is the widely used
     Sage-Husa estimator (A. P. Sage and G. W. Husa, "Adaptive filtering with unknown prior
     statistics", Proc. JACC, 1969) with the exponential forgetting factor b. At the k-th
-    update of a row (k = 0, 1, ...), with nu = z - h(x-), H = J_h(x-)::
+    update of a row (k = 0, 1, ...), with :math:`\nu = \mathbf{z} - h(\mathbf{x}^-)` and
+    :math:`H = J_h(\mathbf{x}^-)` (the covariance in Joseph form):
 
-        d_k   = (1 - b) / (1 - b^(k+1))
-        R_k   = (1 - d_k) R_{k-1} + d_k (nu nu^T - H P- H^T)
-        S     = H P- H^T + R_k,   K = P- H^T S^{-1},   x+ = x- + K nu
-        P+    = (I - K H) P- (I - K H)^T + K R_k K^T                      (Joseph)
+    .. math::
 
-    and, with ``adapt_q=True``, using ``F P F^T = P- - Q_{k-1}``::
+        d_k &= \frac{1 - b}{1 - b^{k+1}}, \qquad
+        R_k = (1 - d_k) R_{k-1} + d_k (\nu \nu^\top - H P^- H^\top), \\
+        S &= H P^- H^\top + R_k, \qquad K = P^- H^\top S^{-1}, \qquad
+        \mathbf{x}^+ = \mathbf{x}^- + K \nu, \\
+        P^+ &= (I - K H) P^- (I - K H)^\top + K R_k K^\top
 
-        Q_k   = (1 - d_k) Q_{k-1} + d_k (K nu nu^T K^T + P+ - F P F^T)
-              = Q_{k-1} + d_k (delta delta^T + P+ - P-),   delta = x+ - x-
+    and, with ``adapt_q=True``, using :math:`F P F^\top = P^- - Q_{k-1}` and
+    :math:`\delta = \mathbf{x}^+ - \mathbf{x}^-`:
+
+    .. math::
+
+        Q_k &= (1 - d_k) Q_{k-1} + d_k (K \nu \nu^\top K^\top + P^+ - F P F^\top) \\
+            &= Q_{k-1} + d_k (\delta \delta^\top + P^+ - P^-)
 
     used by the next prediction ``P- = F P F^T + Q_k``. R_{-1} = ``sensor.noise`` and
     Q_{-1} = ``motion.noise`` of the first prediction (the estimated Q then replaces the

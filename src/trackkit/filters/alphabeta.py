@@ -1,20 +1,28 @@
-"""Constant-gain trackers of the missing-measurements thesis (sections 2-1 to 2-4): the alpha-beta
-and alpha-beta-gamma filters, their gain designers, variance-reduction ratios, steady-state
-covariances and stability tests.
+r"""Constant-gain trackers of the missing-measurements thesis (sections 2-1 to 2-4): the
+alpha-beta and alpha-beta-gamma filters, their gain designers, variance-reduction ratios,
+steady-state covariances and stability tests.
 
 Each position coordinate is filtered on its own with the same gains. Per coordinate, with
-scan period dt, measured position ``x0(n)``, predicted ``x_p(n)`` and smoothed ``x_s(n)``
-(thesis eqs. 2-4..2-6 and 2-33..2-36)::
+scan period :math:`\Delta t`, measured position :math:`x_0(n)`, predicted :math:`x_p(n)` and
+smoothed :math:`x_s(n)` (thesis eqs. 2-4..2-6 and 2-33..2-36; the acceleration line is the
+alpha-beta-gamma filter's only):
 
-    r(n)      = x0(n) - x_p(n)
-    x_s(n)    = x_p(n) + alpha r(n)
-    v_s(n)    = v_s(n-1) + dt a_s(n-1) + (beta / dt) r(n)
-    a_s(n)    = a_s(n-1) + (2 gamma / dt^2) r(n)                   (alpha-beta-gamma only)
-    x_p(n+1)  = x_s(n) + dt v_s(n) + (dt^2 / 2) a_s(n)
+.. math::
 
-In matrix form (2-1..2-3, 2-13..2-16, 2-41..2-44) ``x(n|n) = A x(n-1|n-1) + K y(n)`` with
-``A = (I - K G) Phi``, ``G = [1 0 (0)]``, ``Phi`` the polynomial transition and
-``K = [alpha, beta/dt, 2 gamma/dt^2]^T``.
+    r(n) &= x_0(n) - x_p(n) \\
+    x_s(n) &= x_p(n) + \alpha\, r(n) \\
+    v_s(n) &= v_s(n-1) + \Delta t\, a_s(n-1) + \frac{\beta}{\Delta t}\, r(n) \\
+    a_s(n) &= a_s(n-1) + \frac{2 \gamma}{\Delta t^2}\, r(n) \\
+    x_p(n+1) &= x_s(n) + \Delta t\, v_s(n) + \frac{\Delta t^2}{2}\, a_s(n)
+
+In matrix form (2-1..2-3, 2-13..2-16, 2-41..2-44), with :math:`\Phi` the polynomial
+transition:
+
+.. math::
+
+    \mathbf{x}(n|n) = A\, \mathbf{x}(n-1|n-1) + K\, y(n), \qquad A = (I - K G)\, \Phi, \qquad
+    G = [1 \;\; 0 \;\; (0)], \qquad
+    K = \Bigl[\alpha, \;\frac{\beta}{\Delta t}, \;\frac{2\gamma}{\Delta t^2}\Bigr]^\top
 
 **One gamma convention for the whole module: the acceleration gain is 2 gamma / dt^2**
 (eq. 2-35, the thesis's characteristic polynomial 2-49, Brookner's g-h-k filter and
@@ -27,9 +35,14 @@ in this convention too.
 Memory lives in the belief (:class:`AlphaBetaBelief`): the scan count ``k`` (for the
 start-up rules and Simpson's gains) and ``tau``, the time since the row's last update (the dt
 of the next update's gains). The belief also carries the exact covariance of the
-constant-gain estimator, ``P- = F P F^T + Q`` and the Joseph form
-``P+ = (I - K H) P- (I - K H)^T + K R K^T`` (valid for any gain), so NEES and NIS are
-meaningful; with Q = 0 and noise-only input P converges to :func:`steady_state_cov`.
+constant-gain estimator, the prediction and the Joseph form (valid for any gain),
+
+.. math::
+
+    P^- = F P F^\top + Q, \qquad P^+ = (I - K H) P^- (I - K H)^\top + K R K^\top
+
+so NEES and NIS are meaningful; with Q = 0 and noise-only input P converges to
+:func:`steady_state_cov`.
 """
 
 from __future__ import annotations
@@ -126,7 +139,11 @@ def kohn() -> tuple[float, float]:
 
 
 def benedict_bordner(alpha: ArrayLike) -> Array | float:
-    """Benedict-Bordner beta for a given alpha (eq. 2-24): ``beta = alpha^2 / (2 - alpha)``.
+    r"""Benedict-Bordner beta for a given alpha (eq. 2-24):
+
+    .. math::
+
+        \beta = \frac{\alpha^2}{2 - \alpha}
 
     It minimises the noise VRR plus the transient error to a velocity step. ``0 < alpha < 2``;
     the pair is stable only for ``alpha < 4 - 2 sqrt(2) = 1.1716``.
@@ -138,10 +155,12 @@ def benedict_bordner(alpha: ArrayLike) -> Array | float:
 
 
 def benedict_bordner_gamma(alpha: ArrayLike, beta: ArrayLike) -> Array | float:
-    """Benedict-Bordner gamma of the alpha-beta-gamma filter, from eq. 2-50
-    ``2 beta - alpha (alpha + beta + gamma/2) = 0`` solved for gamma::
+    r"""Benedict-Bordner gamma of the alpha-beta-gamma filter, from eq. 2-50
+    :math:`2 \beta - \alpha (\alpha + \beta + \gamma / 2) = 0` solved for gamma:
 
-        gamma = 4 beta / alpha - 2 alpha - 2 beta
+    .. math::
+
+        \gamma = \frac{4 \beta}{\alpha} - 2 \alpha - 2 \beta
 
     in the module's convention (acceleration gain 2 gamma / dt^2, the convention of the
     characteristic polynomial 2-49 that the thesis states beside it). With gamma = 0 the
@@ -161,9 +180,11 @@ def _check_xi(xi: ArrayLike) -> Array:
 
 
 def fading_memory(xi: ArrayLike) -> tuple[Array | float, Array | float]:
-    """Critically damped (fading-memory) alpha-beta gains (eqs. 2-27, 2-28)::
+    r"""Critically damped (fading-memory) alpha-beta gains (eqs. 2-27, 2-28):
 
-        alpha = 1 - xi^2,   beta = (1 - xi)^2
+    .. math::
+
+        \alpha = 1 - \xi^2, \qquad \beta = (1 - \xi)^2
 
     Both roots of the characteristic polynomial are at ``z = xi``. ``0 <= xi <= 1``: xi -> 1
     smooths heavily, xi = 0 is the dead-beat filter (the line through the last two points).
@@ -173,10 +194,13 @@ def fading_memory(xi: ArrayLike) -> tuple[Array | float, Array | float]:
 
 
 def fading_memory_abg(xi: ArrayLike) -> tuple[Array | float, Array | float, Array | float]:
-    """Critically damped (fading-memory) alpha-beta-gamma gains, acceleration gain
-    2 gamma / dt^2::
+    r"""Critically damped (fading-memory) alpha-beta-gamma gains, acceleration gain
+    2 gamma / dt^2:
 
-        alpha = 1 - xi^3,   beta = 3/2 (1 - xi)^2 (1 + xi),   gamma = (1 - xi)^3 / 2
+    .. math::
+
+        \alpha = 1 - \xi^3, \qquad \beta = \tfrac32 (1 - \xi)^2 (1 + \xi), \qquad
+        \gamma = \tfrac12 (1 - \xi)^3
 
     Derivation: the characteristic polynomial (eq. 2-49)
     ``z^3 + (alpha + beta + gamma - 3) z^2 + (3 - 2 alpha - beta + gamma) z - (1 - alpha)``
@@ -201,9 +225,11 @@ def _check_k(k: ArrayLike) -> Array:
 
 
 def simpson(k: ArrayLike) -> tuple[Array | float, Array | float]:
-    """Simpson's time-varying alpha-beta gains (eq. 2-32), k = 1, 2, ...::
+    r"""Simpson's time-varying alpha-beta gains (eq. 2-32), k = 1, 2, ...:
 
-        alpha_k = 2 (2k - 1) / (k (k + 1)),   beta_k = 6 / (k (k + 1))
+    .. math::
+
+        \alpha_k = \frac{2 (2k - 1)}{k (k + 1)}, \qquad \beta_k = \frac{6}{k (k + 1)}
 
     With these gains the filter's position and velocity at scan k (k >= 2) are those of the
     least-squares straight line through all k measurements (growing memory): recursive
@@ -216,11 +242,13 @@ def simpson(k: ArrayLike) -> tuple[Array | float, Array | float]:
 
 
 def simpson_abg(k: ArrayLike) -> tuple[Array | float, Array | float, Array | float]:
-    """Growing-memory alpha-beta-gamma gains (acceleration gain 2 gamma / dt^2)::
+    r"""Growing-memory alpha-beta-gamma gains (acceleration gain 2 gamma / dt^2):
 
-        alpha_k = 3 (3k^2 - 3k + 2) / (k (k+1) (k+2))
-        beta_k  = 18 (2k - 1) / (k (k+1) (k+2))
-        gamma_k = 30 / (k (k+1) (k+2))
+    .. math::
+
+        \alpha_k = \frac{3 (3k^2 - 3k + 2)}{k (k+1) (k+2)}, \qquad
+        \beta_k = \frac{18 (2k - 1)}{k (k+1) (k+2)}, \qquad
+        \gamma_k = \frac{30}{k (k+1) (k+2)}
 
     Derivation: recursive least squares of a quadratic. With scan times ``i = 1..k`` and
     ``phi_i = (1, (i-k) dt, (i-k)^2 dt^2 / 2)``, the fit's (position, velocity, acceleration)
@@ -276,9 +304,12 @@ def in_stability_region(alpha: ArrayLike, beta: ArrayLike) -> NDArray[np.bool_] 
 
 def in_stability_region_abg(alpha: ArrayLike, beta: ArrayLike,
                             gamma: ArrayLike) -> NDArray[np.bool_] | bool:
-    """The alpha-beta-gamma stability region (acceleration gain 2 gamma / dt^2)::
+    r"""The alpha-beta-gamma stability region (acceleration gain 2 gamma / dt^2):
 
-        0 < alpha < 2,   0 < beta < 4 - 2 alpha,   0 < gamma < alpha beta / (2 - alpha)
+    .. math::
+
+        0 < \alpha < 2, \qquad 0 < \beta < 4 - 2 \alpha, \qquad
+        0 < \gamma < \frac{\alpha \beta}{2 - \alpha}
 
     The Jury conditions of eq. 2-49, ``f(z) = z^3 + a2 z^2 + a1 z + a0``: ``f(1) = 2 gamma
     > 0``, ``-f(-1) = 8 - 4 alpha - 2 beta > 0``, ``|a0| = |1 - alpha| < 1`` and
@@ -294,11 +325,15 @@ def in_stability_region_abg(alpha: ArrayLike, beta: ArrayLike,
 
 @renamed_keywords(T="dt")
 def vrr(alpha: ArrayLike, beta: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
-    """Steady-state VRR of the alpha-beta filter (eqs. 2-17..2-19)::
+    r"""Steady-state VRR of the alpha-beta filter (eqs. 2-17..2-19):
 
-        C / sigma^2 = 1 / (alpha (4 - 2 alpha - beta))
-                      [[2 alpha^2 - 3 alpha beta + 2 beta,  beta (2 alpha - beta) / dt],
-                       [beta (2 alpha - beta) / dt,         2 beta^2 / dt^2         ]]
+    .. math::
+
+        \frac{C}{\sigma^2} = \frac{1}{\alpha (4 - 2 \alpha - \beta)}
+        \begin{bmatrix}
+            2 \alpha^2 - 3 \alpha \beta + 2 \beta & \beta (2 \alpha - \beta) / \Delta t \\
+            \beta (2 \alpha - \beta) / \Delta t & 2 \beta^2 / \Delta t^2
+        \end{bmatrix}
 
     Batched over arrays of gains and dt; nan where the gains are outside the stability
     region (no steady state).
@@ -317,22 +352,25 @@ def vrr(alpha: ArrayLike, beta: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
 @renamed_keywords(T="dt")
 def vrr_abg(alpha: ArrayLike, beta: ArrayLike, gamma: ArrayLike,
             dt: ArrayLike = 1.0) -> VRR3:
-    """Steady-state VRR of the alpha-beta-gamma filter: eqs. 2-45..2-47 evaluated at
+    r"""Steady-state VRR of the alpha-beta-gamma filter: eqs. 2-45..2-47 evaluated at
     ``gamma' = 2 gamma`` (the thesis's formulas hold for an acceleration gain gamma'/dt^2;
     this module's gain is 2 gamma / dt^2), with the cross terms (derived from the discrete
-    Lyapunov equation ``C = A C A^T + K K^T sigma^2``)::
+    Lyapunov equation :math:`C = A C A^\top + K K^\top \sigma^2`), with :math:`s = \sigma^2`:
 
-        D        = (4 - 2 alpha - beta) (2 alpha beta + alpha gamma' - 2 gamma')
-        C_xx / s = [2 beta (2 alpha^2 + 2 beta - 3 alpha beta)
-                    - alpha gamma' (4 - 2 alpha - beta)] / D
-        C_vv / s = [4 beta^3 - 4 beta^2 gamma' + 2 gamma'^2 (2 - alpha)] / (dt^2 D)
-        C_aa / s = 4 beta gamma'^2 / (dt^4 D)
-        C_xv / s = beta (2 alpha - beta) (2 beta - gamma') / (dt D)
-        C_xa / s = gamma' (4 alpha beta + 2 alpha gamma' - 2 beta^2 + beta gamma'
-                           - 4 gamma') / (dt^2 D)
-        C_va / s = 2 beta gamma' (2 beta - gamma') / (dt^3 D)
+    .. math::
 
-    with ``s = sigma^2``. Batched; nan outside the stability region.
+        D &= (4 - 2 \alpha - \beta) (2 \alpha \beta + \alpha \gamma' - 2 \gamma') \\
+        C_{xx} / s &= \bigl[2 \beta (2 \alpha^2 + 2 \beta - 3 \alpha \beta)
+            - \alpha \gamma' (4 - 2 \alpha - \beta)\bigr] / D \\
+        C_{vv} / s &= \bigl[4 \beta^3 - 4 \beta^2 \gamma' + 2 \gamma'^2 (2 - \alpha)\bigr]
+            / (\Delta t^2 D) \\
+        C_{aa} / s &= 4 \beta \gamma'^2 / (\Delta t^4 D) \\
+        C_{xv} / s &= \beta (2 \alpha - \beta) (2 \beta - \gamma') / (\Delta t\, D) \\
+        C_{xa} / s &= \gamma' (4 \alpha \beta + 2 \alpha \gamma' - 2 \beta^2 + \beta \gamma'
+            - 4 \gamma') / (\Delta t^2 D) \\
+        C_{va} / s &= 2 \beta \gamma' (2 \beta - \gamma') / (\Delta t^3 D)
+
+    Batched; nan outside the stability region.
     """
     a = np.asarray(alpha, dtype=float)
     b = np.asarray(beta, dtype=float)
@@ -352,11 +390,16 @@ def vrr_abg(alpha: ArrayLike, beta: ArrayLike, gamma: ArrayLike,
 
 @renamed_keywords(T="dt")
 def benedict_bordner_vrr(alpha: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
-    """VRR of the Benedict-Bordner filter (beta = alpha^2 / (2 - alpha)) in closed form::
+    r"""VRR of the Benedict-Bordner filter (beta = alpha^2 / (2 - alpha)) in closed form
+    (eqs. 2-25 and 2-26; the cross term derived):
 
-        VRR(x)  = alpha (6 - 5 alpha) / (alpha^2 - 8 alpha + 8)                      (2-25)
-        VRR(v)  = [2 alpha^3 / (2 - alpha)] / (dt^2 (alpha^2 - 8 alpha + 8))           (2-26)
-        C_xv/s  = alpha^2 (4 - 3 alpha) / (dt (2 - alpha) (alpha^2 - 8 alpha + 8))   (derived)
+    .. math::
+
+        \mathrm{VRR}(x) &= \frac{\alpha (6 - 5 \alpha)}{\alpha^2 - 8 \alpha + 8}, \qquad
+        \mathrm{VRR}(v) = \frac{2 \alpha^3 / (2 - \alpha)}{\Delta t^2 (\alpha^2 - 8 \alpha + 8)},
+        \\
+        C_{xv} / s &= \frac{\alpha^2 (4 - 3 \alpha)}{\Delta t\, (2 - \alpha)
+            (\alpha^2 - 8 \alpha + 8)}
 
     The Benedict-Bordner gains are stable only for ``alpha < 4 - 2 sqrt(2) = 1.1716``
     (beta < 4 - 2 alpha); beyond, the result is nan, as for :func:`vrr`.
@@ -372,11 +415,14 @@ def benedict_bordner_vrr(alpha: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
 
 @renamed_keywords(T="dt")
 def fading_memory_vrr(xi: ArrayLike, dt: ArrayLike = 1.0) -> VRR:
-    """VRR of the fading-memory alpha-beta filter in closed form (0 <= xi < 1)::
+    r"""VRR of the fading-memory alpha-beta filter in closed form (0 <= xi < 1; eqs. 2-29,
+    2-30 corrected, and 2-31):
 
-        VRR(x) = (1 - xi) (1 + 4 xi + 5 xi^2) / (1 + xi)^3                (2-29)
-        C_xv/s = (1 - xi)^2 (1 + 3 xi) / (dt (1 + xi)^3)                   (2-30, corrected)
-        VRR(v) = 2 (1 - xi)^3 / (dt^2 (1 + xi)^3)                           (2-31)
+    .. math::
+
+        \mathrm{VRR}(x) &= \frac{(1 - \xi) (1 + 4 \xi + 5 \xi^2)}{(1 + \xi)^3} \\
+        C_{xv} / s &= \frac{(1 - \xi)^2 (1 + 3 \xi)}{\Delta t\, (1 + \xi)^3} \\
+        \mathrm{VRR}(v) &= \frac{2 (1 - \xi)^3}{\Delta t^2 (1 + \xi)^3}
 
     The thesis's 2-30 prints (as far as it can be read) ``(1 - xi)^2 (1 + 2 xi + 3 xi^2)``
     in the numerator, which disagrees with the general formula 2-17; the corrected form
@@ -414,12 +460,14 @@ def steady_state_cov(alpha: ArrayLike, beta: ArrayLike, gamma: ArrayLike | None 
 
 def characteristic_polynomial(alpha: ArrayLike, beta: ArrayLike,
                               gamma: ArrayLike | None = None) -> Array:
-    """Coefficients, highest power first, of ``det(z I - A)``, ``A = (I - K G) Phi``
-    (independent of dt)::
+    r"""Coefficients, highest power first, of ``det(z I - A)``, ``A = (I - K G) Phi``
+    (independent of dt), for the alpha-beta (2-20) and alpha-beta-gamma (2-49) filters:
 
-        alpha-beta (2-20):        z^2 + (alpha + beta - 2) z + (1 - alpha)
-        alpha-beta-gamma (2-49):  z^3 + (alpha + beta + gamma - 3) z^2
-                                  + (3 - 2 alpha - beta + gamma) z - (1 - alpha)
+    .. math::
+
+        &z^2 + (\alpha + \beta - 2) z + (1 - \alpha) \\
+        &z^3 + (\alpha + \beta + \gamma - 3) z^2 + (3 - 2 \alpha - \beta + \gamma) z
+            - (1 - \alpha)
 
     (acceleration gain 2 gamma / dt^2). Shape ``(..., 3)`` or ``(..., 4)``."""
     a, b = _array(alpha, "alpha"), _array(beta, "beta")
@@ -711,7 +759,7 @@ class AlphaBetaBelief(NamedTuple):
     ``mean (..., n)`` in the state ordering [x, y, vx, vy] (alpha-beta) or
     [x, y, vx, vy, ax, ay] (alpha-beta-gamma) for d = 2; ``cov (..., n, n)`` the exact
     covariance of the estimator's error; ``k (...)`` the measurements taken since the start
-    or the last :meth:`AlphaBeta.reset` (the next update uses the gains of scan k + 1);
+    or the last ``AlphaBeta.reset`` (the next update uses the gains of scan k + 1);
     ``tau (...)`` the time predicted since the row's last update (s), the dt of the next
     update's gains.
     """
@@ -998,7 +1046,7 @@ class AlphaBeta(_ConstantGain):
     Simpson's growing-memory gains at every scan, and
     ``AlphaBeta(alpha, beta, startup="simpson", switch_after=k0)`` for scans 1..k0 and the
     constant gains after (by default k0 is the last scan whose Simpson alpha_k exceeds
-    alpha). :meth:`reset` restarts the scan count for chosen rows (a manoeuvre, a model
+    alpha). ``reset`` restarts the scan count for chosen rows (a manoeuvre, a model
     change). Gains are scalars or arrays over the batch axes (one gain pair per row, for
     tuning), and must lie in the stability region.
 

@@ -34,6 +34,7 @@ def register(P: Array) -> Array:
 
 
 def produced(P: Any) -> bool:
+    """Whether ``P`` is an array that ``register`` marked (this very object, still alive)."""
     ref = _produced.get(id(P))
     return ref is not None and ref() is P
 

@@ -67,6 +67,7 @@ __all__ = [
     "mpc_from_bearing",
     "mpc_to_cartesian",
     "cartesian_to_mpc",
+    "conditioned_on_bearing",
 ]
 
 Array = NDArray[np.float64]
@@ -514,7 +515,7 @@ def mpc_from_bearing(x: ArrayLike, P: ArrayLike, beta: ArrayLike, var_beta: Arra
     In the frame of the bearing's ray (``u = (sin beta, cos beta)``, ``u' = du/dbeta``),
     ``d = x_p - origin`` has coordinates ``(d_u, d_c)`` and ``P_pp^-1`` entries ``l_uu,
     l_uc, l_cc``. The range given the bearing has mean ``rbar`` and deviation ``sigma_r``
-    (:func:`_range_given_bearing`); the bearing given that range is
+    (``_range_given_bearing``); the bearing given that range is
 
         var_b = 1 / (1 / var_beta + rbar^2 l_cc),  b = beta + var_b rbar (l_cc d_c - l_uc
         (rbar - d_u))

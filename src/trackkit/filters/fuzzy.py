@@ -1,29 +1,40 @@
-"""Fuzzy-adaptive Kalman filtering by innovation covariance matching (Naseri Solhdar, chapter 3):
-the Mamdani fuzzy system and the OFKF / OFEKF wrappers around the KF, EKF and UKF.
+r"""Fuzzy-adaptive Kalman filtering by innovation covariance matching (Naseri Solhdar,
+chapter 3): the Mamdani fuzzy system and the OFKF / OFEKF wrappers around the KF, EKF and UKF.
 
-**Covariance matching** (thesis eqs 3-3 to 3-6). With the innovation ``r_k = z_k - h(x-_k)``
-and its theoretical covariance ``S_k = H P-_k H^T + R_k``::
+**Covariance matching** (thesis eqs 3-3 to 3-6). With the innovation
+:math:`\mathbf{r}_k = \mathbf{z}_k - h(\mathbf{x}^-_k)` and its theoretical covariance
+:math:`S_k = H P^-_k H^\top + R_k`, the innovations' window covariance (N = 25;
+:math:`C_k = 0` until N innovations) and the degree of matching are
 
-    C_k   = (1/N) sum_{i=k-N+1}^{k} r_i r_i^T      (N = 25; C_k = 0 until N innovations)
-    DOM_k = S_k - C_k                                (degree of matching)
+.. math::
+
+    C_k = \frac1N \sum_{i=k-N+1}^{k} \mathbf{r}_i \mathbf{r}_i^\top, \qquad
+    \mathrm{DOM}_k = S_k - C_k
 
 DOM > 0: the innovations are smaller than the filter thinks, so decrease R (or Q); DOM < 0:
 increase it.
 
 **Mamdani fuzzy system** (eq 3-10): singleton fuzzifier, product inference, centre-average
-defuzzifier, one input and five Gaussian sets::
+defuzzifier, one input and five Gaussian sets:
 
-    y(x) = sum_l ybar_l mu_l(x) / sum_l mu_l(x),     mu_l(x) = exp(-((x - c_l) / s_l)^2)
+.. math::
+
+    y(x) = \frac{\sum_l \bar y_l\, \mu_l(x)}{\sum_l \mu_l(x)}, \qquad
+    \mu_l(x) = \exp\Bigl(-\Bigl(\frac{x - c_l}{s_l}\Bigr)^2\Bigr)
 
 with the rules NM -> IL, NS -> I, ZE -> M, PS -> D, PM -> DL (IF DOM is Negative Medium THEN
 the adjustment is Increase Large, ...). The parameters are one flat vector
 ``[c_1..c_5, s_1..s_5, ybar_1..ybar_5]`` in rule order. The output sets' widths do not enter
 a centre-average defuzzifier, so they are not parameters.
 
-**Adaptation** (eqs 3-7 to 3-9, 3-21), per diagonal entry, from step k to k + 1::
+**Adaptation** (eqs 3-7 to 3-9, 3-21), per diagonal entry, from step k to k + 1, of R
+(``adapt="R"``) or Q (``adapt="Q"``):
 
-    R_{k+1}(i,i) = R_k(i,i) + AdjR_k(i),  AdjR_k(i) = FIS(DOM_k(i,i))       (adapt="R")
-    Q_{k+1}(j,j) = Q_k(j,j) + AdjQ_k(j),  AdjQ_k(j) = FIS(d_j)              (adapt="Q")
+.. math::
+
+    R_{k+1}(i,i) &= R_k(i,i) + \mathrm{Adj}R_k(i), \qquad
+    \mathrm{Adj}R_k(i) = \mathrm{FIS}\bigl(\mathrm{DOM}_k(i,i)\bigr) \\
+    Q_{k+1}(j,j) &= Q_k(j,j) + \mathrm{Adj}Q_k(j), \qquad \mathrm{Adj}Q_k(j) = \mathrm{FIS}(d_j)
 
 where for Q the input d_j is DOM(i,i) for the pair ``q_inputs[j] = (i, i)`` and DOM(i,l)^2 for
 an off-diagonal pair (the thesis's eq 3-21, DOM(3,3) := DOM(1,2)^2, which gives a 3 x 3 Q a
@@ -34,13 +45,14 @@ Choices the thesis leaves open (Naseri Solhdar), documented:
 - ``normalise`` sets the units the fuzzy system works in (the thesis tunes raw DOM and
   adjustments for one problem at a time):
 
-  - ``"current"`` (default): ``AdjR(i) = R_k(i,i) FIS(DOM_k(i,i) / S_k(i,i))``. The input is
-    the relative mismatch ``1 - C/S`` (at most 1) and the adjustment a fraction of the
-    current R, so the law is scale-free: one shared system serves channels of different
-    units (seconds^2 and rad^2), one set of bounds serves every problem, and R can travel
-    over orders of magnitude (the thesis's chapter-4 R0 is 100 times the true noise) without
-    overshooting. For Q: input ``DOM(i,l)/S(i,l)`` with S's diagonal (squared for an
-    off-diagonal pair: ``DOM(i,l)^2 / (S(i,i) S(l,l))``), output times ``Q_k(j,j)``.
+  - ``"current"`` (default):
+    :math:`\mathrm{Adj}R(i) = R_k(i,i)\, \mathrm{FIS}\bigl(\mathrm{DOM}_k(i,i) /
+    S_k(i,i)\bigr)`. The input is the relative mismatch ``1 - C/S`` (at most 1) and the
+    adjustment a fraction of the current R, so the law is scale-free: one shared system serves
+    channels of different units (seconds^2 and rad^2), one set of bounds serves every problem,
+    and R can travel over orders of magnitude (the thesis's chapter-4 R0 is 100 times the true
+    noise) without overshooting. For Q: input ``DOM(i,l)/S(i,l)`` with S's diagonal (squared for
+    an off-diagonal pair: ``DOM(i,l)^2 / (S(i,i) S(l,l))``), output times ``Q_k(j,j)``.
   - ``"initial"``: the same with the initial R0 (and Q0) in place of S_k and R_k (Q_k).
   - ``"none"``: the literal additive law on raw DOM.
 
@@ -85,8 +97,13 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
+#: The input (DOM) sets in rule order: Negative Medium, Negative Small, Zero, Positive Small,
+#: Positive Medium.
 INPUT_SETS = ("NM", "NS", "ZE", "PS", "PM")
+#: The output (adjustment) sets in rule order: Increase Large, Increase, Maintain, Decrease,
+#: Decrease Large.
 OUTPUT_SETS = ("IL", "I", "M", "D", "DL")
+#: The length of the flat parameter vector ``[c_1..c_5, s_1..s_5, ybar_1..ybar_5]``.
 N_PARAMS = 15
 
 #: An untuned, symmetric system (normalised units): input centres -2..2, widths 0.6, output

@@ -71,7 +71,7 @@ Mask = NDArray[np.bool_]
 
 
 def measurement_times(steps: int, dt: ArrayLike, t0: float = 0.0) -> Array:
-    """Times of measurements ``0 .. steps-1`` as ``run_with_gaps`` (and ``run_filter``) take
+    """Times of measurements ``0, ..., steps-1`` as ``run_with_gaps`` (and ``run_filter``) take
     them: the first one step after the prior, ``t_k = t0 + (k + 1) dt`` for a scalar dt, or
     ``t0 + cumsum(dt)`` for one step per measurement."""
     K = _count(steps, "steps", 1)
@@ -124,7 +124,7 @@ def mask_by_time(times: ArrayLike, start: ArrayLike, stop: ArrayLike) -> Mask:
 
 
 def mask_by_samples(steps: int, first: ArrayLike, last: ArrayLike) -> Mask:
-    """Missing at sample indices ``first .. last``, both included (0-based indices into the
+    """Missing at sample indices ``first`` to ``last``, both included (0-based indices into the
     measurement axis; the missing-measurements thesis's "from sample 50 to sample 90", counted from
     1, is
     ``first=49, last=89``). Per-run arrays give ``(K, ...)``."""
@@ -139,7 +139,7 @@ def mask_by_samples(steps: int, first: ArrayLike, last: ArrayLike) -> Mask:
 
 def mask_by_count(steps: int, start: ArrayLike, count: ArrayLike) -> Mask:
     """``count`` consecutive missing samples from index ``start`` (0-based): indices
-    ``start .. start + count - 1``. Per-run arrays give ``(K, ...)``."""
+    ``start`` to ``start + count - 1``. Per-run arrays give ``(K, ...)``."""
     K = _count(steps, "steps", 1)
     a = _indices(start, "start")
     c = _indices(count, "count")
@@ -626,6 +626,7 @@ def _sine_fit(y: Array, tau: Array, valid: Mask, theta0: Array, omega: Array, a:
     return np.where(am < 0, th + np.pi, th), om, np.abs(am)
 
 
+#: The thesis's handler names that :func:`make_handler` accepts.
 HANDLER_NAMES = ("B0", "B1", "B2", "P", "P'")
 
 

@@ -1,18 +1,36 @@
-"""Interacting multiple model filter (IMM; Blom and Bar-Shalom 1988; Bar-Shalom, Li and
+r"""Interacting multiple model filter (IMM; Blom and Bar-Shalom 1988; Bar-Shalom, Li and
 Kirubarajan 2001, section 11.6.6).
 
-r motion models M_1 .. M_r, each with its own inner filter (KF, EKF, IEKF, UKF or CKF); the
-mode is a Markov chain with ``p_ij = P(M_j at k | M_i at k-1)``. One cycle, per batch row:
+r motion models :math:`M_1, \dots, M_r`, each with its own inner filter (KF, EKF, IEKF, UKF or
+CKF); the mode is a Markov chain with transition probabilities
+:math:`p_{ij} = P(M_j \text{ at } k \mid M_i \text{ at } k-1)`. One cycle, per batch row:
 
-    mixing       c_j = sum_i p_ij mu_i                    (predicted mode probabilities)
-                 mu_{i|j} = p_ij mu_i / c_j               (mixing probabilities)
-                 x0_j = sum_i mu_{i|j} x_i
-                 P0_j = sum_i mu_{i|j} (P_i + (x_i - x0_j)(x_i - x0_j)^T)
-    prediction   x_j-, P_j- = filter_j.predict(N(x0_j, P0_j), M_j, dt)
-    update       x_j, P_j and nu_j, S_j = filter_j.update(N(x_j-, P_j-), z, sensor)
-                 Lambda_j = N(nu_j; 0, S_j)               (the filter's own innovation)
-                 mu_j = Lambda_j c_j / sum_l Lambda_l c_l (in log space)
-    combination  x = sum_j mu_j x_j,  P = sum_j mu_j (P_j + (x_j - x)(x_j - x)^T)
+**Mixing**: the predicted mode probabilities :math:`c_j`, the mixing probabilities
+:math:`\mu_{i|j}` and each model's mixed initial condition,
+
+.. math::
+
+    c_j &= \sum_i p_{ij} \mu_i, \qquad \mu_{i|j} = \frac{p_{ij} \mu_i}{c_j}, \\
+    \mathbf{x}^0_j &= \sum_i \mu_{i|j} \mathbf{x}_i, \qquad
+    P^0_j = \sum_i \mu_{i|j} \bigl(P_i + (\mathbf{x}_i - \mathbf{x}^0_j)
+        (\mathbf{x}_i - \mathbf{x}^0_j)^\top\bigr)
+
+**Prediction**: ``x_j-, P_j- = filter_j.predict(N(x0_j, P0_j), M_j, dt)``.
+
+**Update**: ``x_j, P_j`` and ``nu_j, S_j = filter_j.update(N(x_j-, P_j-), z, sensor)``; the
+mode probabilities from each filter's own innovation (computed in log space):
+
+.. math::
+
+    \Lambda_j = \mathcal{N}(\nu_j; 0, S_j), \qquad
+    \mu_j = \frac{\Lambda_j c_j}{\sum_l \Lambda_l c_l}
+
+**Combination**:
+
+.. math::
+
+    \mathbf{x} = \sum_j \mu_j \mathbf{x}_j, \qquad
+    P = \sum_j \mu_j \bigl(P_j + (\mathbf{x}_j - \mathbf{x})(\mathbf{x}_j - \mathbf{x})^\top\bigr)
 
 The belief (:class:`IMMBelief`) holds the mode probabilities and every model's mean and
 covariance, the batch axes leading; after ``predict`` its ``mu`` is c_j, after ``update`` the
@@ -29,16 +47,22 @@ still enters every sum above; what it is taken to say about that component is ``
   models that carry it, independent of model i's own components. In mixing into model j that
   is model j's own estimate (mean and covariance of those components), so mixing leaves the
   receiving model's estimate of them unchanged (and scales their correlation with the
-  common components by mu_{j|j}); in the combination it is the carriers' moment match:
-  ``x_k = sum_{j in C_k} mu_j x_jk / sum_{j in C_k} mu_j`` and
-  ``P_kl = sum_{j in C_k and C_l} mu_j (P_j + d_j d_j^T)_kl / sum_{j in C_k or C_l} mu_j``
-  (C_k the models carrying component k). Both are the moments of a true mixture when the
-  models' component sets are nested (CV in CT, CV in CA), hence symmetric PSD. It is the
-  augmentation of the smaller state from the larger model's own estimate, one of the
-  options Granstrom, Willett and Bar-Shalom (2015) compare with zero padding. When the
-  carriers' weights underflow (a mode probability of exactly 0 after a plot tens of sigma
-  from that model) the ratios are taken in the limit: one carrier gives its own moments,
-  several whose weights are all 0 are weighted equally (:func:`combine`).
+  common components by :math:`\mu_{j|j}`); in the combination it is the carriers' moment
+  match, with :math:`C_k` the models carrying component k and
+  :math:`\mathbf{d}_j = \mathbf{x}_j - \mathbf{x}`:
+
+  .. math::
+
+      x_k = \frac{\sum_{j \in C_k} \mu_j x_{jk}}{\sum_{j \in C_k} \mu_j}, \qquad
+      P_{kl} = \frac{\sum_{j \in C_k \cap C_l} \mu_j (P_j + \mathbf{d}_j \mathbf{d}_j^\top)_{kl}}
+          {\sum_{j \in C_k \cup C_l} \mu_j}
+
+  Both are the moments of a true mixture when the models' component sets are nested (CV in CT,
+  CV in CA), hence symmetric PSD. It is the augmentation of the smaller state from the larger
+  model's own estimate, one of the options Granstrom, Willett and Bar-Shalom (2015) compare with
+  zero padding. When the carriers' weights underflow (a mode probability of exactly 0 after a
+  plot tens of sigma from that model) the ratios are taken in the limit: one carrier gives its
+  own moments, several whose weights are all 0 are weighted equally (:func:`combine`).
 * ``"zero"``: the component is exactly zero under that model (mean 0, variance 0: a CV
   target is a CT target with omega = 0). Mixing pulls the CT model's turn rate toward 0 by
   the CV model's weight at every step and shrinks its variance, which biases it toward
@@ -51,10 +75,16 @@ lower position RMSE, 0.178 against 0.186, and is better in 84% of runs (``tests/
 
 Missing measurements (nan in z) keep every model's prediction and leave mu at c_j. The
 returned :class:`~trackkit.belief.Innovation` is that of the moment-matched predicted
-measurement, ``nu = sum_j c_j nu_j = z - zhat`` and
-``S = sum_j c_j (S_j + (nu_j - nu)(nu_j - nu)^T)`` (``zhat_j - zhat = nu - nu_j``), so that
-gating and the multi-target tracker's association use the mixture's first two moments.
-``log_likelihood`` gives the mixture's exact ``log sum_j c_j N(nu_j; 0, S_j)``,
+measurement (:math:`\hat{\mathbf{z}}_j - \hat{\mathbf{z}} = \nu - \nu_j`),
+
+.. math::
+
+    \nu = \sum_j c_j \nu_j = \mathbf{z} - \hat{\mathbf{z}}, \qquad
+    S = \sum_j c_j \bigl(S_j + (\nu_j - \nu)(\nu_j - \nu)^\top\bigr)
+
+so that gating and the multi-target tracker's association use the mixture's first two
+moments. ``log_likelihood`` gives the mixture's exact
+:math:`\log \sum_j c_j \mathcal{N}(\nu_j; 0, S_j)`,
 ``measurement_prediction`` that innovation's predicted measurement and covariance without the
 update (for the tracker's gate), and ``merge_hypotheses`` the JPDA combination per model.
 
@@ -194,7 +224,7 @@ def combine(mu: Array, X: Array, P: Array, carry: Array | None = None,
     With ``fill="others"`` a component's moments are ratios of sums over its carriers'
     weights. Rows where some carriers' total weight is below ``_SMALL_WEIGHT`` (a mode
     probability that underflowed, possibly to exactly 0) take the limit instead of 0/0
-    (:func:`_combine_limit`)."""
+    (``_combine_limit``)."""
     if carry is None or carry.all() or fill == "zero":
         return moment_match(mu, X, P)
     x = np.einsum("...j,...jn->...n", mu, X)

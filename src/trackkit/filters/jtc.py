@@ -1,4 +1,4 @@
-"""Joint tracking and classification with multiple-model particle filters (Hosseini, Haeri and
+r"""Joint tracking and classification with multiple-model particle filters (Hosseini, Haeri and
 Khaloozadeh 2019).
 
 Two filters estimate the state ``x = [x, y, vx, vy]`` and the class ``c`` of a target (an
@@ -6,22 +6,31 @@ airliner or a fighter, :mod:`trackkit.models.classes`) from radar plots:
 
 * :class:`JTC`, the paper's single filter (Table 1): each particle carries a
   state, a class label and a manoeuvre mode; particles are allocated to the classes at every
-  step by ``N_c ~ Mult(N, p(c | Z^k))`` with a floor, and resampled within their class.
+  step by :math:`N_c \sim \operatorname{Mult}(N, p(c \mid Z^k))` with a floor, and resampled
+  within their class.
 * :class:`MultiFilterJTC`, the paper's baseline (Fig. 1): one multiple-model particle filter
-  per class, each with its class's modes and a fixed number of particles, combined by Bayes' rule.
+  per class, each with its class's modes and a fixed number of particles, combined by
+  Bayes' rule.
 
-Both run the same step for each particle j of class c = c^j:
+Both run the same step for each particle j of class :math:`c = c^j`: the class's mode chain
+(drawn by inverse CDF), the mode's motion with :math:`\mathbf{w} \sim \mathcal{N}(0,
+\sigma^2 I)`, and the weight, the kinematic likelihood times the speed likelihood:
 
-    m_k^j ~ p(m_k | m_{k-1}^j)                   the class's mode chain (inverse CDF)
-    x_k^j = F(omega_m) x_{k-1}^j + G (a_m + w)    the mode's motion, w ~ N(0, sigma^2 I)
-    w_k^j = p(z_k | x_k^j) g(v^j | c)             kinematic likelihood x speed likelihood
+.. math::
+
+    m_k^j &\sim p(m_k \mid m_{k-1}^j) \\
+    \mathbf{x}_k^j &= F(\omega_m)\, \mathbf{x}_{k-1}^j + G (\mathbf{a}_m + \mathbf{w}) \\
+    w_k^j &= p(\mathbf{z}_k \mid \mathbf{x}_k^j)\, g(v^j \mid c)
 
 and the same class posterior. With the weights normalised within each class (each class's
-particles represent ``p(x_k | c, Z^{k-1})`` whatever their number), the class likelihood is
-the mean of the class's unnormalised weights and Bayes' rule is
+particles represent :math:`p(\mathbf{x}_k \mid c, Z^{k-1})` whatever their number), the class
+likelihood is the mean of the class's unnormalised weights and Bayes' rule is
 
-    L(c) = p(z_k, y_k | c, Z^{k-1}) = (1 / N_c) sum_{j in c} p(z_k | x_k^j) g(v^j | c)
-    p(c | Z^k) = L(c) p(c | Z^{k-1}) / sum_c' L(c') p(c' | Z^{k-1}).
+.. math::
+
+    L(c) &= p(\mathbf{z}_k, y_k \mid c, Z^{k-1})
+        = \frac{1}{N_c} \sum_{j \in c} p(\mathbf{z}_k \mid \mathbf{x}_k^j)\, g(v^j \mid c) \\
+    p(c \mid Z^k) &= \frac{L(c)\, p(c \mid Z^{k-1})}{\sum_{c'} L(c')\, p(c' \mid Z^{k-1})}
 
 Table 1 of the paper instead normalises the weights over all N particles (each 1/N after
 resampling) and takes ``L(c) = sum_{j in c} w_k^j``: that sum is proportional to
@@ -54,8 +63,14 @@ decision can be undone. Resampling within classes is one systematic pass over th
 rescaled to ``N_c / N`` per class, which gives each class exactly its ``N_c`` offspring.
 
 Estimates (computed before resampling, from the weighted particles): the class-conditional
-means ``x^c = sum_{j in c} w^j x^j`` and the overall mixture ``x = sum_c p(c | Z^k) x^c`` with
-its covariance (the particles' covariance under the weights ``p(c^j) w^j``).
+means and the overall mixture,
+
+.. math::
+
+    \mathbf{x}^c = \sum_{j \in c} w^j \mathbf{x}^j, \qquad
+    \mathbf{x} = \sum_c p(c \mid Z^k)\, \mathbf{x}^c
+
+with its covariance (the particles' covariance under the weights ``p(c^j) w^j``).
 
 Both filters are stateless strategies, batched over runs: their beliefs carry the particles
 as one ``(..., N)`` array per state component (``belief.states`` stacks them, ``(..., N, 4)``)
@@ -94,7 +109,10 @@ __all__ = ["JTC", "JTCBelief", "MultiFilterJTC", "MultiFilterBelief", "next_mode
 Array = NDArray[np.float64]
 Ints = NDArray[np.integer]
 
+#: The class recursions of ``JTC(recursion=...)``: Bayes' rule or the paper's printed one.
 RECURSIONS = ("bayes", "paper")
+#: Where ``JTC(speed=...)`` evaluates the speed likelihood: the previous overall estimate's
+#: speed, or each particle's own.
 SPEEDS = ("estimate", "particle")
 
 

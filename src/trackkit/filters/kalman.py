@@ -1,8 +1,22 @@
-"""Kalman filters linearised by Jacobians: KF, EKF (first and second order) and IEKF.
+r"""Kalman filters linearised by Jacobians: KF, EKF (first and second order) and IEKF.
 
-Notation follows the textbook: prediction ``x- = f(x)``, ``P- = F P F^T + Q``; update with
-``S = H P- H^T + R``, ``K = P- H^T S^{-1}``, ``x+ = x- + K r`` and the Joseph form
-``P+ = (I - K H) P- (I - K H)^T + K R K^T``. Every kernel works on any leading batch shape.
+Notation follows the textbook. Prediction, with :math:`F` the Jacobian of :math:`f` at
+:math:`\mathbf{x}` (the matrix itself for a linear model):
+
+.. math::
+
+    \mathbf{x}^- = f(\mathbf{x}), \qquad P^- = F P F^\top + Q
+
+Update with the innovation :math:`\mathbf{r} = \mathbf{z} - h(\mathbf{x}^-)` and the Joseph
+form of the covariance:
+
+.. math::
+
+    S &= H P^- H^\top + R, \qquad K = P^- H^\top S^{-1}, \\
+    \mathbf{x}^+ &= \mathbf{x}^- + K \mathbf{r}, \qquad
+    P^+ = (I - K H) P^- (I - K H)^\top + K R K^\top
+
+Every kernel works on any leading batch shape.
 """
 
 from __future__ import annotations
@@ -33,7 +47,7 @@ from trackkit.filters.kalman_fast import (
 from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
 from trackkit.models.protocols import MotionModel, SensorModel
 
-__all__ = ["KF", "EKF", "IEKF"]
+__all__ = ["Linearised", "KF", "EKF", "IEKF", "joseph_update", "condition"]
 
 Array = NDArray[np.float64]
 _F64 = np.dtype(np.float64)
@@ -68,13 +82,16 @@ def kalman_gain(P: Array, H: Array, R: Array) -> tuple[Array, Array, Array]:
 
 def joseph_update(x: Array, P: Array, nu: Array, H: Array, R: Array
                   ) -> tuple[Array, Array, Array]:
-    """The Kalman update for the innovation nu as the textbook writes it (Bar-Shalom, Li and
-    Kirubarajan 2001, section 5.2.3; the covariance in Joseph form, Bucy and Joseph 1968):
+    r"""The Kalman update for the innovation :math:`\nu` as the textbook writes it (Bar-Shalom,
+    Li and Kirubarajan 2001, section 5.2.3; the covariance in Joseph form, Bucy and Joseph
+    1968):
 
-        S  = H P H^T + R
-        K  = P H^T S^{-1}
-        x+ = x + K nu
-        P+ = (I - K H) P (I - K H)^T + K R K^T
+    .. math::
+
+        S &= H P H^\top + R \\
+        K &= P H^\top S^{-1} \\
+        \mathbf{x}^+ &= \mathbf{x} + K \nu \\
+        P^+ &= (I - K H) P (I - K H)^\top + K R K^\top
 
     on any batch shapes; returns ``(x+, P+, S)``, S and P+ symmetrised (exactly symmetric).
     The reference of the fast kernels in :mod:`trackkit.filters.kalman_fast`, and what
@@ -92,8 +109,8 @@ def joseph_update(x: Array, P: Array, nu: Array, H: Array, R: Array
 def condition(
     x: Array, P: Array, nu: Array, H: Array, R: Array
 ) -> tuple[Array, Array, Array]:
-    """The Kalman update for the innovation nu, :func:`joseph_update`: returns ``(x+, P+, S)``, P+
-    exactly symmetric.
+    """The Kalman update for the innovation nu, :func:`joseph_update`: returns ``(x+, P+, S)``,
+    P+ exactly symmetric.
 
     Measurements of up to ``FAST_MAX_M`` components (every sensor model but a stack of
     them) take the fast kernels, the same equations ordered for speed
@@ -202,12 +219,22 @@ class KF(Linearised):
 
 
 class EKF(Linearised):
-    """Extended Kalman filter, first order (``order=1``) or second order (``order=2``).
+    r"""Extended Kalman filter, first order (``order=1``) or second order (``order=2``).
 
-    The second-order filter adds the measurement-Hessian terms of Athans, Wishner and
-    Bertolini: ``zhat_i = h_i(x-) + 1/2 tr(Hs_i P-)`` and
-    ``S = H P- H^T + R + B``, ``B_ij = 1/2 tr(Hs_i P- Hs_j P-)``; the prediction stays first
-    order (the motion models here are linear or mildly nonlinear over one step).
+    The first-order filter linearises :math:`h` at the prediction, the Jacobian
+    :math:`H = \partial h / \partial \mathbf{x}` at :math:`\mathbf{x}^-`, and applies the
+    Kalman update. The
+    second-order filter adds the measurement-Hessian terms of Athans, Wishner and Bertolini,
+    with :math:`\mathcal{H}_i` the Hessian of the i-th component of :math:`h`:
+
+    .. math::
+
+        \hat z_i = h_i(\mathbf{x}^-) + \tfrac12 \operatorname{tr}(\mathcal{H}_i P^-), \qquad
+        S = H P^- H^\top + R + B, \qquad
+        B_{ij} = \tfrac12 \operatorname{tr}(\mathcal{H}_i P^- \mathcal{H}_j P^-)
+
+    The prediction stays first order (the motion models here are linear or mildly nonlinear
+    over one step).
     """
 
     name = "EKF"
@@ -235,20 +262,34 @@ class EKF(Linearised):
 
 
 class IEKF(Linearised):
-    """Iterated EKF: Gauss-Newton on the MAP cost of the update (Bell and Cathey 1993).
+    r"""Iterated EKF: Gauss-Newton on the MAP cost of the update (Bell and Cathey 1993).
 
-    From ``x_0 = x-``: ``H_i = J_h(x_i)``, ``K_i = P- H_i^T (H_i P- H_i^T + R)^{-1}`` and the
-    Gauss-Newton point ``x_gn = x- + K_i (z - h(x_i) - H_i (x- - x_i))``, for ``iterations``
-    steps (1 is the EKF). The covariance is the Joseph form with the last ``K_i, H_i``.
+    From :math:`\mathbf{x}_0 = \mathbf{x}^-`, for ``iterations`` steps (1 is the EKF):
 
-    With ``line_search=True`` each step is ``x_{i+1} = x_i + a (x_gn - x_i)`` with
-    ``a`` halved (up to ``max_halvings`` times) until the MAP cost
-    ``c(x) = |x - x-|^2_{P-^{-1}} + |z - h(x)|^2_{R^{-1}}`` does not increase; a row whose
-    cost never decreases stays where it is. Plain Gauss-Newton (``line_search=False``) can
-    overshoot when h is strongly nonlinear over the prior's spread (Havlik and Straka 2015).
-    Either way the iteration converges to the MAP point of the update, and the covariance
-    linearised there can be overconfident when the measurement is weakly informative in
-    some direction (bearings-only range early in a track): the IEKF is not always better.
+    .. math::
+
+        H_i &= \left.\frac{\partial h}{\partial \mathbf{x}}\right|_{\mathbf{x}_i}, \qquad
+        K_i = P^- H_i^\top (H_i P^- H_i^\top + R)^{-1}, \\
+        \mathbf{x}_{gn} &= \mathbf{x}^- + K_i \bigl(\mathbf{z} - h(\mathbf{x}_i)
+            - H_i (\mathbf{x}^- - \mathbf{x}_i)\bigr)
+
+    The covariance is the Joseph form with the last :math:`K_i, H_i`.
+
+    With ``line_search=True`` each step is
+    :math:`\mathbf{x}_{i+1} = \mathbf{x}_i + a (\mathbf{x}_{gn} - \mathbf{x}_i)` with
+    :math:`a` halved (up to ``max_halvings`` times) until the MAP cost
+
+    .. math::
+
+        c(\mathbf{x}) = (\mathbf{x} - \mathbf{x}^-)^\top (P^-)^{-1} (\mathbf{x} - \mathbf{x}^-)
+            + (\mathbf{z} - h(\mathbf{x}))^\top R^{-1} (\mathbf{z} - h(\mathbf{x}))
+
+    does not increase; a row whose cost never decreases stays where it is. Plain Gauss-Newton
+    (``line_search=False``) can overshoot when h is strongly nonlinear over the prior's spread
+    (Havlik and Straka 2015). Either way the iteration converges to the MAP point of the update,
+    and the covariance linearised there can be overconfident when the measurement is weakly
+    informative in some direction (bearings-only range early in a track): the IEKF is not always
+    better.
 
     The returned innovation is the one at the prediction, ``z - h(x-)`` with its S, as used
     for gating and NIS.

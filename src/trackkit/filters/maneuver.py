@@ -222,7 +222,7 @@ class _Imhof:
 
 def weighted_chi2_sf(x: ArrayLike, weights: ArrayLike, dof: int) -> Array:
     """``P(sum_j w_j chi2_dof > x)`` for independent chi-squares and weights ``w_j > 0``
-    (Imhof's inversion, see :class:`_Imhof`). The formula is 1/2 plus an integral, so the
+    (Imhof's inversion, see ``_Imhof``). The formula is 1/2 plus an integral, so the
     accuracy is absolute, a few 1e-14 (rounding): 1e-8 relative at a tail of 1e-6."""
     lam = np.asarray(weights, dtype=float).ravel()
     if lam.size == 0 or not np.all((lam > 0) & np.isfinite(lam)):

@@ -1,18 +1,34 @@
-"""The bootstrap particle filter (Gordon, Salmond and Smith 1993), batched.
+r"""The bootstrap particle filter (Gordon, Salmond and Smith 1993), batched.
 
 The belief is :class:`~trackkit.belief.Particles`: states ``x_i (..., N, n)`` and normalised
 log-weights ``log w_i (..., N)`` per batch row (run or track), plus the generator the filter
 draws from. With the motion model as the proposal, one step is
 
-* predict: ``x_i <- f(x_i, dt) + v_i``, ``v_i ~ N(0, Q(x_i, dt))`` (a PSD square root of Q,
-  so a Q with noiseless components is fine); the weights are unchanged;
-* update: ``log w_i <- log w_i + log N(r_i; 0, R)``, ``r_i = z - h(x_i)`` (the sensor's own
+* predict, the noise drawn through a PSD square root of Q (so a Q with noiseless components
+  is fine); the weights are unchanged:
+
+  .. math::
+
+      \mathbf{x}_i \leftarrow f(\mathbf{x}_i, \Delta t) + \mathbf{v}_i, \qquad
+      \mathbf{v}_i \sim \mathcal{N}\bigl(0, Q(\mathbf{x}_i, \Delta t)\bigr)
+
+* update, with :math:`\mathbf{r}_i = \mathbf{z} - h(\mathbf{x}_i)` (the sensor's own
   ``residual``, so angle components are wrapped), then normalised:
-  ``log w_i <- log w_i - L``, ``L = logsumexp_i(log w_i)``;
-* resample the rows whose effective sample size ``ESS = 1 / sum_i w_i^2`` is below
-  ``ess_threshold * N`` (only those rows), with uniform weights afterwards, then optionally
-  regularise (a Gaussian-kernel jitter, Musso et al., with or without Liu and West's
-  shrinkage towards the mean) or roughen them (see :mod:`trackkit.filters.resample`).
+
+  .. math::
+
+      \log w_i \leftarrow \log w_i + \log \mathcal{N}(\mathbf{r}_i; 0, R), \qquad
+      \log w_i \leftarrow \log w_i - L, \quad L = \log \sum_j \exp(\log w_j)
+
+* resample the rows whose effective sample size
+
+  .. math::
+
+      \mathrm{ESS} = \frac{1}{\sum_i w_i^2}
+
+  is below ``ess_threshold * N`` (only those rows), with uniform weights afterwards, then
+  optionally regularise (a Gaussian-kernel jitter, Musso et al., with or without Liu and
+  West's shrinkage towards the mean) or roughen them (see :mod:`trackkit.filters.resample`).
 
 Weights stay in log space throughout, so a measurement that every particle finds very
 unlikely still gives finite, normalised weights. If no particle can explain a measurement at
@@ -23,8 +39,13 @@ mismatch). A particle whose own likelihood is not finite gets weight zero.
 
 The innovation returned for NIS, gating and the Monte Carlo metrics is moment-matched from
 the particles' residuals ``r_i = residual(z, h(x_i))`` and the predicted weights:
-``rbar = sum_i w_i r_i`` (that is, ``z - zbar``) and
-``S = sum_i w_i (r_i - rbar)(r_i - rbar)^T + R``. On angle components the residuals are
+
+.. math::
+
+    \bar{\mathbf{r}} = \sum_i w_i \mathbf{r}_i \;(= \mathbf{z} - \bar{\mathbf{z}}), \qquad
+    S = \sum_i w_i (\mathbf{r}_i - \bar{\mathbf{r}})(\mathbf{r}_i - \bar{\mathbf{r}})^\top + R
+
+On angle components the residuals are
 wrapped and averaged about the heaviest particle's residual, so a cloud of bearings that
 straddles +-pi, or lies across the cut from z, has its mean on the circle.
 ``estimate`` gives the weighted mean and covariance of the particles, circular on the

@@ -1,9 +1,30 @@
-"""Sigma-point filters: the unscented (UKF) and cubature (CKF) Kalman filters.
+r"""Sigma-point filters: the unscented (UKF) and cubature (CKF) Kalman filters.
 
-Sigma points ``X_i = x + c (L)_i`` and ``X_{i+n} = x - c (L)_i`` with ``L L^T = P`` (lower
-Cholesky) and ``(L)_i`` its i-th column; the UKF adds the centre point ``X_0 = x``. Moments of
-``Y_i = g(X_i)``: ``y = sum Wm_i Y_i`` (circular for angle components),
-``P_y = sum Wc_i (Y_i - y)(Y_i - y)^T`` with wrapped differences.
+Sigma points, with :math:`L L^\top = P` (lower Cholesky) and :math:`(L)_i` its i-th column,
+:math:`i = 1, \dots, n`; the UKF adds the centre point :math:`\mathcal{X}_0 = \mathbf{x}`:
+
+.. math::
+
+    \mathcal{X}_i = \mathbf{x} + c\,(L)_i, \qquad \mathcal{X}_{i+n} = \mathbf{x} - c\,(L)_i
+
+Moments of :math:`\mathcal{Y}_i = g(\mathcal{X}_i)`, the mean circular for angle components
+and the differences wrapped:
+
+.. math::
+
+    \bar{\mathbf{y}} = \sum_i W^m_i \mathcal{Y}_i, \qquad
+    P_y = \sum_i W^c_i (\mathcal{Y}_i - \bar{\mathbf{y}})(\mathcal{Y}_i - \bar{\mathbf{y}})^\top
+
+The update regenerates the points from the prediction and, with
+:math:`\mathcal{Z}_i = h(\mathcal{X}_i)`:
+
+.. math::
+
+    S &= \sum_i W^c_i (\mathcal{Z}_i - \hat{\mathbf{z}})(\mathcal{Z}_i - \hat{\mathbf{z}})^\top
+        + R, \qquad
+    C = \sum_i W^c_i (\mathcal{X}_i - \mathbf{x}^-)(\mathcal{Z}_i - \hat{\mathbf{z}})^\top, \\
+    K &= C S^{-1}, \qquad \mathbf{x}^+ = \mathbf{x}^- + K \mathbf{r}, \qquad
+    P^+ = P^- - K S K^\top
 
 Internally the sigma-point axis leads, ``(k, ..., n)``, so that models whose pose carries the
 batch axes (a moving observer per Monte Carlo run) broadcast against the points unchanged.
@@ -41,7 +62,7 @@ from trackkit.linalg import (
 from trackkit.models.protocols import MotionModel, SensorModel
 from trackkit.models.sensors import wrap_small
 
-__all__ = ["UKF", "CKF", "SigmaPoints"]
+__all__ = ["UKF", "CKF", "SRCKF", "SigmaPoints"]
 
 Array = NDArray[np.float64]
 
@@ -272,12 +293,18 @@ def _cached_rule(key: tuple, build) -> SigmaPoints:
 
 
 class UKF(_SigmaPointFilter):
-    """Unscented Kalman filter with scaled sigma points (Julier; Van der Merwe).
+    r"""Unscented Kalman filter with scaled sigma points (Julier; Van der Merwe).
 
-    ``lambda = alpha^2 (n + kappa) - n``, ``c = sqrt(n + lambda)``,
-    ``Wm_0 = lambda / (n + lambda)``, ``Wc_0 = Wm_0 + 1 - alpha^2 + beta``,
-    ``Wm_i = Wc_i = 1 / (2 (n + lambda))``. Defaults are Stone Soup's: alpha = 0.5, beta = 2
-    and kappa = 3 - n (``kappa=None``).
+    The :math:`2n + 1` points (module docstring) have the scale and weights
+
+    .. math::
+
+        \lambda &= \alpha^2 (n + \kappa) - n, \qquad c = \sqrt{n + \lambda}, \\
+        W^m_0 &= \frac{\lambda}{n + \lambda}, \qquad
+        W^c_0 = W^m_0 + 1 - \alpha^2 + \beta, \qquad
+        W^m_i = W^c_i = \frac{1}{2 (n + \lambda)} \quad (i = 1, \dots, 2n)
+
+    Defaults are Stone Soup's: alpha = 0.5, beta = 2 and kappa = 3 - n (``kappa=None``).
     """
 
     name = "UKF"
@@ -309,9 +336,14 @@ class UKF(_SigmaPointFilter):
 
 
 class CKF(_SigmaPointFilter):
-    """Cubature Kalman filter (Arasaratnam and Haykin, 2009): the third-degree spherical-
-    radial rule, 2n points ``x +- sqrt(n) (L)_i`` with equal weights ``1 / (2n)``. It equals
-    the UKF with alpha = 1, beta = 0, kappa = 0."""
+    r"""Cubature Kalman filter (Arasaratnam and Haykin, 2009): the third-degree spherical-
+    radial rule, 2n points with equal weights,
+
+    .. math::
+
+        \mathcal{X}_{i} = \mathbf{x} \pm \sqrt{n}\,(L)_i, \qquad W^m_i = W^c_i = \frac{1}{2n}
+
+    It equals the UKF with alpha = 1, beta = 0, kappa = 0."""
 
     name = "CKF"
 
@@ -341,13 +373,21 @@ def _psd_sqrt(Q: Array, batch: tuple[int, ...], n: int) -> Array:
 
 
 class SRCKF(CKF):
-    """Square-root cubature Kalman filter (Arasaratnam and Haykin, 2009, section VI): the
+    r"""Square-root cubature Kalman filter (Arasaratnam and Haykin, 2009, section VI): the
     CKF's points and moments, with every covariance formed as the product of a triangular
-    factor from a QR decomposition (``Tria``) instead of by sums and a subtraction::
+    factor from a QR decomposition (:math:`\operatorname{Tria}`) instead of by sums and a
+    subtraction, :math:`w = 1 / (2n)` the weight of every point:
 
-        S- = Tria([sqrt(w) (Y - y), sqrt(Q)])
-        [[S_zz, 0], [K S_zz, S+]] = Tria([[sqrt(w) (Z - z), sqrt(R)], [sqrt(w) (X - x), 0]])
-        K = (K S_zz) S_zz^-1,   x+ = x- + K r,   P+ = S+ S+^T
+    .. math::
+
+        S^- &= \operatorname{Tria}\bigl[\sqrt{w}\,(\mathcal{Y} - \bar{\mathbf{y}}),\;
+            \sqrt{Q}\bigr], \\
+        \begin{bmatrix} S_{zz} & 0 \\ K S_{zz} & S^+ \end{bmatrix}
+            &= \operatorname{Tria} \begin{bmatrix}
+                \sqrt{w}\,(\mathcal{Z} - \hat{\mathbf{z}}) & \sqrt{R} \\
+                \sqrt{w}\,(\mathcal{X} - \mathbf{x}^-) & 0 \end{bmatrix}, \\
+        K &= (K S_{zz})\, S_{zz}^{-1}, \qquad \mathbf{x}^+ = \mathbf{x}^- + K \mathbf{r},
+            \qquad P^+ = S^+ (S^+)^\top
 
     The same filter as the CKF in exact arithmetic; in floating point the covariances stay
     positive semi-definite where the CKF's ``P- - K S K^T`` can cancel into an indefinite

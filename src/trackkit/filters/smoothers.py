@@ -1,12 +1,16 @@
-"""Fixed-interval smoothing: Rauch-Tung-Striebel for every filter in trackkit.
+r"""Fixed-interval smoothing: Rauch-Tung-Striebel for every filter in trackkit.
 
-With the filter's one-step prediction ``x-_{k+1}, P-_{k+1}`` from ``(x_k, P_k)`` and the
-cross-covariance ``C_k = Cov(x_k, x_{k+1})`` (``P_k F^T`` for KF/EKF, the sigma-point sum
-for UKF/CKF, which makes this the unscented RTS smoother of Sarkka 2008):
+With the filter's one-step prediction :math:`\mathbf{x}^-_{k+1}, P^-_{k+1}` from
+:math:`(\mathbf{x}_k, P_k)` and the cross-covariance
+:math:`C_k = \operatorname{Cov}(\mathbf{x}_k, \mathbf{x}_{k+1})` (:math:`P_k F^\top` for
+KF/EKF, the sigma-point sum for UKF/CKF, which makes this the unscented RTS smoother of
+Sarkka 2008), the smoothed :math:`\mathbf{x}^s_k, P^s_k` are, backwards from the last step:
 
-    G_k  = C_k (P-_{k+1})^{-1}
-    xs_k = x_k + G_k (xs_{k+1} - x-_{k+1})
-    Ps_k = P_k + G_k (Ps_{k+1} - P-_{k+1}) G_k^T
+.. math::
+
+    G_k &= C_k \bigl(P^-_{k+1}\bigr)^{-1} \\
+    \mathbf{x}^s_k &= \mathbf{x}_k + G_k \bigl(\mathbf{x}^s_{k+1} - \mathbf{x}^-_{k+1}\bigr) \\
+    P^s_k &= P_k + G_k \bigl(P^s_{k+1} - P^-_{k+1}\bigr) G_k^\top
 """
 
 from __future__ import annotations

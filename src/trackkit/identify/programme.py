@@ -102,6 +102,8 @@ class NoiseLevels(NamedTuple):
 
 _DEG = math.pi / 180.0
 
+#: The default trial programme: an acceleration run, zigzags 20/20 at 2000 and 1500 rpm, a
+#: port turning circle, a deceleration run, a zigzag 10/10 and a starboard turning circle.
 DEFAULT_PROGRAMME: tuple[TrialSpec, ...] = (
     TrialSpec("acceleration", "acceleration",
               {"rpm_start": 1000.0, "rpm_end": 2000.0, "t_step": 10.0, "duration": 60.0}),
@@ -120,6 +122,8 @@ DEFAULT_PROGRAMME: tuple[TrialSpec, ...] = (
               {"delta": 20 * _DEG, "rpm": 2000.0, "side": 1.0, "duration": 90.0}),
 )
 
+#: The default measurement noise: 0.05 m/s on u and v, 0.1 deg/s on r, 2.5 m of GPS per
+#: axis and 0.2 deg of heading.
 DEFAULT_NOISE = NoiseLevels(body=np.array([0.05, 0.05, 0.1 * _DEG]), gps=2.5,
                             heading=0.2 * _DEG)
 

@@ -50,6 +50,7 @@ from trackkit.io.records import ReadReport, Reports
 
 __all__ = ["CHUNK", "looks_like_aivdm", "read_aivdm"]
 
+#: Messages decoded at a time (memory holds one chunk of messages).
 CHUNK = 50_000  # messages decoded at a time
 POSITION_TYPES = (1, 2, 3, 9, 18, 19, 27)
 #: per message type, its own "not available" codes mapped to the class A ones

@@ -27,16 +27,21 @@ __all__ = [
     "EnuFrame",
     "velocity_from_course",
     "course_from_velocity",
+    "ground_geodetic",
 ]
 
 Array = NDArray[np.float64]
 
+#: One nautical mile in metres (exact by definition).
 NAUTICAL_MILE = 1852.0  # metres, exact by definition
+#: One knot in metres per second.
 KNOT = NAUTICAL_MILE / 3600.0  # metres per second
 
-#: Factors to SI (metres, metres per second, radians) for the unit names the readers accept.
+#: Factors to metres for the distance unit names the readers accept.
 DISTANCE_UNITS = {"m": 1.0, "km": 1000.0, "nmi": NAUTICAL_MILE}
+#: Factors to metres per second for the speed unit names the readers accept.
 SPEED_UNITS = {"m/s": 1.0, "kn": KNOT, "km/h": 1000.0 / 3600.0}
+#: Factors to radians for the angle unit names the readers accept.
 ANGLE_UNITS = {"rad": 1.0, "deg": np.pi / 180.0}
 
 

@@ -49,7 +49,7 @@ SNIFF_BYTES = 1 << 16  # what is read to recognise a layout
 @dataclass(frozen=True)
 class Layout:
     """A layout: its ``name``, the tracker profile it maps to (``kind``), its ``title`` and,
-    for CSV layouts, the accepted column names by role (normalised, see :func:`_norm`); the
+    for CSV layouts, the accepted column names by role (normalised, see ``_norm``); the
     roles time, id, lat, lon are the key columns."""
 
     name: str

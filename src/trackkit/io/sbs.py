@@ -17,7 +17,7 @@ velocity) line of the same aircraft above it in the file: so a position carries 
 velocity heard. Altitude (ft) becomes metres. The other lines (types 1, 5 to 8, and the
 ``SEL``, ``ID``, ``AIR``, ``STA``, ``CLK`` lines) are skipped and counted by kind, never fatal.
 
-The file is streamed in blocks like a CSV file (:func:`~trackkit.io._table.read_csv_table`).
+The file is streamed in blocks like a CSV file (``read_csv_table`` of ``trackkit.io._table``).
 """
 
 from __future__ import annotations

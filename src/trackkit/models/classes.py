@@ -299,9 +299,13 @@ def mode_step_components(px: Array, py: Array, vx: Array, vy: Array, s: Array, c
 
 # the paper's two classes, with the c2 sign typo fixed (0.1 + ..., not
 # 0.1 - ...) and the turn rates read in deg/s (module docstring)
+#: The paper's airliner class: speed likelihood falling from 0.8 at 100 m/s to 0.1 at
+#: 300 m/s, modes with u = 5 m/s^2 and omega = 0.5 deg/s.
 AIRLINER = TargetClass(
     "airliner", SpeedLikelihood(v_low=100.0, g_low=0.8, v_high=300.0, g_high=0.1),
     paper_modes(u=5.0, omega=math.radians(0.5)))
+#: The paper's fighter class: speed likelihood rising from 0.1 at 150 m/s to 0.95 at
+#: 650 m/s, modes with u = 20 m/s^2 and omega = 1 deg/s.
 FIGHTER = TargetClass(
     "fighter", SpeedLikelihood(v_low=150.0, g_low=0.1, v_high=650.0, g_high=0.95),
     paper_modes(u=20.0, omega=math.radians(1.0)))

@@ -83,11 +83,13 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
+#: The names of the 16 coefficients theta, in order: a1..a9, b1..b4, c1..c3.
 COEFFICIENT_NAMES: tuple[str, ...] = (
     tuple(f"a{i}" for i in range(1, 10)) + tuple(f"b{i}" for i in range(1, 5))
     + tuple(f"c{i}" for i in range(1, 4))
 )
 N_THETA = 16
+#: One knot in m/s.
 KNOT = 1852.0 / 3600.0  # m/s
 
 
@@ -154,6 +156,7 @@ class Normalisation:
         return np.asarray(s, dtype=float) / np.array([1.0, self.rpm])
 
 
+#: The identity normalisation (unit length, speed and engine speed): SI units as they are.
 IDENTITY = Normalisation()
 
 

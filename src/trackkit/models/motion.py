@@ -1,4 +1,5 @@
-"""Motion models ``x_{k+1} = f(x_k, dt) + w``, ``w ~ N(0, Q(x, dt))``.
+r"""Motion models :math:`\mathbf{x}_{k+1} = f(\mathbf{x}_k, \Delta t) + \mathbf{w}`,
+:math:`\mathbf{w} \sim \mathcal{N}\bigl(0, Q(\mathbf{x}_k, \Delta t)\bigr)`.
 
 Each model is a small frozen dataclass with vectorised methods over leading batch axes:
 ``f(x, dt)``, ``jacobian(x, dt)`` (shape broadcastable to ``(..., n, n)``) and
@@ -235,10 +236,17 @@ class _NearlyConstant(MotionBase):
 
 @dataclass(frozen=True, eq=False)
 class ConstantVelocity(_NearlyConstant):
-    """Nearly constant velocity (continuous white-noise acceleration), state [p..., v...].
+    r"""Nearly constant velocity (continuous white-noise acceleration), state [p..., v...].
 
-    Per axis with spectral density q:  F = [[1, dt], [0, 1]],
-    Q = q [[dt^3/3, dt^2/2], [dt^2/2, dt]]. ``q`` is a scalar or one value per axis.
+    Per axis with spectral density q:
+
+    .. math::
+
+        F = \begin{bmatrix} 1 & \Delta t \\ 0 & 1 \end{bmatrix}, \qquad
+        Q = q \begin{bmatrix} \Delta t^3/3 & \Delta t^2/2 \\ \Delta t^2/2 & \Delta t
+        \end{bmatrix}
+
+    ``q`` is a scalar or one value per axis.
     """
 
     _order: ClassVar[int] = 2
@@ -246,10 +254,19 @@ class ConstantVelocity(_NearlyConstant):
 
 @dataclass(frozen=True, eq=False)
 class ConstantAcceleration(_NearlyConstant):
-    """Nearly constant acceleration (continuous white-noise jerk), state [p..., v..., a...].
+    r"""Nearly constant acceleration (continuous white-noise jerk), state [p..., v..., a...].
 
-    Per axis: F = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]],
-    Q = q [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]].
+    Per axis with spectral density q:
+
+    .. math::
+
+        F = \begin{bmatrix} 1 & \Delta t & \Delta t^2/2 \\ 0 & 1 & \Delta t \\ 0 & 0 & 1
+        \end{bmatrix}, \qquad
+        Q = q \begin{bmatrix}
+            \Delta t^5/20 & \Delta t^4/8 & \Delta t^3/6 \\
+            \Delta t^4/8 & \Delta t^3/3 & \Delta t^2/2 \\
+            \Delta t^3/6 & \Delta t^2/2 & \Delta t
+        \end{bmatrix}
     """
 
     _order: ClassVar[int] = 3
@@ -257,11 +274,40 @@ class ConstantAcceleration(_NearlyConstant):
 
 @dataclass(frozen=True, eq=False)
 class Singer(MotionBase):
-    """Singer manoeuvre model: acceleration is a first-order Gauss-Markov process.
+    r"""Singer manoeuvre model: acceleration is a first-order Gauss-Markov process.
 
-    Per axis ``da/dt = -a / tau + w`` with ``E[w w] = 2 sigma^2 / tau`` so that the stationary
-    acceleration standard deviation is ``sigma``; state [p..., v..., a...]. F and Q are the
-    exact discretisation (Van Loan), which equals Singer's closed form.
+    Per axis, with white noise :math:`w` of spectral density :math:`2 \sigma^2 / \tau` so that
+    the stationary acceleration standard deviation is ``sigma``; state [p..., v..., a...]:
+
+    .. math::
+
+        \dot a = -\frac{a}{\tau} + w
+
+    F and Q are the exact discretisation (Van Loan), which equals Singer's closed form
+    (Singer 1970); with :math:`\alpha = 1/\tau`, :math:`T = \Delta t` and
+    :math:`E = e^{-\alpha T}`:
+
+    .. math::
+
+        F = \begin{bmatrix}
+            1 & T & (\alpha T - 1 + E) / \alpha^2 \\
+            0 & 1 & (1 - E) / \alpha \\
+            0 & 0 & E
+        \end{bmatrix}, \qquad
+        Q = 2 \alpha \sigma^2 \begin{bmatrix}
+            q_{11} & q_{12} & q_{13} \\ q_{12} & q_{22} & q_{23} \\ q_{13} & q_{23} & q_{33}
+        \end{bmatrix}
+
+    .. math::
+
+        q_{11} &= \bigl(1 - E^2 + 2 \alpha T + \tfrac23 (\alpha T)^3 - 2 (\alpha T)^2
+            - 4 \alpha T E\bigr) / (2 \alpha^5), \\
+        q_{12} &= \bigl(E^2 + 1 - 2 E + 2 \alpha T E - 2 \alpha T + (\alpha T)^2\bigr)
+            / (2 \alpha^4), \qquad
+        q_{13} = (1 - E^2 - 2 \alpha T E) / (2 \alpha^3), \\
+        q_{22} &= (4 E - 3 - E^2 + 2 \alpha T) / (2 \alpha^3), \qquad
+        q_{23} = (E^2 + 1 - 2 E) / (2 \alpha^2), \qquad
+        q_{33} = (1 - E^2) / (2 \alpha)
     """
 
     dim: int = 2
@@ -367,8 +413,20 @@ def _turn_block(s: Array, c: Array, cos: Array, sin: Array) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class KnownTurnRate(MotionBase):
-    """Constant turn at a known rate ``omega`` (rad/s, positive counter-clockwise), state
-    [x, y, vx, vy]; Q is the constant-velocity Q with density q."""
+    r"""Constant turn at a known rate ``omega`` (rad/s, positive counter-clockwise), state
+    [x, y, vx, vy]; Q is the constant-velocity Q with density q. The transition, with
+    :math:`s = \sin(\omega \Delta t)/\omega` and :math:`c = (1 - \cos(\omega \Delta t))/\omega`
+    (their limits :math:`\Delta t` and 0 as :math:`\omega \to 0`):
+
+    .. math::
+
+        F(\omega) = \begin{bmatrix}
+            1 & 0 & s & -c \\
+            0 & 1 & c & s \\
+            0 & 0 & \cos \omega \Delta t & -\sin \omega \Delta t \\
+            0 & 0 & \sin \omega \Delta t & \cos \omega \Delta t
+        \end{bmatrix}
+    """
 
     omega: float = 0.0
     q: ArrayLike = 1.0
@@ -393,12 +451,24 @@ class KnownTurnRate(MotionBase):
 
 @dataclass(frozen=True, eq=False)
 class CoordinatedTurn(MotionBase):
-    """Coordinated turn with the turn rate in the state, [x, y, vx, vy, omega].
+    r"""Coordinated turn with the turn rate in the state, [x, y, vx, vy, omega].
 
-    x' = x + s vx - c vy,  y' = y + c vx + s vy,  [vx', vy'] = Rot(omega dt) [vx, vy],
-    omega' = omega, with s = sin(omega dt)/omega and c = (1 - cos(omega dt))/omega (omega
-    positive counter-clockwise). Q is the CV Q (density q) on the kinematic block and
-    ``q_omega dt`` on omega.
+    With :math:`s = \sin(\omega \Delta t)/\omega` and
+    :math:`c = (1 - \cos(\omega \Delta t))/\omega` (omega positive counter-clockwise):
+
+    .. math::
+
+        x' &= x + s\, v_x - c\, v_y, \qquad y' = y + c\, v_x + s\, v_y, \\
+        \begin{bmatrix} v_x' \\ v_y' \end{bmatrix} &=
+        \begin{bmatrix} \cos \omega \Delta t & -\sin \omega \Delta t \\
+            \sin \omega \Delta t & \cos \omega \Delta t \end{bmatrix}
+        \begin{bmatrix} v_x \\ v_y \end{bmatrix}, \qquad \omega' = \omega
+
+    Q is the CV Q (density q) on the kinematic block and ``q_omega dt`` on omega:
+
+    .. math::
+
+        Q = \begin{bmatrix} Q_{CV}(\Delta t) & 0 \\ 0 & q_\omega \Delta t \end{bmatrix}
     """
 
     q: ArrayLike = 1.0

@@ -1,4 +1,5 @@
-"""Sensor models ``z = h(x) + v``, ``v ~ N(0, R)``.
+r"""Sensor models :math:`\mathbf{z} = h(\mathbf{x}) + \mathbf{v}`,
+:math:`\mathbf{v} \sim \mathcal{N}(0, R)`.
 
 Each sensor is a small frozen dataclass with vectorised ``h(x)`` (``(..., m)``),
 ``jacobian(x)`` (``(..., m, n)``), ``hessian(x)`` (``(..., m, n, n)``), the measurement
@@ -244,10 +245,14 @@ class Position(SensorBase):
 
 @dataclass(frozen=True, eq=False)
 class Bearing(SensorBase):
-    """2-D bearing from ``origin`` to the target, z = [b].
+    r"""2-D bearing from ``origin`` :math:`(x_o, y_o)` to the target, z = [b]: nautical
+    (default, clockwise from north) or ``convention="math"`` (counter-clockwise from east):
 
-    Nautical (default): ``b = atan2(x - xo, y - yo)``, clockwise from north.
-    ``convention="math"``: ``b = atan2(y - yo, x - xo)``, counter-clockwise from east.
+    .. math::
+
+        b_{\text{nautical}} = \operatorname{atan2}(x - x_o,\; y - y_o), \qquad
+        b_{\text{math}} = \operatorname{atan2}(y - y_o,\; x - x_o)
+
     ``velocity`` is the observer's velocity (default at rest): h does not use it, but a filter
     whose state is relative to the observer does (the modified-polar EKF).
     """
@@ -300,7 +305,16 @@ class Bearing(SensorBase):
 
 @dataclass(frozen=True, eq=False)
 class RangeBearing(SensorBase):
-    """2-D radar: z = [range, bearing] from ``origin``; bearing convention as ``Bearing``."""
+    r"""2-D radar: z = [range, bearing] from ``origin`` :math:`(x_o, y_o)`; the bearing's
+    convention as :class:`Bearing`'s (nautical shown):
+
+    .. math::
+
+        h(\mathbf{x}) = \begin{bmatrix}
+            \sqrt{(x - x_o)^2 + (y - y_o)^2} \\
+            \operatorname{atan2}(x - x_o,\; y - y_o)
+        \end{bmatrix}
+    """
 
     origin: ArrayLike = (0.0, 0.0)
     sigma_range: float = 1.0
@@ -426,12 +440,20 @@ class AzimuthElevation(SensorBase):
 
 @dataclass(frozen=True, eq=False)
 class BearingFrequency(SensorBase):
-    """Doppler-bearing sensor (Hashemi and Alfi 2019): z = [bearing, received frequency].
+    r"""Doppler-bearing sensor (Hashemi and Alfi 2019): z = [bearing, received frequency].
 
     State [x, y, vx, vy, f0]; ``origin`` and ``velocity`` are the observer's. With
-    d = target - observer, r = |d|, dv the relative velocity and b = atan2(dx, dy):
-    ``V_D = (dv . d) / r`` (range rate, positive opening) and ``f = f0 (1 - V_D / c)``.
-    The bearing is nautical; ``c`` (sound speed, m/s) defaults to 1500.
+    :math:`\mathbf{d}` = target - observer (position), :math:`r = \lVert \mathbf{d} \rVert`
+    and :math:`\Delta\mathbf{v}` the relative velocity, the bearing (nautical), the range rate
+    :math:`V_D` (positive opening) and the received frequency are
+
+    .. math::
+
+        b = \operatorname{atan2}(d_x, d_y), \qquad
+        V_D = \frac{\Delta\mathbf{v} \cdot \mathbf{d}}{r}, \qquad
+        f = f_0 \Bigl(1 - \frac{V_D}{c}\Bigr)
+
+    ``c`` (sound speed, m/s) defaults to 1500.
     """
 
     origin: ArrayLike = (0.0, 0.0)

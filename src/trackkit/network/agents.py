@@ -14,7 +14,7 @@ leaves one open):
        x- = F(dt) x,  P- = F(dt) P F(dt)^T + Q(|dt|),
        F = [[I, dt I], [0, I]],  Q = q [[|dt|^3/3 I, dt^2/2 sgn(dt) I], [.., |dt| I]]
 
-   (the same F back to a bearing's earlier time t_k, dt = t_k - t < 0, with Q(|dt|): the
+   (the same F back to a bearing's earlier time t_k, dt = t_k - t < 0, with ``Q(|dt|)``: the
    uncertainty of the extrapolation grows whichever way it goes).
 3. **Association**, one bearing source (one sensor's execution: unlabelled bearings, one per
    target in range) at a time: each track's bearing from that sensor position at that time,
@@ -118,6 +118,7 @@ __all__ = [
     "associate",
     "combine_with_neighbours",
     "composites",
+    "CompositeStep",
     "cv_predict",
     "empty_bearings",
     "empty_tracks",
@@ -289,6 +290,7 @@ class Tracks(NamedTuple):
 
 
 def empty_tracks() -> Tracks:
+    """An agent's track batch with no tracks (every array with 0 rows)."""
     lg = TimerState(np.zeros(0), np.zeros(0), np.zeros(0, np.int8), np.zeros(0, bool))
     return Tracks(np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros((0, 4, 4)), lg,
                   np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0, 2)), np.zeros((0, 0)),

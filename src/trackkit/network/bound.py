@@ -197,6 +197,7 @@ def information_recursion(
     """The bound's recursion with any measurement information (module docstring).
 
     Args:
+
         prior_cov: P0 ``(4, 4)`` or broadcastable to ``(..., Nt, 4, 4)`` at ``t0``; None for
             no prior (J_0 = 0; q = 0 only).
         time: ``(..., M)`` event times >= t0, any order (sorted here, stably).
@@ -207,6 +208,7 @@ def information_recursion(
         history: keep J after every event.
 
     Returns:
+
         ``NetworkBound``.
     """
     t = np.asarray(time, dtype=float)
@@ -278,6 +280,7 @@ def network_pcrlb(
     An event is one execution: a sensor position and at most one bearing of each target.
 
     Args:
+
         prior_cov: P0 ``(4, 4)`` or broadcastable to ``(..., Nt, 4, 4)`` at ``t0``; None
             for no prior (q = 0 only).
         time: ``(..., M)`` event times >= t0 (any order; several events may share a time).
@@ -290,6 +293,7 @@ def network_pcrlb(
         convention: "nautical" or "math".
 
     Returns:
+
         ``NetworkBound``.
     """
     check_convention(convention)

@@ -247,16 +247,18 @@ def central_fusion(
     """Centralised fusion of labelled bearings (module docstring).
 
     Args:
+
         z: ``(R, A, E, Nt)`` agent a's bearing of target j at its e-th execution (rad,
             nautical; nan: none). The target axis is the true label (ideal association).
         time: ``(R, A, E)`` execution times (s). sensor: ``(R, A, E, 2)`` the agent's
             position at each execution (m). sigma: bearing std (rad), scalar, ``(A,)`` or
             ``(R, A)``.
         q: the CV spectral density used when ``settings.q`` is None (m^2/s^3).
-        settings: :class:`CentralSettings`.
+        settings: ``CentralSettings``.
 
     Returns:
-        :class:`CentralFusion`.
+
+        ``CentralFusion``.
     """
     s = CentralSettings() if settings is None else settings
     Z = np.asarray(z, dtype=float)

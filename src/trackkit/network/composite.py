@@ -472,6 +472,7 @@ def linearize_bearings(
     ``H_k = [da/dx, da/dy, (t_k - t_f) da/dx, (t_k - t_f) da/dy]`` (eqs. 27-33).
 
     Args:
+
         x: ``(..., 4)`` the CV state [x, y, vx, vy] at ``t_f`` (m, m/s).
         t: ``(..., M)`` or ``(M,)`` bearing times (s).
         sensor_pos: ``(..., M, 2)`` sensor positions (east, north) at those times (m).
@@ -479,6 +480,7 @@ def linearize_bearings(
         convention: "nautical" (clockwise from north) or "math" (counter-clockwise from east).
 
     Returns:
+
         ``h_bar`` ``(..., M)`` in (-pi, pi] and ``H`` ``(..., M, 4)``.
     """
     batch, X, p, _ = _prepare(x, t, sensor_pos, 1.0, t_f, None, None, convention, "x")
@@ -501,12 +503,14 @@ def fisher_information(
     (eq. 38), with H_k the Jacobian of ``linearize_bearings`` evaluated at ``x``.
 
     Args:
+
         x: ``(..., 4)`` the state at which J is evaluated (the truth gives the CRLB J^{-1}).
         t, sensor_pos, t_f, convention: as ``linearize_bearings``.
         sigma: bearing standard deviation (rad), scalar or ``(..., M)``.
         valid: optional booleans ``(..., M)``; a False bearing does not count.
 
     Returns:
+
         ``J`` of shape ``(..., 4, 4)``; its inverse is the CRLB when J is regular.
     """
     batch, X, p, _ = _prepare(x, t, sensor_pos, sigma, t_f, None, valid, convention, "x")
@@ -536,6 +540,7 @@ def composite_measurement(
     ``X + D^{-1/2} (J_s + mu I)^{-1} D^{-1/2} g``; keep it if lambda falls.
 
     Args:
+
         z: ``(..., M)`` bearings (rad); nan marks a missing bearing, so rows may hold
             different numbers of bearings (pad with nan).
         t: ``(..., M)`` or ``(M,)`` bearing times (s), finite where z is present.
@@ -551,11 +556,13 @@ def composite_measurement(
         convention: "nautical" (clockwise from north, default) or "math".
 
     Returns:
+
         ``Composite(mean, cov, information, status, iterations, cost)``, batch shape of the
         broadcast inputs; see ``Composite`` for the status table. Geometry that does not
         observe the state is a status, not an exception.
 
     Raises:
+
         ValueError: a shape, a non-finite value or sigma <= 0, naming the argument.
     """
     if not isinstance(max_iter, (int, np.integer)) or max_iter < 1:

@@ -1,4 +1,4 @@
-"""Diffusion Kalman filter over a network of agents (Jalalipoor and Kardehi Moghaddam 2021, eqs.
+r"""Diffusion Kalman filter over a network of agents (Jalalipoor and Kardehi Moghaddam 2021, eqs.
 44-50; Cattivelli and Sayed, "Diffusion strategies for distributed Kalman filtering and smoothing",
 IEEE TAC 55(9), 2010).
 
@@ -7,18 +7,23 @@ whose mean is ``(..., N, n)`` and covariance ``(..., N, n, n)``: the leading axe
 and targets, the last batch axis is the agent. One cycle, for agent k with neighbourhood
 ``N_k`` (k itself included):
 
-* prediction (eqs. 44-45), ``x_k- = F x_k``, ``P_k- = F P_k F^T + Q``: the core
-  :class:`trackkit.filters.KF` prediction, applied to every agent at once;
-* incremental update (eqs. 46-48, in information form), with the measurements ``z_l``
-  (``H_l``, ``R_l``) of every ``l`` in ``N_k``::
+* prediction (eqs. 44-45), :math:`\mathbf{x}_k^- = F \mathbf{x}_k`,
+  :math:`P_k^- = F P_k F^\top + Q`: the core :class:`trackkit.filters.KF` prediction, applied
+  to every agent at once;
+* incremental update (eqs. 46-48, in information form), with the measurements
+  :math:`\mathbf{z}_l` (:math:`H_l`, :math:`R_l`) of every :math:`l \in \mathcal{N}_k`:
 
-      S_k = sum_l c_lk H_l^T R_l^-1 H_l,     q_k = sum_l c_lk H_l^T R_l^-1 z_l
-      P_k+^-1 = P_k-^-1 + S_k,               psi_k = x_k- + P_k+ (q_k - S_k x_k-)
+  .. math::
+
+      S_k &= \sum_{l \in \mathcal{N}_k} c_{lk} H_l^\top R_l^{-1} H_l, \qquad
+      \mathbf{q}_k = \sum_{l \in \mathcal{N}_k} c_{lk} H_l^\top R_l^{-1} \mathbf{z}_l, \\
+      (P_k^+)^{-1} &= (P_k^-)^{-1} + S_k, \qquad
+      \psi_k = \mathbf{x}_k^- + P_k^+ (\mathbf{q}_k - S_k \mathbf{x}_k^-)
 
   which equals the paper's sequential single-measurement updates over ``l`` (with
   ``c_lk = 1``) in exact arithmetic;
-* combination (eqs. 49-50) with weights ``a_lk >= 0``, ``sum_l a_lk = 1``, see
-  :func:`combine`.
+* combination (eqs. 49-50) with weights :math:`a_{lk} \ge 0`,
+  :math:`\sum_l a_{lk} = 1`, see :func:`combine`.
 
 Adapt-then-combine (ATC, the paper's Fig. 5 order) updates and then combines; combine-then-
 adapt (CTA) combines the predictions and then updates.
@@ -99,7 +104,8 @@ def neighbourhood(adjacency: ArrayLike) -> NDArray[np.bool_]:
 
 
 def uniform_weights(adjacency: ArrayLike) -> Array:
-    """Uniform weights ``a_lk = 1 / |N_k|`` for ``l`` in ``N_k`` (self included), else 0.
+    r"""Uniform weights :math:`a_{lk} = 1 / |\mathcal{N}_k|` for :math:`l \in \mathcal{N}_k`
+    (self included), else 0.
 
     Rows sum to 1; the matrix is symmetric only when every agent has the same degree.
     """
@@ -108,9 +114,14 @@ def uniform_weights(adjacency: ArrayLike) -> Array:
 
 
 def metropolis_weights(adjacency: ArrayLike) -> Array:
-    """Metropolis-Hastings weights: ``a_lk = 1 / max(n_k, n_l)`` for a neighbour ``l != k``,
-    ``a_kk = 1 - sum_{l != k} a_lk``, 0 off the graph, with ``n_k = |N_k|`` (the degree plus
-    one).
+    r"""Metropolis-Hastings weights, 0 off the graph, with :math:`n_k = |\mathcal{N}_k|` (the
+    degree plus one):
+
+    .. math::
+
+        a_{lk} = \frac{1}{\max(n_k, n_l)} \quad (l \in \mathcal{N}_k,\ l \ne k), \qquad
+        a_{kk} = 1 - \sum_{l \ne k} a_{lk}
+
 
     Symmetric and doubly stochastic, with ``a_kk >= 1 / n_k > 0``: repeated combination
     converges to the network average on a connected graph (Xiao and Boyd 2004).
@@ -252,10 +263,14 @@ def measurement_information(z: ArrayLike, R: ArrayLike,
 
 def adapt(belief: Gaussian, z: ArrayLike, R: ArrayLike, share: ArrayLike,
           H: ArrayLike | None = None) -> Gaussian:
-    """Incremental update (eqs. 46-48) in information form, every agent at once::
+    r"""Incremental update (eqs. 46-48) in information form, every agent at once:
 
-        S_k = sum_l c_lk H_l^T R_l^-1 H_l,   q_k = sum_l c_lk H_l^T R_l^-1 z_l
-        P_k+ = (P_k^-1 + S_k)^-1,            psi_k = x_k + P_k+ (q_k - S_k x_k)
+    .. math::
+
+        S_k &= \sum_l c_{lk} H_l^\top R_l^{-1} H_l, \qquad
+        \mathbf{q}_k = \sum_l c_{lk} H_l^\top R_l^{-1} \mathbf{z}_l, \\
+        P_k^+ &= (P_k^{-1} + S_k)^{-1}, \qquad
+        \psi_k = \mathbf{x}_k + P_k^+ (\mathbf{q}_k - S_k \mathbf{x}_k)
 
     ``share[..., k, l] = c_lk`` (``(..., N, N)``, >= 0; the neighbourhood indicator for the
     paper's update with every neighbour's measurement, or all ones for full sharing). ``z``,
@@ -296,18 +311,22 @@ def adapt(belief: Gaussian, z: ArrayLike, R: ArrayLike, share: ArrayLike,
 
 def ci_weights(cov: ArrayLike, weights: ArrayLike, criterion: str = "det",
                iterations: int = 50) -> Array:
-    """Covariance-intersection weights ``omega[..., k, l]`` for every agent at once:
-    minimise ``det P_k`` or ``tr P_k`` over the simplex, with
-    ``P_k^-1 = sum_l omega_kl P_l^-1`` and ``omega_kl`` zero wherever ``weights`` is.
+    r"""Covariance-intersection weights ``omega[..., k, l]`` for every agent at once:
+    minimise :math:`\det P_k` or :math:`\operatorname{tr} P_k` over the simplex, with
+    :math:`P_k^{-1} = \sum_l \omega_{kl} P_l^{-1}` and :math:`\omega_{kl}` zero wherever
+    ``weights`` is.
 
     ``cov`` is ``(..., N, n, n)``, ``weights`` ``(..., N, N)`` (rows summing to 1; the
     start point and the support). The problem is a convex optimal-design problem (D- or
     A-optimality of the ``P_l^-1``); the multiplicative algorithm (Titterington 1976 for the
     determinant; Yu 2010 for the trace) decreases the criterion monotonically, step by
-    step, for all rows at once::
+    step, for all rows at once (``"det"``, then ``"trace"``):
 
-        det:    omega_kl <- omega_kl tr(P_k P_l^-1) / n
-        trace:  omega_kl <- omega_kl sqrt(tr(P_k P_l^-1 P_k)) / sum_j (same for j)
+    .. math::
+
+        \omega_{kl} &\leftarrow \omega_{kl}\, \operatorname{tr}(P_k P_l^{-1}) / n \\
+        \omega_{kl} &\leftarrow \frac{\omega_{kl} \sqrt{\operatorname{tr}(P_k P_l^{-1} P_k)}}
+            {\sum_j \omega_{kj} \sqrt{\operatorname{tr}(P_k P_j^{-1} P_k)}}
 
     Any omega in the simplex gives a consistent fusion, so stopping after ``iterations``
     steps costs optimality only, never consistency. The determinant is the default: it does
@@ -355,22 +374,33 @@ def _intersect(x: Array, P: Array, omega: Array, where: str) -> tuple[Array, Arr
 
 def combine(belief: Gaussian, weights: ArrayLike, method: str = "information",
             criterion: str = "det", iterations: int = 50) -> Gaussian:
-    """Diffusion combination of the agents' estimates, with ``weights[..., k, l] = a_lk``.
+    r"""Diffusion combination of the agents' estimates, with ``weights[..., k, l] = a_lk``.
 
     ``method``:
 
-    * ``"convex"`` (Cattivelli and Sayed 2010): ``x_k = sum_l a_lk psi_l`` and ``P_k``
-      kept (the agent's own updated covariance);
-    * ``"paper"`` (Jalalipoor and Kardehi Moghaddam 2021, eqs. 49-50 as printed): ``x_k = sum_l a_lk
-    psi_l`` and
-      ``P_k = (sum_l a_lk P_l^-1)^-1``. The covariance is a harmonic mean, the mean an
-      arithmetic one: when the agents' covariances differ the pair can be badly
-      overconfident (the mean keeps a share a_lk of the worst agent's error, the covariance
-      hardly any), with or without correlation; with equal covariances it is consistent;
-    * ``"information"``: ``P_k = (sum_l a_lk P_l^-1)^-1`` with the information-weighted mean
-      ``x_k = P_k sum_l a_lk P_l^-1 psi_l``: covariance intersection with the weights fixed
-      at ``a_lk``: consistent inputs give a consistent result whatever the correlation
-      between the agents' errors (shared measurements, common priors);
+    * ``"convex"`` (Cattivelli and Sayed 2010): :math:`\mathbf{x}_k = \sum_l a_{lk} \psi_l`
+      and :math:`P_k` kept (the agent's own updated covariance);
+    * ``"paper"`` (Jalalipoor and Kardehi Moghaddam 2021, eqs. 49-50 as printed):
+
+      .. math::
+
+          \mathbf{x}_k = \sum_l a_{lk} \psi_l, \qquad
+          P_k = \Bigl(\sum_l a_{lk} P_l^{-1}\Bigr)^{-1}
+
+      The covariance is a harmonic mean, the mean an arithmetic one: when the agents'
+      covariances differ the pair can be badly overconfident (the mean keeps a share a_lk of
+      the worst agent's error, the covariance hardly any), with or without correlation; with
+      equal covariances it is consistent;
+    * ``"information"``: the same covariance with the information-weighted mean,
+
+      .. math::
+
+          P_k = \Bigl(\sum_l a_{lk} P_l^{-1}\Bigr)^{-1}, \qquad
+          \mathbf{x}_k = P_k \sum_l a_{lk} P_l^{-1} \psi_l
+
+      covariance intersection with the weights fixed at ``a_lk``: consistent inputs give a
+      consistent result whatever the correlation between the agents' errors (shared
+      measurements, common priors);
     * ``"ci"``: the same with the weights chosen per agent by :func:`ci_weights`
       (``criterion`` ``"det"`` or ``"trace"``, ``iterations`` steps from ``a_lk``, over the
       agents with ``a_lk > 0``).

@@ -201,6 +201,7 @@ def run_network(
     """Run ``run`` of a network of agents (module docstring).
 
     Args:
+
         seed, run: the run's randomness comes from (seed, run) alone.
         targets: ``(Nt, 4)`` target states at t = 0; agents: ``(A, 4)`` agent states at
             t = 0 (position, velocity: the initial course and the constant speed).

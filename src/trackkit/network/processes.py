@@ -686,6 +686,7 @@ def run_network_processes(
     """Run ``run`` of a network with every agent in its own process (module docstring).
 
     Args:
+
         seed, run, targets, agents, duration, period, sigma, mr, cr, max_delay, q, settings,
             steering, central, loss, central_settings: as ``run_network``; with ``loss`` 0,
             ``delay`` 0 and no outages the tracks equal ``run_network``'s bit for bit.

@@ -12,7 +12,7 @@ turn-rate limit w (2 deg/s in the paper), may command any course in
     [C - w dt, C + w dt]                                           (eqs. 52-64, "course bounds")
 
 The interval is searched on a grid of ``n_candidates`` courses ``C + w dt g_k`` with g_k
-evenly spaced on [-1, 1] (both ends and g = 0 included), ordered by |g_k| so that ties go to
+evenly spaced on [-1, 1] (both ends and g = 0 included), ordered by ``|g_k|`` so that ties go to
 the smallest turn. ``w dt < pi/2`` is required: the interval is then shorter than pi, which
 the circular blend below needs.
 
@@ -65,7 +65,7 @@ a's own centre when it commands c,
 
 so that the two moves together leave h >= h - h/2 - h/2 = 0 to first order (the distance is
 convex, so the first-order change over-states the loss for the lower bound; the margin m
-absorbs what is left at the upper one, about |alpha|^2 / (2 |c_a - c_i|), a few metres). A
+absorbs what is left at the upper one, about ``|alpha|^2 / (2 |c_a - c_i|)``, a few metres). A
 neighbour's centre comes from its position and velocity (its turn rate taken as w). The
 price is a narrower band in practice: the agents' own distance can reach R_n,min only when
 both circles' worst points face each other. The condition for the guarantee is to *start*
@@ -118,6 +118,7 @@ from numpy.typing import ArrayLike, NDArray
 from trackkit.angles import circular_mean, wrap
 
 __all__ = [
+    "TURN_RATE",
     "Steering",
     "CourseCommand",
     "admissible_courses",

@@ -78,6 +78,7 @@ def require(ok: bool, owner: str, what: str, value: Any, want: str) -> None:
 
 
 def is_integer(v: Any) -> bool:
+    """A Python or numpy integer (not a bool)."""
     return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
 

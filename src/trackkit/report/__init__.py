@@ -1,5 +1,7 @@
 """Report: summary tables, figures, results.json, metrics.parquet and a self-contained HTML page.
 
+Typical use::
+
     from trackkit.report import write_report, rich_table
     paths = write_report(result, "out/")       # result: experiments.results.MonteCarloResult
     rich.print(rich_table(result))

@@ -46,15 +46,22 @@ __all__ = [
     "RESULTS_JSON", "TIMINGS_JSON", "METRICS_PARQUET", "REPORT_HTML", "INCOMPLETE",
     "TRACKKIT_FILES", "results_document", "timings_document", "write_results_json",
     "write_timings_json", "metrics_table", "write_metrics_parquet", "write_report",
-    "MANIFEST_JSON", "CommandRun", "command_output", "read_manifest",
+    "MANIFEST_JSON", "CommandRun", "command_output", "read_manifest", "write_atomically",
 ]
 
+#: The results document of a run (written last).
 RESULTS_JSON = "results.json"
+#: The wall-clock times of a run (not deterministic, so kept out of ``results.json``).
 TIMINGS_JSON = "timings.json"
+#: The per-step metrics table.
 METRICS_PARQUET = "metrics.parquet"
+#: The self-contained HTML report.
 REPORT_HTML = "report.html"
+#: The marker present in an output directory while its files are being moved into place.
 INCOMPLETE = "INCOMPLETE"
+#: The record of the command that wrote an output directory and of the files it wrote.
 MANIFEST_JSON = "manifest.json"
+#: The files ``write_report`` owns: an earlier run's that this run did not write are removed.
 TRACKKIT_FILES = (METRICS_PARQUET, *plots.PLOT_FILES.values(), REPORT_HTML, TIMINGS_JSON,
                   RESULTS_JSON)
 #: the units of the quantities that are the same for every scenario (the error groups' units
@@ -344,7 +351,7 @@ def _check_directory(out: Path, label: str, run: CommandRun, writes: Iterable[st
 @contextmanager
 def command_output(out_dir: str | Path, label: str, run: CommandRun) -> Iterator[None]:
     """While inside, ``run`` is the command writing ``out_dir``: checked now (before any
-    computing; see :func:`_check_directory`), and every :func:`write_atomically` into it
+    computing; see ``_check_directory``), and every :func:`write_atomically` into it
     writes ``manifest.json`` and removes the files of the command's previous manifest that
     it did not write again."""
     out = Path(out_dir).resolve()

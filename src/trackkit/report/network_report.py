@@ -61,6 +61,7 @@ PATHS_PNG = "paths.png"
 ERRORS_PNG = "errors.png"
 GOSPA_PNG = "gospa.png"
 COURSES_PNG = "courses.png"
+#: The files the network report owns (an earlier run's not written again are removed).
 NETWORK_FILES = (PATHS_PNG, ERRORS_PNG, GOSPA_PNG, COURSES_PNG, REPORT_HTML, TIMINGS_JSON,
                  RESULTS_JSON)
 

@@ -29,6 +29,7 @@ __all__ = [
     "plot_time", "classes_figure", "plot_classes",
 ]
 
+#: The file name of each report figure, by figure.
 PLOT_FILES = {"geometry": "geometry.png", "rmse": "rmse.png", "nees": "nees.png",
               "matching": "matching.png", "membership": "membership.png",
               "convergence": "convergence.png", "time": "time.png", "classes": "classes.png"}
@@ -129,7 +130,8 @@ def geometry_figure(result: MonteCarloResult, every: int | None = None,
 
 def plot_geometry(result: MonteCarloResult, path: str | Path, every: int | None = None,
                   nsigma: float = 2.0) -> Path | None:
-    """Write :func:`geometry_figure` as a PNG; None (nothing written) without an example run."""
+    """Write :func:`~trackkit.report.plots.geometry_figure` as a PNG;
+    None (nothing written) without an example run."""
     fig = geometry_figure(result, every, nsigma)
     return None if fig is None else save_figure(fig, path)
 
@@ -191,7 +193,7 @@ def rmse_figure(result: MonteCarloResult) -> Figure:
 
 
 def plot_rmse(result: MonteCarloResult, path: str | Path) -> Path:
-    """Write :func:`rmse_figure` as a PNG."""
+    """Write :func:`~trackkit.report.plots.rmse_figure` as a PNG."""
     return save_figure(rmse_figure(result), path)
 
 
@@ -231,7 +233,7 @@ def nees_figure(result: MonteCarloResult) -> Figure:
 
 
 def plot_nees(result: MonteCarloResult, path: str | Path) -> Path:
-    """Write :func:`nees_figure` as a PNG."""
+    """Write :func:`~trackkit.report.plots.nees_figure` as a PNG."""
     return save_figure(nees_figure(result), path)
 
 
@@ -291,7 +293,8 @@ def matching_figure(result: MonteCarloResult) -> Figure | None:
 
 
 def plot_matching(result: MonteCarloResult, path: str | Path) -> Path | None:
-    """Write :func:`matching_figure` as a PNG; None (nothing written) without logs."""
+    """Write :func:`~trackkit.report.plots.matching_figure` as a PNG;
+    None (nothing written) without logs."""
     fig = matching_figure(result)
     return None if fig is None else save_figure(fig, path)
 
@@ -363,7 +366,8 @@ def membership_figure(result: MonteCarloResult, points: int = 600) -> Figure | N
 
 
 def plot_membership(result: MonteCarloResult, path: str | Path) -> Path | None:
-    """Write :func:`membership_figure` as a PNG; None (nothing written) without tuning."""
+    """Write :func:`~trackkit.report.plots.membership_figure` as a PNG;
+    None (nothing written) without tuning."""
     fig = membership_figure(result)
     return None if fig is None else save_figure(fig, path)
 
@@ -411,7 +415,8 @@ def convergence_figure(result: MonteCarloResult) -> Figure | None:
 
 
 def plot_convergence(result: MonteCarloResult, path: str | Path) -> Path | None:
-    """Write :func:`convergence_figure` as a PNG; None (nothing written) without tuning."""
+    """Write :func:`~trackkit.report.plots.convergence_figure` as a PNG;
+    None (nothing written) without tuning."""
     fig = convergence_figure(result)
     return None if fig is None else save_figure(fig, path)
 
@@ -462,7 +467,8 @@ def time_figure(result: MonteCarloResult) -> Figure | None:
 
 
 def plot_time(result: MonteCarloResult, path: str | Path) -> Path | None:
-    """Write :func:`time_figure` as a PNG; None (nothing written) without an example run."""
+    """Write :func:`~trackkit.report.plots.time_figure` as a PNG;
+    None (nothing written) without an example run."""
     fig = time_figure(result)
     return None if fig is None else save_figure(fig, path)
 
@@ -507,8 +513,8 @@ def classes_figure(result: MonteCarloResult) -> Figure | None:
 
 
 def plot_classes(result: MonteCarloResult, path: str | Path) -> Path | None:
-    """Write :func:`classes_figure` as a PNG; None (nothing written) when no filter
-    classifies."""
+    """Write :func:`~trackkit.report.plots.classes_figure` as a PNG;
+    None (nothing written) when no filter classifies."""
     fig = classes_figure(result)
     return None if fig is None else save_figure(fig, path)
 

@@ -63,10 +63,15 @@ __all__ = ["sweep_table", "write_sweep_csv", "write_sweep_report", "render_sweep
            "published_rows", "reference_filter", "sweep_outputs", "headline_metrics",
            "SWEEP_PARQUET", "SWEEP_CSV", "SWEEP_JSON", "SWEEP_HTML", "SWEEP_TIMINGS"]
 
+#: The campaign's table, one row per point and filter, as Parquet.
 SWEEP_PARQUET = "sweep.parquet"
+#: The same table as CSV.
 SWEEP_CSV = "sweep.csv"
+#: The campaign's results document.
 SWEEP_JSON = "sweep.json"
+#: The campaign's HTML report.
 SWEEP_HTML = "report.html"
+#: The campaign's wall-clock times.
 SWEEP_TIMINGS = "timings.json"
 _FIXED = (SWEEP_PARQUET, SWEEP_CSV, SWEEP_JSON, SWEEP_HTML, SWEEP_TIMINGS)
 _FIGURE = re.compile(r"(lines|heatmap)-[A-Za-z0-9._-]+\.png")

@@ -30,7 +30,8 @@ __all__ = [
     "averaging_window", "display_unit", "Summary", "summary", "rich_table", "html_table", "short",
     "channel_labels", "state_labels", "matching_values", "matching_summary", "tuning_summary",
     "matching_summaries", "summary_rich_table", "summary_html_table", "matching_rich_tables",
-    "matching_html_tables", "classification_summary", "window_summaries", "fit_rich_table",
+    "matching_html_tables", "classification_summary", "gap_summary", "window_summaries",
+    "fit_rich_table",
 ]
 
 _DEG = 180.0 / math.pi
@@ -505,10 +506,11 @@ def summary_html_table(s: Summary) -> str:
 
 def matching_rich_tables(result: MonteCarloResult, width: int | None = None
                          ) -> list[Table | Group]:
-    """The error-window tables (:func:`window_summaries`, transposed when wider than
-    ``width``), :func:`matching_summaries`, the missing-measurement table
-    (:func:`gap_summary`) and the classification table (:func:`classification_summary`),
-    when present, as ``rich`` tables (printed after :func:`rich_table`)."""
+    """The error-window tables (:func:`~trackkit.report.tables.window_summaries`,
+    transposed when wider than ``width``), :func:`~trackkit.report.tables.matching_summaries`,
+    the missing-measurement table (:func:`~trackkit.report.tables.gap_summary`) and the
+    classification table (:func:`~trackkit.report.tables.classification_summary`), when
+    present, as ``rich`` tables (printed after :func:`~trackkit.report.tables.rich_table`)."""
     n = len(result.filters)
     windows = [fit_rich_table(s, width, n) for s in window_summaries(result)]
     extra = [t for t in (gap_summary(result), classification_summary(result)) if t is not None]

@@ -324,6 +324,8 @@ def _track_features(history: TrackHistory, frame: EnuFrame, epoch: np.datetime64
 
 
 def write_tracks_geojson(doc: dict, path: str | Path) -> Path:
+    """Write the GeoJSON document ``doc`` (from ``tracks_geojson``) to ``path`` as compact JSON
+    (no nan: it is refused); returns the path."""
     path = Path(path)
     path.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False) + "\n",
                     encoding="utf-8")

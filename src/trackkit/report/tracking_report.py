@@ -62,6 +62,7 @@ __all__ = [
 
 XY_PNG = "xy.png"
 GOSPA_PNG = "gospa.png"
+#: The files the tracking report owns (an earlier run's not written again are removed).
 TRACKING_FILES = (METRICS_PARQUET, XY_PNG, GOSPA_PNG, REPORT_HTML, TIMINGS_JSON, RESULTS_JSON)
 
 #: per-tracker entries of results.json, in order, with their units (the table's rows too)
@@ -136,6 +137,7 @@ _ROWS: tuple[tuple[str, str, str], ...] = (
     ("jpda_clusters_approximated", "JPDA clusters approximated", "d"),
 )
 
+#: The tracking report's glossary: ``(term, definition)`` pairs.
 TRACKING_GLOSSARY: tuple[tuple[str, str], ...] = (
     ("GOSPA",
      "Generalised optimal sub-pattern assignment distance (alpha = 2, p = 2) between the true "

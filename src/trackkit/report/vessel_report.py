@@ -69,6 +69,7 @@ TRACK_PNG = "track.png"
 HEADING_PNG = "heading.png"
 TRIALS_PNG = "trials.png"
 ERRORS_PNG = "errors.png"
+#: The files the vessel report owns (an earlier run's not written again are removed).
 VESSEL_FILES = (CONVERGENCE_PNG, TRACK_PNG, HEADING_PNG, TRIALS_PNG, ERRORS_PNG, REPORT_HTML,
                 TIMINGS_JSON, RESULTS_JSON)
 PAPER_BAND = (2.0, 7.0)

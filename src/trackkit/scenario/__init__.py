@@ -20,6 +20,7 @@ from trackkit.scenario.toml_writer import dumps
 __all__ = ["Scenario", "ScenarioError", "load", "parse", "validated", "dumps", "bundled", "DEFAULT",
            "KNOT"]
 
+#: The bundled scenario a command runs when none is named.
 DEFAULT = "bo-cv"
 
 

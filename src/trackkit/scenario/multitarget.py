@@ -88,6 +88,7 @@ __all__ = [
     "parse_multitarget",
 ]
 
+#: The scene builders a multi-target scenario's ``builder`` may name.
 BUILDERS = ("radar_crossing", "radar_clutter", "radar_dense")
 _MAX_WINDOW = 64  # the history logic's longest window (trackkit.tracking.logic)
 

@@ -26,6 +26,7 @@ from trackkit.scenario.toml_writer import toml_value
 
 __all__ = ["reference", "COMMAND"]
 
+#: The command that writes ``docs/scenario-reference.md`` from the schemas.
 COMMAND = "python -m trackkit.scenario.reference > docs/scenario-reference.md"
 
 #: unit suffixes of field names, longest first (``_deg_s`` before ``_s``)

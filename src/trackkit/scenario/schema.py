@@ -83,6 +83,8 @@ def unit(unit: str) -> dict[str, str]:
 
 
 class Strict(BaseModel):
+    """The base of every scenario section: unknown keys are refused and the model is frozen."""
+
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 

@@ -54,7 +54,7 @@ The file (units in the field names; angles in degrees, the nozzle positive to st
 The identifier's measurement standard deviations follow from the sensors: rotating a GPS
 velocity error of ``s_v`` per axis with a heading error of ``s_h`` gives surge and sway
 errors ``hypot(s_v, |v| s_h)`` and ``hypot(s_v, U s_h)``, taken at the trial's (or the
-design) speed U with |v| = 0, and the yaw rate's is the gyro's (:meth:`sigma_z`).
+design) speed U with ``|v| = 0``, and the yaw rate's is the gyro's (:meth:`VesselScenario.sigma_z`).
 """
 
 from __future__ import annotations

@@ -68,6 +68,7 @@ __all__ = [
     "simulate_gnss",
     "simulate_gps",
     "simulate_ins",
+    "Truth",
 ]
 
 #: A default local origin: the Khor Musa channel off Bandar Imam Khomeini, where the SAR boat

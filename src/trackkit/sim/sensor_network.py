@@ -33,7 +33,7 @@ overlap), the gaps t_i,e+1 - t_ie have mean P and lie in (P - d_max, P + d_max),
 different agents are never synchronised for d_max > 0 (d_max = 0 is the synchronous network).
 
 Communication (2.10). The proximity (disk) graph links agents k != l with
-|S_k - S_l| <= min(CR_k, CR_l): a link is two-way, so both ends must reach.
+``|S_k - S_l| <= min(CR_k, CR_l)``: a link is two-way, so both ends must reach.
 
 Record layout. Bearings are padded arrays, one slot per (run, agent, execution, target):
 ``Bearings.z[r, i, e, j]`` is agent i's e-th bearing of target j in run r; the agent and
@@ -338,6 +338,7 @@ def bearings_at(
     """The bearings of one batched execution event (module docstring, 2.1).
 
     Args:
+
         sensor_pos: ``(..., 2)`` the executing agents' positions S (east, north; m).
         targets: ``(..., Nt, 4)`` the target states at the same times (only x, y are read).
         noise: ``(..., Nt)`` standard normals e, or None for noise-free bearings.
@@ -346,7 +347,8 @@ def bearings_at(
         convention: "nautical" (atan2(dx, dy), default) or "math" (atan2(dy, dx)).
 
     Returns:
-        ``z`` ``(..., Nt)``: wrap(h + sigma e), nan where |T - S| > MR; ``in_range``
+
+        ``z`` ``(..., Nt)``: wrap(h + sigma e), nan where ``|T - S| > MR``; ``in_range``
         ``(..., Nt)``.
     """
     check_convention(convention)
@@ -419,6 +421,7 @@ def simulate_network(
     """Runs ``first_run ..`` of an open-loop network: straight-line agents, CV targets.
 
     Args:
+
         seed, runs, first_run: run r draws from ``SeedSequence(seed, spawn_key=(r,))``'s
             children (module docstring).
         targets: ``(Nt, 4)`` or ``(R, Nt, 4)`` target states at t = 0 (m, m/s).
@@ -431,6 +434,7 @@ def simulate_network(
         convention: the bearing convention.
 
     Returns:
+
         ``NetworkRun``.
     """
     x0 = _states("targets", targets, "Nt")

@@ -1,5 +1,7 @@
 """Multi-target tracking front end: scans, gating, association, track logic, initiation.
 
+Typical use::
+
     from trackkit import tracking as tt
     g = tt.gate(zhat, S, z, p_gate=0.99)                 # KD-tree pre-gate, batched fine test
     a = tt.gnn_assign(g, tt.loglik_costs(g, pd=0.9, clutter_density=1e-6))

@@ -1,4 +1,4 @@
-"""Association: which gated detection updates which track (GNN), or how much (JPDA).
+r"""Association: which gated detection updates which track (GNN), or how much (JPDA).
 
 Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of gated
 (track i, detection j) pairs with their squared distances d2_ij, log-likelihoods
@@ -10,19 +10,29 @@ Everything starts from a :class:`~trackkit.tracking.gating.Gate`, the list of ga
   detection, each detection at most one track) of least total cost, where a track may also
   take its miss alternative. Costs come from a cost function:
 
-  - :func:`loglik_costs`: ``c_ij = -log(P_D N_ij / lambda)``, ``c_i0 = -log(1 - P_D P_G)``;
-    the least-cost assignment is then the most probable joint event (the JPDA event below);
+  - :func:`loglik_costs`: :math:`c_{ij} = -\log(P_D N_{ij} / \lambda)`,
+    :math:`c_{i0} = -\log(1 - P_D P_G)`; the least-cost assignment is then the most probable
+    joint event (the JPDA event below);
   - :func:`distance_costs`: ``c_ij = d_ij`` (Mahalanobis distance), ``c_i0`` a missed
     distance (Stone Soup's ``DistanceHypothesiser``);
   - :func:`pda_costs`: ``c_ij = -beta_ij`` with beta the single-track PDA probabilities
     (Stone Soup's ``GNNWith2DAssignment`` over a ``PDAHypothesiser``, which maximises
     their sum);
-  - :func:`saturating_costs`: ``c_ij = K1 (1 - exp(-K2 gamma_ij^2))``, the cost of Jalalipoor and
-  Kardehi Moghaddam (2021).
+  - :func:`saturating_costs`: :math:`c_{ij} = K_1 (1 - e^{-K_2 \gamma_{ij}^2})`, the cost of
+    Jalalipoor and Kardehi Moghaddam (2021).
 
 * :func:`jpda_probabilities`: marginal association probabilities from the feasible joint
-  events of each cluster (the tracker updates a track with each of its gated detections
-  and moment-matches the mixture, :func:`trackkit.belief.moment_match`).
+  events :math:`\theta` of each cluster (each detection to at most one track, each track at
+  most one detection), weighted by
+
+  .. math::
+
+      w(\theta) = \prod_{(i,j) \in \theta} \frac{P_D N_{ij}}{\lambda}
+          \prod_{i \text{ missed}} (1 - P_D P_G), \qquad
+      \beta_{ij} = \frac{\sum_{\theta \ni (i,j)} w(\theta)}{\sum_\theta w(\theta)}
+
+  (the tracker updates a track with each of its gated detections and moment-matches the
+  mixture, :func:`trackkit.belief.moment_match`).
 """
 
 from __future__ import annotations
@@ -40,6 +50,7 @@ from trackkit.renamed import renamed_keywords
 from trackkit.tracking.gating import Gate
 
 __all__ = [
+    "GNN_DENSE_MAX_CELLS",
     "JPDA_MAX_EVENTS",
     "Assignment",
     "Clusters",
@@ -394,16 +405,25 @@ class JPDAResult(NamedTuple):
 def jpda_probabilities(g: Gate, pd: float, clutter_density: float, p_gate: float | None = None, *,
          max_events: int = JPDA_MAX_EVENTS, cl: Clusters | None = None,
          star: bool = False) -> JPDAResult:
-    """Parametric JPDA marginals (Bar-Shalom): a feasible joint event theta (each detection
-    to at most one track, each track at most one detection) has weight
+    r"""Parametric JPDA marginals (Bar-Shalom): a feasible joint event :math:`\theta` (each
+    detection to at most one track, each track at most one detection) has weight
 
-        w(theta) = prod_{(i,j) in theta} P_D N_ij / lambda  *  prod_{i missed} (1 - P_D P_G)
+    .. math::
 
-    and ``beta_ij = sum_{theta ni (i,j)} w / sum_theta w``, ``beta_i0`` likewise over the
-    events that miss track i. Events are enumerated exactly within each cluster (a track alone
-    in its cluster in closed form, the PDA); a cluster with more than ``max_events`` events
-    falls back to loopy belief propagation (Williams and Lau 2014, exact on clusters without
-    cycles), reported in ``approximated``.
+        w(\theta) = \prod_{(i,j) \in \theta} \frac{P_D N_{ij}}{\lambda}
+            \prod_{i \text{ missed}} (1 - P_D P_G)
+
+    and the marginals are
+
+    .. math::
+
+        \beta_{ij} = \frac{\sum_{\theta \ni (i,j)} w(\theta)}{\sum_\theta w(\theta)}, \qquad
+        \beta_{i0} = \frac{\sum_{\theta:\, i \text{ missed}} w(\theta)}{\sum_\theta w(\theta)}
+
+    Events are enumerated exactly within each cluster (a track alone in its cluster in closed
+    form, the PDA); a cluster with more than ``max_events`` events falls back to loopy belief
+    propagation (Williams and Lau 2014, exact on clusters without cycles), reported in
+    ``approximated``.
 
     ``star=True`` is JPDA* (Blom and Bloem 2000), against track coalescence: the exact
     enumeration drops every event theta in which two tracks i, k take detections j, l while

@@ -35,9 +35,11 @@ class BearingSet(NamedTuple):
 
 
 def empty_bearings() -> BearingSet:
+    """A bearing set with no bearings (every field with 0 rows)."""
     return BearingSet(np.zeros(0), np.zeros(0), np.zeros((0, 2)), np.zeros(0),
                       np.zeros(0, np.int64))
 
 
 def concat_bearings(*sets: BearingSet) -> BearingSet:
+    """The bearings of ``sets`` one after another, in order, as one bearing set."""
     return BearingSet(*(np.concatenate(parts, axis=0) for parts in zip(*sets, strict=True)))

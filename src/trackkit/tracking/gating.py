@@ -1,18 +1,27 @@
-"""Gating: which detections may have come from which track.
+r"""Gating: which detections may have come from which track.
 
-A detection z_j falls in track i's gate when its squared Mahalanobis distance
+A detection :math:`\mathbf{z}_j` falls in track i's gate when its squared Mahalanobis
+distance is within the threshold,
 
-    d2_ij = nu_ij^T S_i^{-1} nu_ij <= gamma,      nu_ij = z_j - zhat_i  (angles wrapped)
+.. math::
 
-with S_i the innovation covariance and gamma = chi2.ppf(P_G, m), so that a detection of the
-target falls in the gate with probability P_G. Each gated pair also gets the Gaussian
-log-likelihood ``log N(z_j; zhat_i, S_i) = -0.5 (d2_ij + log det(2 pi S_i))``.
+    d^2_{ij} = \nu_{ij}^\top S_i^{-1} \nu_{ij} \le \gamma, \qquad
+    \nu_{ij} = \mathbf{z}_j - \hat{\mathbf{z}}_i \quad \text{(angles wrapped)}
+
+with :math:`S_i` the innovation covariance and :math:`\gamma = F^{-1}_{\chi^2_m}(P_G)`
+(``chi2.ppf(P_G, m)``), so that a detection of the target falls in the gate with probability
+:math:`P_G`. Each gated pair also gets the Gaussian log-likelihood
+
+.. math::
+
+    \log \mathcal{N}(\mathbf{z}_j; \hat{\mathbf{z}}_i, S_i)
+        = -\tfrac12 \bigl(d^2_{ij} + \log\det(2 \pi S_i)\bigr)
 
 Two paths give the same pairs, bit for bit:
 
 * brute force, every (track, detection) pair through the fine test: cost T x D;
 * a coarse pre-gate first: a ``cKDTree`` over the detections, queried with each track's
-  bounding radius ``sqrt(gamma lambda_max(S_i))`` (the smallest ball that holds the gate
+  bounding radius :math:`\sqrt{\gamma\, \lambda_{\max}(S_i)}` (the smallest ball that holds the gate
   ellipsoid; tracks of similar radius are queried together, one dual-tree search per
   group), then the fine test on the candidates only: cost ~ (T + D) log D when the
   targets are spread out. The tree works in coordinates divided by one per-axis scale
