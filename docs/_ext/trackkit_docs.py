@@ -97,14 +97,19 @@ def module_page(module: str) -> str:
     defined = [n for n in own if getattr(getattr(mod, n, None), "__module__", module) == module]
     out = [_title(f"``{module}``"), f".. automodule:: {module}",
            "   :no-members:", ""]
-    for name in defined:
+    return "\n".join(out + entries(mod, module, defined))
+
+
+def entries(mod, path: str, names: list[str]) -> list[str]:
+    """The autodoc directives of ``names`` of ``mod``, documented as ``path.NAME``."""
+    out = []
+    for name in names:
         obj = getattr(mod, name)
         kind = "autoclass" if inspect.isclass(obj) else (
             "autofunction" if callable(obj) else "autodata")
-        out += [f".. {kind}:: {module}.{name}", ""]
-        if kind == "autoclass":
-            out[-1:] = ["   :members:", "   :show-inheritance:", ""]
-    return "\n".join(out)
+        out += [f".. {kind}:: {path}.{name}"]
+        out += ["   :members:", "   :show-inheritance:", ""] if kind == "autoclass" else [""]
+    return out
 
 
 def home_of(obj: object, name: str, modules: list[str]) -> str | None:
@@ -130,13 +135,7 @@ def package_page(package: str, modules: list[str]) -> str:
         out += ["Public names", "------------", "", ".. autosummary::", ""]
         out += [f"   {n}" for n in exported]
         out += [""]
-    for name in here:
-        obj = getattr(mod, name)
-        kind = "autoclass" if inspect.isclass(obj) else (
-            "autofunction" if callable(obj) else "autodata")
-        out += [f".. {kind}:: {package}.{name}", ""]
-        if kind == "autoclass":
-            out[-1:] = ["   :members:", "   :show-inheritance:", ""]
+    out += entries(mod, package, here)
     if subs:
         out += ["Modules", "-------", "", ".. toctree::", "   :maxdepth: 1", ""]
         out += [f"   {m}" for m in subs]

@@ -14,40 +14,33 @@ classic two-leg geometry, an observer that turns once so that the range becomes 
 # %%
 # The problem
 # -----------
-# A constant-velocity target 12 km north of an observer that sails at 8 kn and turns 90 deg
-# between 600 s and 690 s: before the turn the bearings fix the line of sight but not the
-# range. Leading axes are runs: the truth is ``(T + 1, runs, 4)``, one bearing per run and
-# step ``(T, runs, 1)``.
+# The bundled ``bo-cv`` scenario, as ``trackkit run`` simulates it:
+# :func:`trackkit.scenario.build.compile_scenario` turns it into models, sensors and times,
+# :func:`trackkit.scenario.simulate.simulate_block` draws each run's truth and bearings from
+# that run's own random stream. A constant-velocity target 12 km north of an observer that
+# sails at 8 kn and turns 90 deg between 600 s and 690 s; a bearing (1 deg) every 5 s.
+# Leading axes are runs: the truth is ``(T + 1, runs, 4)``, the bearings ``(T, runs, 1)``;
+# each run's prior mean is its truth plus a draw from N(0, P0), as the scenario says.
 import matplotlib.pyplot as plt
 import numpy as np
 
 import trackkit as tk
 from trackkit.eval import pcrlb, rmse_bound
-from trackkit.sim.kinematics import LegPlan, propagate
+from trackkit.scenario import load
+from trackkit.scenario.build import compile_scenario
+from trackkit.scenario.simulate import simulate_block
 
-rng = np.random.default_rng(2026)
-runs, dt = 500, 5.0
-t = np.arange(0.0, 1800.0 + dt, dt)  # t[0] is the prior's time
-T = t.size - 1
-knot = 1852.0 / 3600.0
+runs = 500
 
-motion = tk.models.ConstantVelocity(dim=2, q=1e-4)  # m^2/s^3
-course = np.deg2rad(100.0)
-x0 = np.array([0.0, 12e3, 10 * knot * np.sin(course), 10 * knot * np.cos(course)])
-L = np.linalg.cholesky(motion.noise(x0, dt))
-truth = propagate(np.tile(x0, (runs, 1)), t, [], 2,
-                  noise=rng.standard_normal((T, runs, 4)) @ L.T)
+scenario = load("bo-cv")
+plan = compile_scenario(scenario)
+data = simulate_block(plan, 0, runs)
+truth, z, t = data.truth, data.z, plan.times
+T, dt = t.size - 1, float(t[1] - t[0])
+motion, sensors, P0 = plan.truth_motion, plan.sensors, plan.prior_cov
+observer = plan.observer_states[0]  # (T + 1, 4): the observer's position and velocity
+prior = data.prior(P0)  # each run's truth plus a draw from N(0, P0)
 
-observer = propagate(np.array([0.0, 0.0, 8 * knot * np.sin(np.pi / 3), 8 * knot * 0.5]), t,
-                     [LegPlan("turn", 600.0, 690.0, rate=np.deg2rad(-1.0))], 2)
-sigma = np.deg2rad(1.0)
-sensors = [tk.models.Bearing(origin=o[:2], sigma=sigma) for o in observer[1:]]
-z = np.stack([s.h(x) for s, x in zip(sensors, truth[1:], strict=True)])
-z = tk.angles.wrap(z + sigma * rng.standard_normal(z.shape))
-
-P0 = np.diag([2000.0**2, 2000.0**2, 4.0**2, 4.0**2])
-prior = tk.Gaussian(x0 + rng.standard_normal((runs, 4)) @ np.linalg.cholesky(P0).T,
-                    np.broadcast_to(P0, (runs, 4, 4)))
 print(f"truth {truth.shape}, bearings {z.shape}")
 
 # %%

@@ -15,47 +15,48 @@ of one run, and how the effective sample size and the resampling go over 20 runs
 # %%
 # The problem
 # -----------
-# The two-leg geometry of the Kalman filter example: a constant-velocity target 12 km away,
-# an observer that turns 90 deg between 600 s and 690 s, a bearing (1 deg) every 10 s.
+# The bundled ``bo-cv`` scenario, as ``trackkit run`` simulates it:
+# :func:`trackkit.scenario.build.compile_scenario` turns it into models, sensors and times,
+# :func:`trackkit.scenario.simulate.simulate_block` draws each run's truth and bearings from
+# that run's own random stream. A constant-velocity target 12 km north of an observer that
+# sails at 8 kn and turns 90 deg between 600 s and 690 s; a bearing (1 deg) every 5 s.
+# Leading axes are runs: the truth is ``(T + 1, runs, 4)``, the bearings ``(T, runs, 1)``;
+# each run's prior mean is its truth plus a draw from N(0, P0), as the scenario says.
 import matplotlib.pyplot as plt
 import numpy as np
 
 import trackkit as tk
 from trackkit.filters.resample import effective_sample_size
-from trackkit.sim.kinematics import LegPlan, propagate
+from trackkit.scenario import load
+from trackkit.scenario.build import compile_scenario
+from trackkit.scenario.simulate import simulate_block
 
-rng = np.random.default_rng(3)
-runs, dt, N = 20, 10.0, 1000
-t = np.arange(0.0, 1800.0 + dt, dt)
-T = t.size - 1
-knot = 1852.0 / 3600.0
+runs, N = 20, 1000
 
-motion = tk.models.ConstantVelocity(dim=2, q=1e-4)
-x0 = np.array([0.0, 12e3, 10 * knot * np.sin(np.deg2rad(100.0)),
-               10 * knot * np.cos(np.deg2rad(100.0))])
-L = np.linalg.cholesky(motion.noise(x0, dt))
-truth = propagate(np.tile(x0, (runs, 1)), t, [], 2,
-                  noise=rng.standard_normal((T, runs, 4)) @ L.T)
-observer = propagate(np.array([0.0, 0.0, 8 * knot * np.sin(np.pi / 3), 8 * knot * 0.5]), t,
-                     [LegPlan("turn", 600.0, 690.0, rate=np.deg2rad(-1.0))], 2)
-sigma = np.deg2rad(1.0)
-sensors = [tk.models.Bearing(origin=o[:2], sigma=sigma) for o in observer[1:]]
-z = np.stack([s.h(x) for s, x in zip(sensors, truth[1:], strict=True)])
-z = tk.angles.wrap(z + sigma * rng.standard_normal(z.shape))
-P0 = np.diag([2000.0**2, 2000.0**2, 4.0**2, 4.0**2])
-prior = tk.Gaussian(x0 + rng.standard_normal((runs, 4)) @ np.linalg.cholesky(P0).T,
-                    np.broadcast_to(P0, (runs, 4, 4)))
+scenario = load("bo-cv")
+plan = compile_scenario(scenario)
+data = simulate_block(plan, 0, runs)
+truth, z, t = data.truth, data.z, plan.times
+T, dt = t.size - 1, float(t[1] - t[0])
+motion, sensors, P0 = plan.truth_motion, plan.sensors, plan.prior_cov
+observer = plan.observer_states[0]  # (T + 1, 4): the observer's position and velocity
+prior = data.prior(P0)  # each run's truth plus a draw from N(0, P0)
 
 # %%
 # The filter, step by step
 # ------------------------
+# The particle filter of ``bo-cv``: :class:`trackkit.filters.RangePF` draws the particles at
+# the first bearing from the Gaussian prior conditioned on it (drawn from the prior itself, a
+# run whose prior lies three sigmas off keeps only a few draws near that bearing), and
 # ``regularise=True, shrink=True``: after resampling, a Gaussian-kernel jitter keeps the
 # copies of one particle apart, with Liu and West's shrinkage so that the jitter does not
-# widen the cloud. The belief is :class:`trackkit.belief.Particles`, ``states (runs, N, 4)``
+# widen the cloud. The scenario runs 2 000 particles; this example 1 000. The belief is
+# :class:`trackkit.belief.Particles`, ``states (runs, N, 4)``
 # and ``log_weights (runs, N)``; after each update the effective sample size of every run
 # is read from its weights. A run just resampled has equal weights, an ESS of exactly N.
 # For scale, an EKF filters the same runs.
-pf = tk.filters.PF(n_particles=N, ess_threshold=0.5, regularise=True, shrink=True)
+pf = tk.filters.RangePF(n_particles=N, ess_threshold=0.5, regularise=True, shrink=True,
+                        prior="bearing")
 b = pf.init(prior, rng=np.random.default_rng(1))
 ess = np.empty((T, runs))
 means = np.empty((T, runs, 4))
@@ -82,10 +83,10 @@ print(f"share of runs resampled: {resampled[0].mean():.0%} at the first bearing,
 # Cloud and effective sample size
 # -------------------------------
 # On the first leg the cloud stretches kilometres along the line of sight; after the turn it
-# closes in around the target. The first bearing cuts the 2 km prior down to a wedge of a
-# few hundred metres, and every run resamples; after that each bearing reweights a cloud
-# that already agrees with it, and a run resamples only now and then (the shares printed
-# above).
+# closes in around the target. The particles are drawn along the first bearing's rays,
+# already weighted by the prior, so no run needs to resample there; after that each bearing
+# reweights a cloud that already agrees with it, and a run resamples only now and then (the
+# shares printed above).
 fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 4.5), width_ratios=(1, 1.2))
 ax0.plot(truth[:, 0, 0] / 1e3, truth[:, 0, 1] / 1e3, "k", lw=1, label="target")
 ax0.plot(observer[:, 0] / 1e3, observer[:, 1] / 1e3, "k--", lw=1, label="observer")
@@ -101,7 +102,7 @@ ax0.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.0, 1.0))
 ax1.plot(t[1:], ess.mean(1) / N, label="mean ESS / N after the update")
 ax1.plot(t[1:], ess[:, 0] / N, lw=0.8, alpha=0.7, label="ESS / N, run 0")
 ax1.step(t[1:], resampled.mean(1), where="mid", lw=0.8, label="share of runs resampled")
-ax1.axhline(pf.ess_threshold, color="k", ls=":", lw=1, label="threshold")
+ax1.axhline(pf.pf.ess_threshold, color="k", ls=":", lw=1, label="threshold")
 ax1.axvspan(600.0, 690.0, color="0.9", label="observer turns")
 ax1.set_xlabel("time (s)")
 ax1.set_ylabel("fraction")

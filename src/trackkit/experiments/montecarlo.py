@@ -295,10 +295,7 @@ def run_block(scenario: Scenario, block: int,
         if ga_start is not None:  # every filter from the same GA estimate (the paper's)
             prior = Gaussian(ga_start.mean.copy(), ga_start.cov.copy())
         else:
-            L0 = np.linalg.cholesky(P0)
-            m0 = (data.truth[0] + data.prior_offset @ L0.T) if mean0 is None else (
-                np.broadcast_to(mean0, (r1 - r0, n)).copy())
-            prior = Gaussian(m0, np.broadcast_to(P0, (r1 - r0, n, n)).copy())
+            prior = data.prior(P0, mean0)
         b = f.init(prior, rng=filter_rng(s.run.seed, block, i)) if getattr(
             f, "stochastic", False) else f.init(prior)
         elapsed = 0.0

@@ -156,8 +156,7 @@ def _tuned(scenario_json: str, index: int, progress: Progress | None = None) -> 
     plan = compile_scenario(scenario)
     data = simulate_block(plan, 0, t.realisations, seed=t.seed)
     mean0, P0 = plan.priors[index]
-    x0 = (data.truth[0] + data.prior_offset @ np.linalg.cholesky(P0).T) if mean0 is None \
-        else np.broadcast_to(mean0, (t.realisations, plan.n)).copy()
+    x0 = data.prior(P0, mean0).mean
     template = plan.filters[index]
     alpha = scenario.report.dom_alpha
     calls = 0

@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from trackkit.angles import wrap
+from trackkit.belief import Gaussian
 from trackkit.linalg import psd_factor
 from trackkit.scenario.build import Plan
 from trackkit.sim.kinematics import step as platform_step
@@ -27,9 +28,21 @@ __all__ = ["BlockData", "simulate_block"]
 
 @dataclass
 class BlockData:
-    truth: Array  # (T + 1, B, n)
-    z: Array  # (T, B, m)
-    prior_offset: Array  # (B, n) standard-normal draws
+    """A block's truths ``(T + 1, B, n)``, measurements ``(T, B, m)`` (nan where missed) and
+    prior offsets ``(B, n)``, standard-normal draws."""
+
+    truth: Array
+    z: Array
+    prior_offset: Array
+
+    def prior(self, P0: Array, mean0: Array | None = None) -> Gaussian:
+        """The filters' prior of each run, ``N(m0, P0)``: ``m0 = x0 + L u`` with ``x0`` the
+        run's true initial state, ``L L^T = P0`` and ``u`` its prior offset, so the prior is
+        consistent with the truth; or the scenario's fixed ``mean0`` for every run."""
+        B, n = self.prior_offset.shape
+        m0 = (self.truth[0] + self.prior_offset @ np.linalg.cholesky(P0).T) if mean0 is None \
+            else np.broadcast_to(mean0, (B, n)).copy()
+        return Gaussian(m0, np.broadcast_to(P0, (B, n, n)).copy())
 
 
 def simulate_block(plan: Plan, r0: int, r1: int, seed: int | None = None) -> BlockData:
