@@ -38,8 +38,7 @@ if os.environ.get("TRACKKIT_DOCS_API_ONLY"):
     extensions.remove("sphinx_gallery.gen_gallery")
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
-exclude_patterns = ["_build", "tutorials", "examples", "figures/*.py", "**/*.ipynb",
-                    "**/*.py.md5", "**/*.codeobj.json", "**/sg_execution_times.rst"]
+exclude_patterns = ["_build", "tutorials", "examples"]  # the gallery's sources: it renders them
 root_doc = "index"
 
 # cross-references: every one must resolve (nitpicky + -W); names of other libraries in

@@ -142,6 +142,13 @@ def package_page(package: str, modules: list[str]) -> str:
     return "\n".join(out) + "\n"
 
 
+def write_if_changed(path: Path, text: str) -> None:
+    """Write a generated page only when its text changed: an unchanged page keeps its mtime,
+    so Sphinx does not read it again."""
+    if not path.exists() or path.read_text(encoding="utf-8") != text:
+        path.write_text(text, encoding="utf-8")
+
+
 def write_api_pages(app: Sphinx) -> None:
     if not app.config.trackkit_api_pages:
         return
@@ -163,9 +170,7 @@ def write_api_pages(app: Sphinx) -> None:
     index += [f"   {p}" for p in PACKAGES]
     wanted["index"] = "\n".join(index) + "\n"
     for name, text in wanted.items():
-        path = API / f"{name}.rst"
-        if not path.exists() or path.read_text(encoding="utf-8") != text:
-            path.write_text(text, encoding="utf-8")  # unchanged pages keep their mtime
+        write_if_changed(API / f"{name}.rst", text)
     for stale in API.glob("*.rst"):
         if stale.stem not in wanted:
             stale.unlink()
@@ -372,10 +377,7 @@ def write_cli_page(app: Sphinx) -> None:
                 ""]
         out += ["   " + line.rstrip() if line.strip() else "" for line in text.splitlines()]
         out += [""]
-    path = DOCS / "cli.rst"
-    text = "\n".join(out) + "\n"
-    if not path.exists() or path.read_text(encoding="utf-8") != text:
-        path.write_text(text, encoding="utf-8")
+    write_if_changed(DOCS / "cli.rst", "\n".join(out) + "\n")
 
 
 def compile_kernels(app: Sphinx) -> None:
