@@ -1,24 +1,18 @@
-"""A ``net-baseline`` Monte Carlo in-process (Jalalipoor and Kardehi Moghaddam 2021): the time per
-run and the share of it in each phase of the agents' program.
+"""A ``net-baseline`` Monte Carlo in process (Jalalipoor and Kardehi Moghaddam 2021): the time
+per run with the runs one at a time and stepped together in blocks, in one process.
 
 Runs ``--runs`` runs of the bundled ``net-baseline`` scenario through ``run_network_mc``
 (steered agents, the centralised reference, scoring and the per-run PCRLB), as
-``trackkit network net-baseline`` does, in one process. Each phase is timed by wrapping the
-function that does it with a ``perf_counter`` pair (a few microseconds per call, against
-milliseconds per call inside), so the shares add up to the agents' part of the run:
+``trackkit network net-baseline`` does, once per block size of ``--blocks`` (1 is one run at
+a time, the loop before blocks), the sizes in turn for ``--rounds`` rounds; the best round of
+each. Every block size gives the same numbers bit for bit (checked here on the scores).
 
-- association: ``agents.associate`` (CV prediction to the scan time, measurement prediction,
-  gate, the saturating cost and Munkres), once per source per execution;
-- course control: ``Agent.steer`` (the three sub-objectives, the distance constraints, the
-  turn-rate limit and the blend);
-- composite measurement: ``agents.composites`` (the batched Gauss-Newton fit);
-- combination: ``agents.combine_with_neighbours`` (track-to-track matching and diffusion);
-- initiation: ``Agent._initiate``;
-- the rest of ``Agent.step`` (prediction, update, timers, pruning, the message);
-- outside the agents: the simulation, message delivery, the centralised reference, scoring
-  and the bound.
+For the largest block it also reports the time inside the batched kernels
+(``network.lockstep.BATCHED``, each wrapped with a ``perf_counter`` pair) against the rest:
+the agents' per-run program between its kernel calls, the simulation, message delivery, the
+centralised filter, scoring and the bound.
 
-    python benchmarks/bench_network.py [--runs 100] [--seed 2026] [--straight]
+    python benchmarks/bench_network.py [--runs 100] [--blocks 1 25] [--rounds 2] [--seed 2026]
 """
 
 from __future__ import annotations
@@ -32,71 +26,70 @@ from collections import defaultdict
 import numpy as np
 
 from trackkit.experiments.network_mc import run_network_mc
-from trackkit.network import agents
+from trackkit.network import lockstep
 from trackkit.scenario.network import load_network
 
-spent: dict[str, float] = defaultdict(float)
-calls: dict[str, int] = defaultdict(int)
 
-
-def timed(owner, name: str, label: str) -> None:
-    """Replace ``owner.name`` by a wrapper that adds its time to ``spent[label]``."""
-    real = getattr(owner, name)
-
-    def wrapper(*args, **kwargs):
-        t0 = time.perf_counter()
-        try:
-            return real(*args, **kwargs)
-        finally:
-            spent[label] += time.perf_counter() - t0
-            calls[label] += 1
-
-    setattr(owner, name, wrapper)
+def timed_kernels() -> dict[str, float]:
+    """Wrap every batched kernel so that its time adds up in the returned dict."""
+    spent: dict[str, float] = defaultdict(float)
+    for fn, many in list(lockstep.BATCHED.items()):
+        def wrapper(calls, many=many, name=fn.__name__):
+            t0 = time.perf_counter()
+            try:
+                return many(calls)
+            finally:
+                spent[name] += time.perf_counter() - t0
+        lockstep.BATCHED[fn] = wrapper
+    return spent
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--blocks", type=int, nargs="+", default=[1, 25])
+    ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--seed", type=int, default=2026)
-    ap.add_argument("--straight", action="store_true")
     args = ap.parse_args()
-
     print(f"numpy {np.__version__}, python {platform.python_version()}, "
-          f"{platform.machine()}, {os.cpu_count()} CPUs")
-    timed(agents, "associate", "association")
-    timed(agents.Agent, "steer", "course control")
-    timed(agents, "composites", "composite measurement")
-    timed(agents, "combine_with_neighbours", "combination")
-    timed(agents.Agent, "_initiate", "initiation")
-    timed(agents.Agent, "step", "agent step (all)")
-
+          f"{platform.machine()}, {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}")
     sc = load_network("net-baseline")
-    t0 = time.perf_counter()
-    mc = run_network_mc(sc, runs=args.runs, seed=args.seed, steering=not args.straight,
-                        keep_example=False)
-    wall = time.perf_counter() - t0
+    best: dict[int, float] = {}
+    scores = {}
+    for rnd in range(args.rounds):
+        for b in args.blocks:
+            t0 = time.perf_counter()
+            mc = run_network_mc(sc, runs=args.runs, seed=args.seed, keep_example=False,
+                                block=b)
+            wall = time.perf_counter() - t0
+            best[b] = min(best.get(b, np.inf), wall)
+            scores[b] = (mc.gospa, mc.err["pos"], mc.count)
+            print(f"round {rnd + 1}, block {b}: {wall:.1f} s, {wall / args.runs:.3f} s per run",
+                  flush=True)
+    first = scores[args.blocks[0]]
+    same = all(all(np.array_equal(x, y, equal_nan=True) for x, y in zip(first, v, strict=True))
+               for v in scores.values())
+    print(f"\nnet-baseline, {args.runs} runs, seed {args.seed}, steered; scores bit for bit "
+          f"equal across block sizes: {same}\n")
+    print("| runs stepped together | s per run (best of rounds) | against one at a time |")
+    print("|---:|---:|---:|")
+    ref = best.get(1)
+    for b in args.blocks:
+        ratio = f"{ref / best[b]:.2f}x" if ref else "-"
+        print(f"| {b} | {best[b] / args.runs:.3f} | {ratio} |")
 
-    inside = spent["agent step (all)"]
-    phases = ["association", "composite measurement", "combination", "initiation"]
-    rest_step = inside - sum(spent[p] for p in phases)
-    agent_total = inside + spent["course control"]
-    outside = wall - agent_total
-    print(f"\nnet-baseline, {args.runs} runs, seed {args.seed}, "
-          f"{'straight' if args.straight else 'steered'}: {wall:.1f} s, "
-          f"{wall / args.runs:.2f} s per run (network run alone "
-          f"{mc.seconds.mean():.2f} s, scoring and bound {(mc.wall - mc.seconds).mean():.2f} s)"
-          "\n")
-    print("| phase | calls per run | ms per call | s per run | share of the run |")
-    print("|---|---:|---:|---:|---:|")
-    rows = [(p, spent[p], calls[p]) for p in phases + ["course control"]]
-    rows += [("rest of the agent step", rest_step, calls["agent step (all)"]),
-             ("outside the agents", outside, 0)]
-    for label, s, n in rows:
-        per_call = f"{1e3 * s / n:.2f}" if n else "—"
-        print(f"| {label} | {n / args.runs:.0f} | {per_call} | {s / args.runs:.3f} | "
-              f"{100 * s / wall:.1f}% |")
-    print(f"\nassociation and course control together: "
-          f"{100 * (spent['association'] + spent['course control']) / wall:.1f}% of the run")
+    b = max(args.blocks)
+    spent = timed_kernels()
+    t0 = time.perf_counter()
+    run_network_mc(sc, runs=args.runs, seed=args.seed, keep_example=False, block=b)
+    wall = time.perf_counter() - t0
+    inside = sum(spent.values())
+    print(f"\nblock {b}, kernels timed: {wall:.1f} s; inside the batched kernels "
+          f"{inside:.1f} s ({100 * inside / wall:.0f}%), the rest {wall - inside:.1f} s\n")
+    print("| batched kernel | s per run |")
+    print("|---|---:|")
+    for name, s in sorted(spent.items(), key=lambda kv: -kv[1]):
+        print(f"| {name} | {s / args.runs:.3f} |")
 
 
 if __name__ == "__main__":

@@ -28,8 +28,11 @@ the paper.
 #    trackkit network net-baseline --runs 20
 #
 # The command calls :func:`trackkit.experiments.network_mc.run_network_mc`, which runs
-# :func:`trackkit.network.inprocess.run_network` once per run (each run is one multi-target
-# problem whose agents execute one at a time), beside the centralised reference
+# :func:`trackkit.network.inprocess.run_network` for each run (each run is one multi-target
+# problem whose agents execute one at a time), 25 runs stepped together
+# (:func:`~trackkit.network.inprocess.run_network_block`: the agents' array work of all 25
+# runs at one execution goes through :mod:`trackkit.network.lockstep` as one batched call,
+# with the same numbers bit for bit as one run at a time), beside the centralised reference
 # (:mod:`trackkit.network.central`: one EKF per target fed every bearing, with ideal
 # association) and the centralised PCRLB on the agents' actual, steered paths. The
 # scenario's default is 100 runs; here 2 runs, so the numbers below are noisy.

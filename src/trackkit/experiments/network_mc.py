@@ -58,13 +58,22 @@ from numpy.typing import NDArray
 from trackkit.eval.network_score import score_trace
 from trackkit.eval.track_metrics import Frames, assign
 from trackkit.network.bound import network_pcrlb
-from trackkit.network.inprocess import NetworkResult, Trace, run_network
+from trackkit.network.inprocess import (
+    NetworkResult,
+    Trace,
+    run_network,
+    run_network_block,
+)
 
 if TYPE_CHECKING:
     from trackkit.network.agents import AgentSettings
     from trackkit.network.processes import Deployment
 
-__all__ = ["NetworkMonteCarlo", "RunScores", "run_network_mc", "score_run"]
+__all__ = ["NETWORK_BLOCK", "NetworkMonteCarlo", "RunScores", "run_network_mc", "score_run"]
+
+#: runs stepped together in process (``run_network_mc``'s ``block``): past about 25 the
+#: per-run work outside the batched kernels dominates (benchmarks/RESULTS.md)
+NETWORK_BLOCK = 25
 
 Array = NDArray[np.float64]
 Kind = Literal["pos", "vel", "rng"]
@@ -349,6 +358,7 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                    delay: float = 0.0,
                    outages: Sequence[tuple[int, float, float | None]] = (),
                    deployment: Deployment | None = None,
+                   block: int = NETWORK_BLOCK,
                    ) -> NetworkMonteCarlo:
     """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
     ``runs``, ``seed``, ``steering`` and ``loss`` override the file's; ``progress(done,
@@ -359,7 +369,12 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     which also takes ``delay`` (the channel's delivery delay, simulated s), ``outages``
     (``(agent, kill_at, restart_at or None)``, 0-based agent) and ``deployment`` (a
     ``network.processes.Deployment``: the address the environment binds, agents on other
-    machines, CURVE: on by default off loopback)."""
+    machines, CURVE: on by default off loopback). In process, ``block`` runs at a time step
+    together (``network.inprocess.run_network_block``: the same results bit for bit as one
+    at a time, about half the time per run at 25); ``progress`` is then told after each
+    block, and each run's wall time is its share of its block's."""
+    if not (isinstance(block, int) and block >= 1):
+        raise ValueError(f"block = {block!r}; expected an integer >= 1 (runs stepped together)")
     runner, extra = _runner(agents, delay, outages, deployment)
     runs = scenario.run.runs if runs is None else int(runs)
     seed = scenario.run.seed if seed is None else int(seed)
@@ -380,22 +395,29 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     refused: list[int] = []
     secured = False
     example = example_targets = None
-    for r in range(runs):
+    options = dict(duration=net.duration_s, period=net.period_s, sigma=sigma, mr=mr, cr=cr,
+                   max_delay=net.max_delay_s, q=net.q, settings=settings, steering=steer,
+                   central=scenario.run.central, loss=p_loss, **extra)
+    size = block if runner is run_network else 1
+    for r0 in range(0, runs, size):
         t0 = _time.perf_counter()
-        targets = scenario.target_states(seed, r)
-        res = runner(seed, r, targets, states, duration=net.duration_s,
-                     period=net.period_s, sigma=sigma, mr=mr, cr=cr,
-                     max_delay=net.max_delay_s, q=net.q, settings=settings,
-                     steering=steer, central=scenario.run.central, loss=p_loss, **extra)
-        per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m))
-        recovered.append(list(getattr(res, "recovered", [])))
-        refused.append(getattr(res, "refused", 0))
-        secured = getattr(res, "curve", False)
-        wall.append(_time.perf_counter() - t0)
-        if r == 0 and keep_example:
-            example, example_targets = res, targets
+        block_runs = list(range(r0, min(runs, r0 + size)))
+        targets = [scenario.target_states(seed, r) for r in block_runs]
+        if runner is run_network:
+            results = run_network_block(seed, block_runs, targets, states, **options)
+        else:
+            results = [runner(seed, r0, targets[0], states, **options)]
+        for r, tg, res in zip(block_runs, targets, results, strict=True):
+            per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m))
+            recovered.append(list(getattr(res, "recovered", [])))
+            refused.append(getattr(res, "refused", 0))
+            secured = getattr(res, "curve", False)
+            if r == 0 and keep_example:
+                example, example_targets = res, tg
+        share = (_time.perf_counter() - t0) / len(block_runs)
+        wall.extend([share] * len(block_runs))
         if progress is not None:
-            progress(r + 1, runs)
+            progress(block_runs[-1] + 1, runs)
     return _stacked(scenario, per_run, seed=seed, steering=steer,
                     recovered=np.array(recovered, float).reshape(runs, len(outages)),
                     wall=np.array(wall), loss=p_loss, delay=float(delay),

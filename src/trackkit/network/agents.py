@@ -74,7 +74,7 @@ leaves one open):
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Generator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -116,8 +116,17 @@ __all__ = [
     "Tracks",
     "StepReport",
     "associate",
+    "Call",
+    "Program",
+    "run_inline",
+    "scan_source",
     "combine_with_neighbours",
+    "combine_program",
+    "combine_call",
+    "steer_call",
     "composites",
+    "composite_inputs",
+    "composite_step",
     "CompositeStep",
     "cv_predict",
     "empty_bearings",
@@ -430,14 +439,20 @@ def associate(mean: Array, cov: Array, t: float, bearings: BearingSet, settings:
     T, D = mean.shape[0], bearings.size
     if T == 0 or D == 0:
         return np.full(T, -1, np.intp)
-    tk, sk = float(bearings.t[0]), bearings.sensor[0]
-    if not (np.all(bearings.t == tk) and np.all(bearings.sensor == sk)):
-        raise ValueError("associate: bearings come from several times or positions; expected "
-                         "one source's scan (one sensor at one time)")
+    tk, sk = scan_source(bearings)
     x, P = cv_predict(mean, cov, tk - t, settings.q)
     pred = predict_measurement(Gaussian(x, P), Bearing(origin=sk, sigma=float(bearings.sigma[0])))
     g = gate(pred.zhat, pred.S, bearings.z[:, None], settings.p_gate, angular=(True,))
     return gnn_assign(g, saturating_costs(g, settings.k1, settings.k2)).det
+
+
+def scan_source(bearings: BearingSet) -> tuple[float, Array]:
+    """The time and sensor position of one source's scan (a ValueError for several)."""
+    tk, sk = float(bearings.t[0]), bearings.sensor[0]
+    if not (np.all(bearings.t == tk) and np.all(bearings.sensor == sk)):
+        raise ValueError("associate: bearings come from several times or positions; expected "
+                         "one source's scan (one sensor at one time)")
+    return tk, sk
 
 
 def _append(tracks: Tracks, det: NDArray[np.intp], bearings: BearingSet) -> Tracks:
@@ -487,23 +502,39 @@ class CompositeStep(NamedTuple):
 def composites(tracks: Tracks, t: float, settings: AgentSettings) -> CompositeStep:
     """The composite measurements at t of every track whose batch may fix the state (module
     docstring, step 4), in one batched ``composite_measurement`` call."""
+    rows, args = composite_inputs(tracks, t, settings)
+    if rows.size == 0:
+        return composite_step(tracks.size, rows, None, args[0], settings)
+    return composite_step(tracks.size, rows, composite_measurement(*args), args[0], settings)
+
+
+def composite_inputs(tracks: Tracks, t: float, settings: AgentSettings
+                     ) -> tuple[NDArray[np.intp], tuple]:
+    """The tracks whose batch holds at least ``batch_min`` bearings, and the arguments of
+    ``composite_measurement`` for them (the missing slots filled: the fit ignores them)."""
     T = tracks.size
+    count = (~np.isnan(tracks.bz)).sum(1) if T else np.zeros(0, int)
+    rows = np.flatnonzero(count >= settings.batch_min)
+    bz = tracks.bz[rows]
+    present = ~np.isnan(bz)
+    bt = np.where(present, tracks.bt[rows], t)
+    bs = np.where(present[..., None], tracks.bsensor[rows], 0.0)
+    sg = np.where(present, tracks.bsigma[rows], 1.0)
+    return rows, (bz, bt, bs, sg, t, tracks.mean[rows])
+
+
+def composite_step(T: int, rows: NDArray[np.intp], c: Any, bz: Array,
+                   settings: AgentSettings) -> CompositeStep:
+    """The :class:`CompositeStep` of T tracks from the fits ``c`` of the ``rows`` (None for
+    no rows) to the bearings ``bz``: a converged fit that passes ``2 lambda <= chi2.ppf(
+    fit_p, M - 4)`` and the speed test is a measurement; one that fails them is dropped."""
     z = np.full((T, 4), np.nan)
     R = np.full((T, 4, 4), np.nan)
     made = np.zeros(T, bool)
     dropped = np.zeros(T, bool)
-    count = (~np.isnan(tracks.bz)).sum(1) if T else np.zeros(0, int)
-    rows = np.flatnonzero(count >= settings.batch_min)
-    if rows.size == 0:
+    if c is None:
         return CompositeStep(z, R, made, dropped)
-    bz = tracks.bz[rows]
-    present = ~np.isnan(bz)
-    # fillers for the missing slots: composite_measurement ignores them (z = nan)
-    bt = np.where(present, tracks.bt[rows], t)
-    bs = np.where(present[..., None], tracks.bsensor[rows], 0.0)
-    sg = np.where(present, tracks.bsigma[rows], 1.0)
-    c = composite_measurement(bz, bt, bs, sg, t, tracks.mean[rows])
-    M = present.sum(1)
+    M = (~np.isnan(bz)).sum(1)
     limit = chi2.ppf(settings.fit_p, np.maximum(M - 4, 1))
     ok = c.status == CONVERGED
     # a composite faster than any target (beyond its own uncertainty) is a mixed or wrongly
@@ -561,6 +592,12 @@ def combine_with_neighbours(mean: Array, cov: Array,
     slots (own, neighbour 1, ..., neighbour L) with uniform weights over the track and its
     matches (module docstring, step 6). Returns the fused means, covariances and the number
     of matches of each track."""
+    return run_inline(combine_program(mean, cov, neighbours, settings))
+
+
+def combine_program(mean: Array, cov: Array, neighbours: Sequence[tuple[Array, Array]],
+                    settings: AgentSettings) -> Program:
+    """:func:`combine_with_neighbours` as a program (:class:`Call`)."""
     T, L = mean.shape[0], len(neighbours)
     matches = np.zeros(T, np.int64)
     if T == 0 or L == 0:
@@ -572,7 +609,7 @@ def combine_with_neighbours(mean: Array, cov: Array,
     for l, (xn, Pn) in enumerate(neighbours):  # a loop over neighbours, not over tracks
         if xn.shape[0] == 0:
             continue
-        m = match_tracks(mean, cov, xn, Pn, settings.match_gate)
+        m = yield Call(match_tracks, (mean, cov, xn, Pn, settings.match_gate))
         X[m.a, l + 1] = xn[m.b]
         P[m.a, l + 1] = Pn[m.b]
         have[m.a, l + 1] = True
@@ -583,8 +620,13 @@ def combine_with_neighbours(mean: Array, cov: Array,
     # (identity rows) that combine needs for a square matrix
     W = np.broadcast_to(np.eye(L + 1), (T, L + 1, L + 1)).copy()
     W[:, 0] = have / have.sum(1, keepdims=True)
-    out = combine(Gaussian(X, P), W, settings.combination)
+    out = yield Call(combine_call, (X, P, W, settings.combination))
     return out.mean[:, 0], out.cov[:, 0], matches
+
+
+def combine_call(X: Array, P: Array, W: Array, rule: str) -> Gaussian:
+    """``combine`` with positional arguments (a :class:`Call`)."""
+    return combine(Gaussian(X, P), W, rule)
 
 
 def _support(x: Array, t0: float, pool: BearingSet) -> NDArray[np.bool_]:
@@ -593,6 +635,34 @@ def _support(x: Array, t0: float, pool: BearingSet) -> NDArray[np.bool_]:
     zeta = wrap(np.arctan2(x[0] + dt * x[2] - pool.sensor[:, 0],
                            x[1] + dt * x[3] - pool.sensor[:, 1]) - pool.z) / pool.sigma
     return np.abs(zeta) <= 2.0
+
+
+# --------------------------------------------------------------------------------------------
+# the program's kernel calls
+
+
+class Call(NamedTuple):
+    """One kernel call of the agent's program, ``fn(*args)``: the program yields it and is
+    sent the result, so that a driver may run the same call of many runs' agents together
+    (:mod:`trackkit.network.lockstep`) or run it at once (:func:`run_inline`)."""
+
+    fn: Callable[..., Any]
+    args: tuple
+
+
+#: the agent's program (``Agent.program``): a generator that yields its kernel calls and is
+#: sent their answers
+Program = Generator[Call, Any, Any]
+
+
+def run_inline(program: Program) -> Any:
+    """Run a program's calls one by one as it yields them; its return value."""
+    try:
+        call = next(program)
+        while True:
+            call = program.send(call.fn(*call.args))
+    except StopIteration as stop:
+        return stop.value
 
 
 # --------------------------------------------------------------------------------------------
@@ -648,13 +718,17 @@ class Agent:
 
     def neighbour_tracks(self, t: float) -> list[tuple[Array, Array]]:
         """Each neighbour's confirmed tracks from its newest message, predicted to t."""
+        return run_inline(self._neighbour_tracks(t))
+
+    def _neighbour_tracks(self, t: float) -> Program:
         assert self.memory is not None
         self.memory.expire(t)
         out = []
         for m in self.memory:
             p: Payload = m.payload
             keep = p.status == _CONF
-            x, P = cv_predict(p.mean[keep], p.cov[keep], t - p.time, self.settings.q)
+            x, P = yield Call(cv_predict, (p.mean[keep], p.cov[keep], t - p.time,
+                                           self.settings.q))
             out.append((x, P))
         return out
 
@@ -662,11 +736,18 @@ class Agent:
     def step(self, t: float, own: BearingSet, position: ArrayLike = (0.0, 0.0),
              velocity: ArrayLike = (0.0, 0.0)) -> tuple[Message, StepReport]:
         """One execution at time t with the agent's own new bearings ``own`` (one scan)."""
+        return run_inline(self.program(t, own, position, velocity))
+
+    def program(self, t: float, own: BearingSet, position: ArrayLike = (0.0, 0.0),
+                velocity: ArrayLike = (0.0, 0.0)) -> Program:
+        """``step`` as a program that yields its kernel calls (:class:`Call`) and returns
+        the message and the report."""
         s = self.settings
         if not t >= self.time:
             raise ValueError(f"Agent.step: t = {t!r}; expected a time >= the last execution "
                              f"({self.time!r} s)")
-        tr = predict_tracks(self.tracks, 0.0 if self.tracks.size == 0 else t - self.time, s.q)
+        tr = yield Call(predict_tracks, (self.tracks, 0.0 if self.tracks.size == 0
+                                         else t - self.time, s.q))
         self.time = t
 
         # association, one source (one sensor's execution) at a time, newest bearings last
@@ -676,7 +757,7 @@ class Agent:
         unclaimed: list[BearingSet] = []
         n_assoc = 0
         for b in _by_source(new):
-            det = associate(tr.mean, tr.cov, t, b, s)
+            det = yield Call(associate, (tr.mean, tr.cov, t, b, s))
             tr = _append(tr, det, b)
             hits |= det >= 0
             n_assoc += int((det >= 0).sum())
@@ -686,15 +767,15 @@ class Agent:
         tr = _compact(tr, t, s.batch_age_s)
 
         # composite measurements from batches that fix the state, then the update
-        cs = composites(tr, t, s)
-        tr = update_tracks(tr, cs)
+        cs = yield Call(composites, (tr, t, s))
+        tr = yield Call(update_tracks, (tr, cs))
         tr = _clear_batches(tr, cs.made | cs.dropped)
         tr = _compact(tr, t, s.batch_age_s)
 
         # combination with the neighbours' estimates of the same targets
-        nb = self.neighbour_tracks(t)
+        nb = yield from self._neighbour_tracks(t)
         if s.combine_neighbours and nb and tr.size:
-            x, P, _ = combine_with_neighbours(tr.mean, tr.cov, nb, s)
+            x, P, _ = yield from combine_program(tr.mean, tr.cov, nb, s)
             tr = tr._replace(mean=x, cov=P)
 
         # the timers (before initiation: a new track's first hit is its birth)
@@ -703,7 +784,7 @@ class Agent:
             tr = tr._replace(logic=logic.step(tr.logic, t, hits))
         ghosts = 0
         if nb and tr.size and math.isfinite(s.corroborate_s):
-            tr, ghosts = self._corroborate(tr, nb, t)
+            tr, ghosts = yield from self._corroborate(tr, nb, t)
 
         # initiation from the unclaimed pool
         n_new = sum(b.size for b in unclaimed)
@@ -711,13 +792,13 @@ class Agent:
         fresh = np.arange(pool.size) >= pool.size - n_new
         recent = pool.t >= t - s.init_window_s
         pool, fresh = pool.take(recent), fresh[recent]
-        tr, pool, started = self._initiate(tr, pool, np.flatnonzero(fresh), t)
+        tr, pool, started = yield from self._initiate(tr, pool, np.flatnonzero(fresh), t)
         self.pool = pool
 
         # duplicates, then deletion
         pruned = np.zeros(tr.size, bool)
         if tr.size > 1:
-            pruned = duplicates(tr.mean, tr.cov, s.prune_gate)
+            pruned = yield Call(duplicates, (tr.mean, tr.cov, s.prune_gate))
         # a track that has run off faster than any target is following nothing real (a
         # ghost, or a track dragged off by a crossing target's bearings): deleted
         dead = pruned | (tr.logic.status == _DEL) | ~plausible_speed(tr.mean, tr.cov, s)
@@ -729,8 +810,7 @@ class Agent:
                          int(pruned.sum()), int(dead.sum() - pruned.sum()) + ghosts, len(nb))
         return msg, rep
 
-    def _corroborate(self, tr: Tracks, nb: list[tuple[Array, Array]], t: float
-                     ) -> tuple[Tracks, int]:
+    def _corroborate(self, tr: Tracks, nb: list[tuple[Array, Array]], t: float) -> Program:
         """``AgentSettings.corroborate_s`` against the neighbours' confirmed tracks ``nb``
         (``neighbour_tracks(t)``, in memory order): refresh ``seen`` and delete the ghosts.
         Returns the tracks and the number of ghosts deleted."""
@@ -741,7 +821,8 @@ class Agent:
         for (xn, Pn), m in zip(nb, self.memory, strict=True):
             if xn.shape[0] == 0:
                 continue
-            matched[match_tracks(tr.mean, tr.cov, xn, Pn, s.match_gate).a] = True
+            found = yield Call(match_tracks, (tr.mean, tr.cov, xn, Pn, s.match_gate))
+            matched[found.a] = True
             where = m.payload.position + (t - m.time) * m.payload.velocity
             watched |= np.hypot(*(tr.mean[:, :2] - where).T) <= s.meas_range
         seen = np.where(matched | ~watched, t, tr.seen)
@@ -749,10 +830,11 @@ class Agent:
         return tr._replace(seen=seen).take(~ghost), int(ghost.sum())
 
     def _initiate(self, tr: Tracks, pool: BearingSet, fresh: NDArray[np.intp], t: float
-                  ) -> tuple[Tracks, BearingSet, int]:
+                  ) -> Program:
         """Initiation seeded by the unclaimed bearings new at this execution (``fresh``
         indices into the pool; own or neighbours', so that a target only neighbours see can
-        be started), at most ``max_initiations`` of them, in random order."""
+        be started), at most ``max_initiations`` of them, in random order. Returns the
+        tracks, the pool and the number of tracks started."""
         s = self.settings
         started = 0
         if s.max_initiations == 0 or pool.size < s.min_support or fresh.size == 0:
@@ -773,7 +855,7 @@ class Agent:
                 continue
             x0, _ = cv_predict(ini.mean, np.eye(4), t - float(part.t[kk]), 0.0)
             b = part.take(sup)
-            c = composite_measurement(b.z, b.t, b.sensor, b.sigma, t, x0)
+            c = yield Call(composite_measurement, (b.z, b.t, b.sensor, b.sigma, t, x0))
             if c.status != CONVERGED or 2.0 * c.cost > chi2.ppf(s.fit_p, max(b.size - 4, 1)):
                 continue
             ids, self.counter = self.counter.issue(1)
@@ -799,6 +881,11 @@ class Agent:
         """The commanded course for the next dt seconds (``steer`` with the confirmed
         tracks as targets and the neighbours in memory); the current course when the
         settings have no ``steering``."""
+        return run_inline(self.steering_program(position, course, speed, dt))
+
+    def steering_program(self, position: ArrayLike, course: float, speed: float, dt: float
+                         ) -> Program:
+        """``steer`` as a program (:class:`Call`)."""
         s = self.settings
         if s.steering is None:
             return float(course)
@@ -818,12 +905,20 @@ class Agent:
         else:
             npos = nvel = np.full((1, 1, 2), np.nan)
             nr = np.full((1, 1), np.nan)
-        cmd = steer(np.asarray(position, float)[None], np.array([course]), np.array([speed]),
-                    np.array([dt]), targets=targets, target_velocity=tv, neighbours=npos,
-                    neighbour_velocity=nvel, neighbour_range=nr,
-                    comm_range=np.array([s.comm_range]), meas_range=np.array([s.meas_range]),
-                    params=s.steering)
+        cmd = yield Call(steer_call, (np.asarray(position, float)[None], np.array([course]),
+                                  np.array([speed]), np.array([dt]), targets, tv, npos, nvel,
+                                  nr, np.array([s.comm_range]), np.array([s.meas_range]),
+                                  s.steering))
         return float(cmd.course[0])
+
+
+def steer_call(position: Array, course: Array, speed: Array, dt: Array, targets: Array,
+               tv: Array, npos: Array, nvel: Array, nr: Array, comm_range: Array,
+               meas_range: Array, params: Steering) -> Any:
+    """``steer`` with positional arguments (a :class:`Call`)."""
+    return steer(position, course, speed, dt, targets=targets, target_velocity=tv,
+                 neighbours=npos, neighbour_velocity=nvel, neighbour_range=nr,
+                 comm_range=comm_range, meas_range=meas_range, params=params)
 
 
 def _by_source(sets: Sequence[BearingSet]) -> list[BearingSet]:
@@ -831,6 +926,9 @@ def _by_source(sets: Sequence[BearingSet]) -> list[BearingSet]:
     out = []
     for b in sets:
         if b.size == 0:
+            continue
+        if np.all(b.source == b.source[0]) and np.all(b.t == b.t[0]):
+            out.append(b)  # a message's bearings: one source already
             continue
         key = np.stack([b.source.astype(float), b.t], -1)
         _, inv = np.unique(key, axis=0, return_inverse=True)

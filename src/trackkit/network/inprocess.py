@@ -43,8 +43,9 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -53,11 +54,14 @@ from trackkit.network.agents import (
     Agent,
     AgentSettings,
     Payload,
+    Program,
     StepReport,
     empty_bearings,
     own_bearings,
+    run_inline,
 )
 from trackkit.network.central import CentralFusion, CentralSettings, central_fusion
+from trackkit.network.lockstep import drive
 from trackkit.network.steering import TURN_RATE, Steering, move
 from trackkit.network.tracks import Message
 from trackkit.sim.sensor_network import (
@@ -68,7 +72,8 @@ from trackkit.sim.sensor_network import (
     simulate_network,
 )
 
-__all__ = ["Trace", "NetworkResult", "run_network", "check_loss"]
+__all__ = ["Trace", "NetworkResult", "NetworkRunState", "run_network", "run_network_block",
+           "check_loss"]
 
 Array = NDArray[np.float64]
 
@@ -217,53 +222,113 @@ def run_network(
         loss: probability that one delivery is lost (0 <= loss < 1).
         central_settings: the centralised filter's ``CentralSettings``.
     """
-    check_loss(loss)
-    w = build_world(seed, run, targets, agents, duration=duration, period=period,
-                    sigma=sigma, mr=mr, cr=cr, max_delay=max_delay, q=q, settings=settings,
-                    steering=steering, central=central)
-    A, E = w.times.shape
-    nodes = [Agent(a, w.settings[a], np.random.default_rng(np.random.SeedSequence(
-        seed, spawn_key=(run, 3, a)))) for a in range(A)]
-    motion = Motion(w.ag0, steering)
-    rec = [Recorder() for _ in range(A)]
-    rec_c = Recorder() if w.hub is not None else None
-    # the bearings as taken, labelled by target, for the centralised filter
-    Zc = np.full((A, E, w.Nt), np.nan)
-    Sc = np.zeros((A, E, 2))
-    sent = delivered = lost = 0
-    spacing = Spacing(w.CR)
+    one = NetworkRunState(seed, run, targets, agents, duration=duration, period=period,
+                          sigma=sigma, mr=mr, cr=cr, max_delay=max_delay, q=q,
+                          settings=settings, steering=steering, central=central, loss=loss,
+                          central_settings=central_settings)
     t0 = _time.perf_counter()
-    for a, e in w.order:
+    for k in range(one.executions):
+        run_inline(one.execution(k))
+    return one.result(t0)
+
+
+def run_network_block(seed: int, runs: Sequence[int], targets: Sequence[ArrayLike],
+                      agents: ArrayLike, **options: Any) -> list[NetworkResult]:
+    """Runs ``runs`` of a network (``targets[i]`` the targets of ``runs[i]``) stepped
+    together, execution by execution: the agents' kernel calls of all runs at one execution
+    run as one batched call (:func:`trackkit.network.lockstep.drive`). Each result equals
+    ``run_network(seed, runs[i], targets[i], agents, **options)`` bit for bit; its
+    ``seconds`` is the block's wall time shared equally among its runs."""
+    if len(targets) != len(runs):
+        raise ValueError(f"{len(targets)} target sets for {len(runs)} runs; expected one "
+                         "per run")
+    states = [NetworkRunState(seed, int(r), tg, agents, **options)
+              for r, tg in zip(runs, targets, strict=True)]
+    if not states:
+        return []
+    t0 = _time.perf_counter()
+    for k in range(states[0].executions):
+        drive([one.execution(k) for one in states])
+    share = (_time.perf_counter() - t0) / len(states)
+    return [one.result(_time.perf_counter() - share) for one in states]
+
+
+class NetworkRunState:
+    """One in-process network run between its executions (``run_network``'s arguments):
+    the world, the agents, their motion and recorders, the message counts. ``execution(k)``
+    is the k-th execution in time order as a program (its kernel calls yielded as
+    :class:`~trackkit.network.agents.Call`); ``result`` the run's :class:`NetworkResult`
+    after the last one."""
+
+    def __init__(self, seed: int, run: int, targets: ArrayLike, agents: ArrayLike, *,
+                 duration: float, period: float, sigma: ArrayLike, mr: ArrayLike = math.inf,
+                 cr: ArrayLike = math.inf, max_delay: float | None = None, q: float = 0.0,
+                 settings: AgentSettings | None = None, steering: bool = False,
+                 central: bool | str = False, loss: float = 0.0,
+                 central_settings: CentralSettings | None = None) -> None:
+        check_loss(loss)
+        w = build_world(seed, run, targets, agents, duration=duration, period=period,
+                        sigma=sigma, mr=mr, cr=cr, max_delay=max_delay, q=q,
+                        settings=settings, steering=steering, central=central)
+        A, E = w.times.shape
+        self.w, self.period, self.steering, self.loss = w, period, steering, loss
+        self.q, self.central_settings = q, central_settings
+        self.nodes = [Agent(a, w.settings[a], np.random.default_rng(np.random.SeedSequence(
+            seed, spawn_key=(run, 3, a)))) for a in range(A)]
+        self.motion = Motion(w.ag0, steering)
+        self.rec = [Recorder() for _ in range(A)]
+        self.rec_c = Recorder() if w.hub is not None else None
+        # the bearings as taken, labelled by target, for the centralised filter
+        self.Zc = np.full((A, E, w.Nt), np.nan)
+        self.Sc = np.zeros((A, E, 2))
+        self.sent = self.delivered = self.lost = 0
+        self.spacing = Spacing(w.CR)
+
+    @property
+    def executions(self) -> int:
+        """The run's number of executions (every agent's, in time order)."""
+        return len(self.w.order)
+
+    def execution(self, k: int) -> Program:
+        """The k-th execution: move the agent, take its bearings, run its program, steer,
+        deliver its message over the disk graph (and to the "agent" reference's hub)."""
+        w, motion = self.w, self.motion
+        a, e = w.order[k]
         t = float(w.times[a, e])
         here, vel = motion.at(a, t)
         truth = w.sim.target_at_bearing[0, a, e]
         z, _ = bearings_at(here, truth, w.noise[a, e], w.sig[a], w.MR[a])
-        Zc[a, e], Sc[a, e] = z, here
+        self.Zc[a, e], self.Sc[a, e] = z, here
         own = own_bearings(z, t, here, float(w.sig[a]), a)
-        msg, rep = nodes[a].step(t, own, here, vel)
-        rec[a].add(nodes[a], truth, here, rep)
-        if steering:
-            dt_next = float(w.times[a, e + 1] - t) if e + 1 < E else period
-            motion.cmd[a] = nodes[a].steer(here, float(motion.course[a]),
-                                           float(motion.speed[a]), dt_next)
+        msg, rep = yield from self.nodes[a].program(t, own, here, vel)
+        self.rec[a].add(self.nodes[a], truth, here, rep)
+        if self.steering:
+            E = w.times.shape[1]
+            dt_next = float(w.times[a, e + 1] - t) if e + 1 < E else self.period
+            motion.cmd[a] = yield from self.nodes[a].steering_program(
+                here, float(motion.course[a]), float(motion.speed[a]), dt_next)
 
         # delivery over the disk graph at time t
         where = motion.where(t)
-        spacing.add(where)
+        self.spacing.add(where)
         links = disk_graph(where, w.CR)[a]
         for b in np.flatnonzero(links).tolist():
-            sent += 1
-            if loss > 0 and w.lose.random() < loss:
-                lost += 1
+            self.sent += 1
+            if self.loss > 0 and w.lose.random() < self.loss:
+                self.lost += 1
                 continue
-            nodes[b].receive(msg)
-            delivered += 1
-        if rec_c is not None:
-            relay_to_hub(w.hub, rec_c, msg.payload, t, truth)
-    trace_c, fusion = central_trace(w, rec_c, Zc, Sc, q, central_settings)
-    seconds = _time.perf_counter() - t0
-    return NetworkResult([r.trace() for r in rec], trace_c, w.sim, sent, delivered, lost,
-                         seconds, fusion, spacing.span)
+            self.nodes[b].receive(msg)
+            self.delivered += 1
+        if self.rec_c is not None:
+            yield from relay_to_hub(w.hub, self.rec_c, msg.payload, t, truth)
+
+    def result(self, t0: float) -> NetworkResult:
+        """The run's result after its last execution (``seconds`` counted from ``t0``)."""
+        trace_c, fusion = central_trace(self.w, self.rec_c, self.Zc, self.Sc, self.q,
+                                        self.central_settings)
+        seconds = _time.perf_counter() - t0
+        return NetworkResult([r.trace() for r in self.rec], trace_c, self.w.sim, self.sent,
+                             self.delivered, self.lost, seconds, fusion, self.spacing.span)
 
 
 # --------------------------------------------------------------------------------------------
@@ -370,13 +435,13 @@ class Motion:
 
 
 def relay_to_hub(hub: Agent, rec: Recorder, payload: Payload, t: float,
-                 truth: Array) -> None:
+                 truth: Array) -> Program:
     """The "agent" reference: the sender's bearings (not its tracks) to the hub, which then
-    executes."""
+    executes (a program: :class:`~trackkit.network.agents.Call`)."""
     bare = replace(payload, ids=payload.ids[:0], mean=payload.mean[:0],
                    cov=payload.cov[:0], status=payload.status[:0], lost=payload.lost[:0])
     hub.receive(Message(payload.sender, payload.time, bare))
-    _, rep = hub.step(t, empty_bearings())
+    _, rep = yield from hub.program(t, empty_bearings())
     rec.add(hub, truth, np.full(2, np.nan), rep)
 
 

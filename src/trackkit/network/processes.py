@@ -112,6 +112,7 @@ from trackkit.network.agents import (
     StepReport,
     empty_tracks,
     own_bearings,
+    run_inline,
 )
 from trackkit.network.central import CentralSettings
 from trackkit.network.inprocess import (
@@ -833,7 +834,7 @@ class _Exchange:
         payload = decode_payload(pd)  # checks the schema on receipt
         self._broadcast(a, t, pd)
         if self.rec_c is not None:
-            relay_to_hub(w.hub, self.rec_c, payload, t, truth)
+            run_inline(relay_to_hub(w.hub, self.rec_c, payload, t, truth))
 
     def _outage(self, a: int, t: float) -> None:
         """Kill agent a at its kill time (what it had not yet read dies with it); restart it

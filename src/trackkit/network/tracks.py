@@ -34,7 +34,7 @@ from scipy.optimize import linear_sum_assignment
 from trackkit.linalg import solve_psd
 
 __all__ = ["DEFAULT_GATE", "similarity", "uncertainty", "Matches", "match_tracks",
-           "duplicates", "Message", "MessageMemory"]
+           "matches_within", "duplicates", "Message", "MessageMemory"]
 
 Array = NDArray[np.float64]
 
@@ -99,6 +99,11 @@ def match_tracks(xa: ArrayLike, Pa: ArrayLike, xb: ArrayLike, Pb: ArrayLike,
     if S.ndim != 2:
         raise ValueError(f"match_tracks: tracks {np.shape(xa)} and {np.shape(xb)}; expected "
                          "one agent's (A, n) and one neighbour's (B, n)")
+    return matches_within(S, gate)
+
+
+def matches_within(S: Array, gate: float) -> Matches:
+    """:func:`match_tracks`'s assignment given the similarities ``S (A, B)``."""
     inside = S <= gate
     empty = Matches(np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0))
     if not inside.any():

@@ -37,6 +37,7 @@ from trackkit.tracking.gating import (
     Gate,
     MeasurementPrediction,
     gate,
+    gate_pairs,
     gate_threshold,
     predict_measurement,
 )
@@ -79,7 +80,7 @@ __all__ = [
     "clusters",
     "distance_costs", "gnn_assign", "jpda_probabilities", "loglik_costs",
     "pda_costs", "saturating_costs",
-    "GATE_PROBABILITY", "KDTREE_MIN_PAIRS", "Gate", "MeasurementPrediction", "gate",
+    "GATE_PROBABILITY", "KDTREE_MIN_PAIRS", "Gate", "MeasurementPrediction", "gate", "gate_pairs",
     "gate_threshold", "predict_measurement",
     "convert_range_bearing", "converted_cov_given_truth", "pair_plots", "single_point",
     "two_point",

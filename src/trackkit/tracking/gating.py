@@ -59,6 +59,7 @@ __all__ = [
     "Gate",
     "MeasurementPrediction",
     "gate",
+    "gate_pairs",
     "gate_threshold",
     "predict_measurement",
 ]
@@ -166,6 +167,19 @@ def gate(
     else:
         t, d = _candidates_kdtree(zhat, S, z, ang, gamma)
     return _fine(zhat, L, z, t, d, ang, gamma)
+
+
+def gate_pairs(zhat: ArrayLike, S: ArrayLike, L: ArrayLike, z: ArrayLike,
+               track: ArrayLike, det: ArrayLike, gamma: float, *,
+               angular: ArrayLike | None = None) -> Gate:
+    """The fine test of :func:`gate` on the candidate pairs ``(track[p], det[p])`` alone,
+    sorted by (track, detection), with ``L`` the lower Cholesky factor of each ``S`` and
+    ``gamma`` the threshold: for several scans stacked into one (each track's candidates
+    among its own scan's detections). Each pair's numbers are those ``gate`` gives it."""
+    zhat, S, z, ang = _check(zhat, S, z, angular)
+    t = np.asarray(track, dtype=np.intp)
+    d = np.asarray(det, dtype=np.intp)
+    return _fine(zhat, np.asarray(L, dtype=float), z, t, d, ang, float(gamma))
 
 
 def _check(zhat, S, z, angular):
