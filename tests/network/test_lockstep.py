@@ -93,8 +93,9 @@ def test_the_monte_carlo_gives_the_same_numbers_in_blocks_of_any_size():
     short = type(sc).model_validate(d)
     a = network_mc.run_network_mc(short, runs=3, block=1, keep_example=False)
     b = network_mc.run_network_mc(short, runs=3, block=2, keep_example=False)
-    for field in ("count", "gospa", "central_count", "central_gospa", "bound_pos",
-                  "held_final", "final_range", "spacing", "sent", "delivered", "lost"):
+    for field in ("count", "gospa", "central_count", "central_gospa", "bound_pos", "bound_vel",
+                  "bound_rng", "held_final", "final_range", "spacing", "sent", "delivered",
+                  "lost"):
         assert np.array_equal(getattr(a, field), getattr(b, field), equal_nan=True), field
     for kind in a.err:
         assert np.array_equal(a.err[kind], b.err[kind], equal_nan=True), kind

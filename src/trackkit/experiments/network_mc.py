@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 
 from trackkit.eval.network_score import score_trace
 from trackkit.eval.track_metrics import Frames, assign
-from trackkit.network.bound import network_pcrlb
+from trackkit.network.bound import NetworkBound, network_pcrlb
 from trackkit.network.inprocess import (
     NetworkResult,
     Trace,
@@ -69,7 +69,8 @@ if TYPE_CHECKING:
     from trackkit.network.agents import AgentSettings
     from trackkit.network.processes import Deployment
 
-__all__ = ["NETWORK_BLOCK", "NetworkMonteCarlo", "RunScores", "run_network_mc", "score_run"]
+__all__ = ["NETWORK_BLOCK", "NetworkMonteCarlo", "RunScores", "run_bound", "run_network_mc",
+           "score_run"]
 
 #: runs stepped together in process (``run_network_mc``'s ``block``): past about 25 the
 #: per-run work outside the batched kernels dominates (benchmarks/RESULTS.md)
@@ -154,9 +155,31 @@ def _at_times(trace: Trace, times: Array) -> tuple[Array, NDArray[np.int64], Arr
     return trace.time[idx], off, trace.mean[rows].reshape(-1, 4), trace.truth[idx]
 
 
+def run_bound(results: Sequence[NetworkResult], sigma: Array, meas_range: Array,
+              prior_cov: Array, q: float) -> list[NetworkBound]:
+    """The centralised PCRLB on each run's actual paths (one event per agent execution),
+    every run in one batched ``network_pcrlb``; one ``NetworkBound`` per run."""
+    def events(result: NetworkResult) -> tuple[Array, ...]:
+        t = np.stack([tr.time for tr in result.agents])  # (A, E)
+        pos = np.stack([tr.position for tr in result.agents])  # (A, E, 2)
+        truth = np.stack([tr.truth for tr in result.agents])  # (A, E, Nt, 4)
+        A, E, Nt = truth.shape[:3]
+        valid = np.hypot(truth[..., 0] - pos[..., None, 0],
+                         truth[..., 1] - pos[..., None, 1]) <= meas_range[:, None, None]
+        sig = np.broadcast_to(sigma[:, None], (A, E))
+        return (t.reshape(A * E), pos.reshape(A * E, 2), truth.reshape(A * E, Nt, 4),
+                sig.reshape(A * E), valid.reshape(A * E, Nt))
+    t, pos, truth, sig, valid = (np.stack(a) for a in zip(*map(events, results),
+                                                          strict=True))
+    b = network_pcrlb(prior_cov, t, pos, truth, sig, valid, q=q, history=True)
+    return [NetworkBound(*(None if a is None else a[i] for a in b))
+            for i in range(len(results))]
+
+
 def score_run(result: NetworkResult, sigma: Array, meas_range: Array, prior_cov: Array,
-              q: float, c: float) -> RunScores:
-    """Score one ``run_network`` result (module docstring)."""
+              q: float, c: float, bound: NetworkBound | None = None) -> RunScores:
+    """Score one ``run_network`` result (module docstring); ``bound``: its ``run_bound``,
+    when computed already (with the other runs of its block)."""
     A = len(result.agents)
     E = result.agents[0].time.shape[0]
     if any(tr.time.shape[0] != E for tr in result.agents):
@@ -191,15 +214,9 @@ def score_run(result: NetworkResult, sigma: Array, meas_range: Array, prior_cov:
         c_held = _held(n, e["pos"], Nt)
 
     # the centralised PCRLB on the actual paths: one event per agent execution
-    t = np.stack([tr.time for tr in result.agents])  # (A, E)
+    b = run_bound([result], sigma, meas_range, prior_cov, q)[0] if bound is None else bound
     pos = np.stack([tr.position for tr in result.agents])  # (A, E, 2)
     truth = np.stack([tr.truth for tr in result.agents])  # (A, E, Nt, 4)
-    valid = np.hypot(truth[..., 0] - pos[..., None, 0],
-                     truth[..., 1] - pos[..., None, 1]) <= meas_range[:, None, None]
-    sig = np.broadcast_to(sigma[:, None], (A, E))
-    b = network_pcrlb(prior_cov, t.reshape(A * E), pos.reshape(A * E, 2),
-                      truth.reshape(A * E, Nt, 4), sig.reshape(A * E),
-                      valid.reshape(A * E, Nt), q=q, history=True)
     back = np.empty(A * E, np.intp)
     back[b.order] = np.arange(A * E)  # sorted position of every input event
     bound_pos = b.position_rmse[back].reshape(A, E, Nt)
@@ -407,8 +424,9 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
             results = run_network_block(seed, block_runs, targets, states, **options)
         else:
             results = [runner(seed, r0, targets[0], states, **options)]
-        for r, tg, res in zip(block_runs, targets, results, strict=True):
-            per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m))
+        bounds = run_bound(results, sigma, mr, prior, net.q)
+        for r, tg, res, b in zip(block_runs, targets, results, bounds, strict=True):
+            per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m, b))
             recovered.append(list(getattr(res, "recovered", [])))
             refused.append(getattr(res, "refused", 0))
             secured = getattr(res, "curve", False)

@@ -203,9 +203,18 @@ def _normal(X: Array, p: _Problem) -> tuple[Array, Array, Array]:
     ``g = sum_k A_k r_k`` (4, N); J is a view of scratch, valid until the next call."""
     r, A = _linearize(X, p)
     n = X.shape[1]
+    if n == 1:
+        # einsum sums a lone column's bearings in another order than two or more columns'
+        # (numpy 2.4): the column twice keeps a row's numbers the same in any batch
+        return tuple(a[..., :1].copy() for a in _sums(np.repeat(r, 2, 1),
+                                                       np.repeat(A, 2, 2), None))
+    return _sums(r, A, p.work_J[: 16 * n].reshape(4, 4, n))
+
+
+def _sums(r: Array, A: Array, out: Array | None) -> tuple[Array, Array, Array]:
     cost = np.einsum("mn,mn->n", r, r)
     cost *= 0.5
-    J = np.einsum("imn,jmn->ijn", A, A, out=p.work_J[: 16 * n].reshape(4, 4, n))
+    J = np.einsum("imn,jmn->ijn", A, A, out=out)
     return cost, J, np.einsum("imn,mn->in", A, r)
 
 

@@ -249,8 +249,17 @@ def run_network_block(seed: int, runs: Sequence[int], targets: Sequence[ArrayLik
     t0 = _time.perf_counter()
     for k in range(states[0].executions):
         drive([one.execution(k) for one in states])
+    fusion: list[CentralFusion | None] = [None] * len(states)
+    first = states[0]
+    if first.w.central == "filter":  # the centralised filter of every run in one batch
+        both = central_fusion(np.stack([one.Zc for one in states]),
+                              np.stack([one.w.times for one in states]),
+                              np.stack([one.Sc for one in states]), first.w.sig, q=first.q,
+                              settings=first.central_settings)
+        fusion = [CentralFusion(*(a[i:i + 1] for a in both)) for i in range(len(states))]
     share = (_time.perf_counter() - t0) / len(states)
-    return [one.result(_time.perf_counter() - share) for one in states]
+    return [one.result(_time.perf_counter() - share, f) for one, f in zip(states, fusion,
+                                                                         strict=True)]
 
 
 class NetworkRunState:
@@ -322,10 +331,11 @@ class NetworkRunState:
         if self.rec_c is not None:
             yield from relay_to_hub(w.hub, self.rec_c, msg.payload, t, truth)
 
-    def result(self, t0: float) -> NetworkResult:
-        """The run's result after its last execution (``seconds`` counted from ``t0``)."""
+    def result(self, t0: float, fusion: CentralFusion | None = None) -> NetworkResult:
+        """The run's result after its last execution (``seconds`` counted from ``t0``;
+        ``fusion``: the centralised filter's output for this run, when computed already)."""
         trace_c, fusion = central_trace(self.w, self.rec_c, self.Zc, self.Sc, self.q,
-                                        self.central_settings)
+                                        self.central_settings, fusion)
         seconds = _time.perf_counter() - t0
         return NetworkResult([r.trace() for r in self.rec], trace_c, self.w.sim, self.sent,
                              self.delivered, self.lost, seconds, fusion, self.spacing.span)
@@ -446,12 +456,15 @@ def relay_to_hub(hub: Agent, rec: Recorder, payload: Payload, t: float,
 
 
 def central_trace(w: World, rec_c: Recorder | None, Zc: Array, Sc: Array, q: float,
-                  central_settings: CentralSettings | None
+                  central_settings: CentralSettings | None,
+                  fusion: CentralFusion | None = None
                   ) -> tuple[Trace | None, CentralFusion | None]:
-    """The centralised reference's trace (and the filter's output), after the run."""
+    """The centralised reference's trace (and the filter's output), after the run;
+    ``fusion``: the filter's output when already computed (a block's, one run of it)."""
     if w.central == "filter":
-        fusion = central_fusion(Zc[None], w.times[None], Sc[None], w.sig, q=q,
-                                settings=central_settings)
+        if fusion is None:
+            fusion = central_fusion(Zc[None], w.times[None], Sc[None], w.sig, q=q,
+                                    settings=central_settings)
         return _fusion_trace(fusion, w.sim.target_at_bearing[0], Zc), fusion
     return (rec_c.trace() if rec_c else None), None
 

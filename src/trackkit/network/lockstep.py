@@ -35,6 +35,7 @@ from trackkit.network.agents import (
     combine_call,
     composite_inputs,
     composite_step,
+    composites,
     cv_predict,
     predict_tracks,
     scan_source,
@@ -164,18 +165,11 @@ def _split(a: np.ndarray, counts: Sequence[int]) -> list[np.ndarray]:
 def _composite_measurement_many(calls: list[tuple]) -> list[Composite]:
     """``composite_measurement(z, t, sensor_pos, sigma, t_f, x0)`` of several problems as
     one: the rows stacked, each with its own t_f, grouped by the number of bearing slots and
-    whether any is missing (the layout a row's sums see). A problem of one row is solved
-    alone: numpy's einsum sums a lone column's bearings in another order than a stack's
-    (the same numbers to rounding, not bit for bit)."""
+    whether any is missing (the layout a row's sums see)."""
     def key(c: tuple) -> tuple:
         z = np.asarray(c[0])
-        return z.shape[-1], bool(np.isnan(z).any()), np.ndim(c[3]), z.ndim, len(z) == 1
-
-    def stack(group: list[tuple]) -> list[Composite]:
-        if np.ndim(group[0][0]) == 1 or len(group[0][0]) == 1:
-            return [composite_measurement(*c) for c in group]
-        return _composite_stack(group)
-    return _grouped(calls, key, stack)
+        return z.shape[-1], bool(np.isnan(z).any()), np.ndim(c[3])
+    return _grouped(calls, key, _composite_stack)
 
 
 def _composite_stack(calls: list[tuple]) -> list[Composite]:
@@ -264,7 +258,7 @@ def _match_tracks_many(calls: list[tuple]) -> list[Matches]:
     return out
 
 
-# composites: see _composite_measurement_many
+BATCHED[composites] = _composites_many
 BATCHED[composite_measurement] = _composite_measurement_many
 BATCHED[cv_predict] = _cv_predict_many
 BATCHED[predict_tracks] = _predict_tracks_many
