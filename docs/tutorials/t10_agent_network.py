@@ -29,7 +29,7 @@ the paper.
 #
 # The command calls :func:`trackkit.experiments.network_mc.run_network_mc`, which runs
 # :func:`trackkit.network.inprocess.run_network` for each run (each run is one multi-target
-# problem whose agents execute one at a time), 25 runs stepped together
+# problem whose agents execute one at a time), up to 25 runs stepped together
 # (:func:`~trackkit.network.inprocess.run_network_block`: the agents' array work of all 25
 # runs at one execution goes through :mod:`trackkit.network.lockstep` as one batched call,
 # with the same numbers bit for bit as one run at a time), beside the centralised reference
