@@ -28,7 +28,6 @@ import numpy as np
 from trackkit.belief import Gaussian
 from trackkit.models.sensors import Bearing
 from trackkit.network.agents import (
-    AgentSettings,
     Call,
     Program,
     associate,
@@ -107,27 +106,19 @@ def _associate_many(calls: list[tuple]) -> list[Any]:
     """``associate`` of several (tracks, scan) problems as one stacked scan: every track's
     prediction to its own scan's time and position, the gate on the pairs within each
     problem, the saturating costs and one assignment (each problem's tracks and bearings
-    are their own clusters)."""
-    out: list[Any] = [None] * len(calls)
-    live = []
-    for i, (mean, cov, t, b, s) in enumerate(calls):
+    are their own clusters). Problems with no track or no bearing are answered alone."""
+    def key(c: tuple) -> tuple:
+        mean, _, _, b, s = c
         if mean.shape[0] == 0 or b.size == 0:
-            out[i] = associate(mean, cov, t, b, s)
-        else:
-            live.append(i)
+            return (None,)
+        return s.q, s.p_gate, s.k1, s.k2, float(b.sigma[0])
 
-    def key(i: int) -> tuple:
-        s: AgentSettings = calls[i][4]
-        return (s.q, s.p_gate, s.k1, s.k2, float(calls[i][3].sigma[0]))
-
-    groups: dict[tuple, list[int]] = {}
-    for i in live:
-        groups.setdefault(key(i), []).append(i)
-    for (q, p_gate, k1, k2, sigma), idx in groups.items():
-        for i, det in zip(idx, _associate_stacked([calls[i] for i in idx], q, p_gate, k1,
-                                                  k2, sigma), strict=True):
-            out[i] = det
-    return out
+    def many(group: list[tuple]) -> list[Any]:
+        k = key(group[0])
+        if k == (None,):
+            return [associate(*c) for c in group]
+        return _associate_stacked(group, *k)
+    return _grouped(calls, key, many)
 
 
 def _associate_stacked(calls: list[tuple], q: float, p_gate: float, k1: float, k2: float,
@@ -201,16 +192,19 @@ def _composites_many(calls: list[tuple]) -> list[Any]:
 
 def _cv_predict_many(calls: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
     """``cv_predict(mean (T, 4), cov, dt, q)`` of several track sets: the rows stacked, each
-    with its set's dt."""
+    with its set's dt (other shapes answered alone)."""
+    def stackable(c: tuple) -> bool:
+        return np.ndim(c[0]) == 2 and np.ndim(c[2]) == 0
+
     def stack(group: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
+        if not stackable(group[0]):
+            return [cv_predict(*c) for c in group]
         n = [c[0].shape[0] for c in group]
         x, P = cv_predict(np.concatenate([c[0] for c in group]),
                           np.concatenate([c[1] for c in group]),
                           np.repeat([float(c[2]) for c in group], n), group[0][3])
         return list(zip(_split(x, n), _split(P, n), strict=True))
-    return _grouped(calls, lambda c: (np.ndim(c[0]) == 2 and np.ndim(c[2]) == 0, c[3]),
-                    lambda g: stack(g) if np.ndim(g[0][0]) == 2 and np.ndim(g[0][2]) == 0
-                    else [cv_predict(*c) for c in g])
+    return _grouped(calls, lambda c: (stackable(c), c[3]), stack)
 
 
 def _predict_tracks_many(calls: list[tuple]) -> list[Any]:
