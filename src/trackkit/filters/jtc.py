@@ -91,6 +91,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit.belief import Gaussian, Innovation
 from trackkit.filters.base import check_dt, check_measurement, register
+from trackkit.filters.particle_fast import standard_normals
 from trackkit.filters.resample import logsumexp, systematic
 from trackkit.linalg import check_covariance, psd_factor
 from trackkit.models.classes import (
@@ -387,7 +388,7 @@ def _draw_prior(prior: Gaussian, shape: tuple[int, ...], rng: np.random.Generato
     x, P = _check_prior(prior, where)
     batch = x.shape[:-1]
     L = psd_factor(P, f"{where} prior.cov")
-    e = rng.standard_normal(batch + (4,) + shape)
+    e = standard_normals(rng, batch + (4,) + shape)
     k = len(shape)
     parts = tuple(x[(..., i) + (None,) * k]
                   + sum(L[(..., i, j) + (None,) * k] * e[(..., j) + (slice(None),) * k]
@@ -491,7 +492,7 @@ class JTC:
         shape = belief.modes.shape
         base = belief.labels.astype(np.intp) * M
         m = next_modes(base + belief.modes, tab.cdf, rng.random(shape, dtype=np.float32))
-        w = rng.standard_normal((2,) + shape)
+        w = standard_normals(rng, (2,) + shape)
         w *= self.sigma
         X = _propagate((belief.x, belief.y, belief.vx, belief.vy), base + m, tab, w[0], w[1],
                        dt, self.acceleration)
@@ -715,7 +716,7 @@ class MultiFilterJTC:
         for c, tab in enumerate(self._tables(dt)):
             mode = belief.modes[..., c, :]
             m = next_modes(mode, tab.cdf, rng.random(mode.shape, dtype=np.float32))
-            w = rng.standard_normal((2,) + mode.shape)
+            w = standard_normals(rng, (2,) + mode.shape)
             w *= self.sigma
             X = _propagate(tuple(a[..., c, :] for a in comps), m, tab, w[0], w[1], dt,
                            self.acceleration)

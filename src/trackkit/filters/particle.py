@@ -78,6 +78,7 @@ from trackkit.filters.base import (
     produced,
     register,
 )
+from trackkit.filters.particle_fast import standard_normals
 from trackkit.linalg import cholesky, psd_factor
 from trackkit.models.protocols import MotionModel, SensorModel
 
@@ -154,7 +155,7 @@ def sample_gaussian(mean: Array, cov: Array, n_particles: int,
     P = np.asarray(cov, dtype=float)
     batch = np.broadcast_shapes(m.shape[:-1], P.shape[:-2])
     L = psd_factor(P, "prior covariance")
-    e = rng.standard_normal(batch + (n_particles, m.shape[-1]))
+    e = standard_normals(rng, batch + (n_particles, m.shape[-1]))
     return m[..., None, :] + (e @ L.T if L.ndim == 2 else e @ L.mT)
 
 
@@ -180,7 +181,7 @@ def propagate(states: Array, motion: MotionModel, dt: ArrayLike, rng: np.random.
     if not x.flags.writeable or np.may_share_memory(x, X):
         x = x.copy()  # the noise is added in place: never into the caller's states
     Q = np.asarray(motion.noise(X, d), dtype=float)
-    e = rng.standard_normal(X.shape)
+    e = standard_normals(rng, X.shape)
     if Q.ndim == 2:
         L = _cached(Q, "sqrt", lambda M: psd_factor(M, "process noise Q"))
         x += e @ L.T

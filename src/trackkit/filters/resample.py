@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit import linalg
 from trackkit.angles import wrap
+from trackkit.filters.particle_fast import standard_normals
 
 __all__ = [
     "systematic",
@@ -373,7 +374,7 @@ def regularise(states: ArrayLike, weights: ArrayLike, rng: np.random.Generator |
     D = linalg.psd_factor(S, "regularise: the particles' covariance",
                    sample=cov is None or cov_is_sample)
     rng = np.random.default_rng() if rng is None else rng
-    e = rng.standard_normal(X.shape)
+    e = standard_normals(rng, X.shape)
     out = bandwidth * (e @ D.mT if D.ndim > 2 else e @ D.T)
     if shrink:
         if mean is not None:
@@ -409,7 +410,7 @@ def roughen(states: ArrayLike, rng: np.random.Generator | None, K: float = 0.2,
         E[..., ang] = d.max(-2) - d.min(-2)
     sigma = K * E * N ** (-1.0 / n)
     rng = np.random.default_rng() if rng is None else rng
-    out = X + sigma[..., None, :] * rng.standard_normal(X.shape)
+    out = X + sigma[..., None, :] * standard_normals(rng, X.shape)
     if ang:
         out[..., ang] = wrap(out[..., ang])
     return out
