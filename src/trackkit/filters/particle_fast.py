@@ -24,7 +24,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["COMPILED_DRAWS", "standard_normals"]
+__all__ = ["COMPILED_DRAWS", "COMPILED_WEIGHTS", "standard_normals", "systematic_ancestors"]
 
 Array = NDArray[np.float64]
 
@@ -48,3 +48,47 @@ def standard_normals(rng: np.random.Generator, shape: tuple[int, ...]) -> Array:
     out = np.empty(shape)
     _fill_standard_normal(rng, out)
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Systematic resampling's ancestors
+# --------------------------------------------------------------------------------------------
+
+#: the number of weights (rows x N) from which the compiled resampling takes over
+COMPILED_WEIGHTS = 1024
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _systematic_ancestors(w: Array, U: Array, n: int, out: NDArray[np.intp]) -> None:
+    """Per row of ``w (R, N)``: with ``c`` the cumulative weights (ending at 1) and ``K_i =
+    ceil(n c_i - U)`` clipped to [0, n], point k goes to particle ``a_k = #{i : K_i <= k}``
+    (at most N - 1), a cumulative histogram of K: no branch per point."""
+    R, N = w.shape
+    c = np.empty(N)
+    h = np.empty(n + 1, dtype=np.intp)
+    for r in range(R):
+        acc = 0.0
+        for i in range(N):
+            acc += w[r, i]
+            c[i] = acc
+        last = c[N - 1]
+        h[:] = 0
+        for i in range(N):
+            h[min(max(math.ceil((c[i] / last) * n - U[r]), 0), n)] += 1
+        a = 0
+        for k in range(n):
+            a += h[k]
+            out[r, k] = min(a, N - 1)
+
+
+def systematic_ancestors(w: Array, U: Array, n: int) -> NDArray[np.intp]:
+    """Sorted ancestors ``(..., n)`` of systematic resampling of the weights ``w (..., N)``
+    with one uniform per row ``U (...)``: ``resample.systematic``'s numpy passes (a
+    cumulative sum, ``ceil``, one ``bincount`` and a cumulative histogram) bit for bit, in
+    one compiled pass per row."""
+    batch, N = w.shape[:-1], w.shape[-1]
+    rows = math.prod(batch)
+    out = np.empty((rows, n), dtype=np.intp)
+    _systematic_ancestors(np.ascontiguousarray(w, dtype=float).reshape(rows, N),
+                          np.ascontiguousarray(U, dtype=float).reshape(rows), int(n), out)
+    return out.reshape(batch + (n,))

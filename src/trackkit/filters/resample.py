@@ -62,7 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from trackkit import linalg
 from trackkit.angles import wrap
-from trackkit.filters.particle_fast import standard_normals
+from trackkit.filters import particle_fast as pf
 
 __all__ = [
     "systematic",
@@ -188,6 +188,12 @@ def systematic(weights: ArrayLike, rng: np.random.Generator | None,
 
 def _systematic(w: Array, rng: np.random.Generator, n: int) -> Indices:
     U = np.asarray(rng.random(w.shape[:-1]), dtype=float)
+    if w.size >= pf.COMPILED_WEIGHTS:
+        return pf.systematic_ancestors(w, U, n)
+    return _systematic_numpy(w, U, n)
+
+
+def _systematic_numpy(w: Array, U: Array, n: int) -> Indices:
     c = _cdf(w)
     # #{k in 0..n-1 : (k + U) / n < c} = ceil(n c - U), in [0, n]
     c *= n
@@ -374,7 +380,7 @@ def regularise(states: ArrayLike, weights: ArrayLike, rng: np.random.Generator |
     D = linalg.psd_factor(S, "regularise: the particles' covariance",
                    sample=cov is None or cov_is_sample)
     rng = np.random.default_rng() if rng is None else rng
-    e = standard_normals(rng, X.shape)
+    e = pf.standard_normals(rng, X.shape)
     out = bandwidth * (e @ D.mT if D.ndim > 2 else e @ D.T)
     if shrink:
         if mean is not None:
@@ -410,7 +416,7 @@ def roughen(states: ArrayLike, rng: np.random.Generator | None, K: float = 0.2,
         E[..., ang] = d.max(-2) - d.min(-2)
     sigma = K * E * N ** (-1.0 / n)
     rng = np.random.default_rng() if rng is None else rng
-    out = X + sigma[..., None, :] * standard_normals(rng, X.shape)
+    out = X + sigma[..., None, :] * pf.standard_normals(rng, X.shape)
     if ang:
         out[..., ang] = wrap(out[..., ang])
     return out
