@@ -1,5 +1,6 @@
-r"""Compiled draws of the particle filters: the generator's standard normals, the same numbers
-in the same order as ``Generator.standard_normal``, at a third of its cost.
+r"""Compiled kernels of the particle filters: the generator's standard normals, the same
+numbers in the same order as ``Generator.standard_normal`` at a third of its cost; and
+systematic resampling's ancestors in one pass per row.
 
 A particle filter's floor under numpy is its random numbers: ``Generator.standard_normal``
 fills an array at about 10 ns a draw on a 2-core AMD EPYC, and a 4-state prediction draws
@@ -7,13 +8,20 @@ four per particle (38 of a position step's 101 ns per particle, ``benchmarks/RES
 numba compiles NumPy's own ziggurat against the same bit generator (it reads and advances the
 generator's state through its C interface) at 3.5 ns a draw there. The numbers are numpy's,
 bit for bit, and the generator is left where numpy would leave it, so a run's random stream
-and every result drawn from it are unchanged (``tests/test_particle_fast.py``, also with the
-kernel compiled for plain x86-64 and for AVX2).
+and every result drawn from it are unchanged. The textbook form is ``rng.standard_normal``
+itself; :func:`standard_normals` takes over from :data:`COMPILED_DRAWS` draws, below which
+numba's call (about 8 us, most of it handing over the generator) costs more than it saves.
 
-The textbook form is ``rng.standard_normal(shape)`` itself; :func:`standard_normals` takes
-over from :data:`COMPILED_DRAWS` draws, below which numba's call (about 8 us, most of it
-handing over the generator) costs more than the draws save. numba compiles the kernel on
-first use (about a second) and caches the machine code beside this module (``cache=True``).
+Systematic resampling (``trackkit.filters.resample``) computes its ancestors in numpy as a
+cumulative sum, ``ceil``, one ``bincount`` over all rows and a cumulative histogram: four
+passes and their temporaries. :func:`systematic_ancestors` does the same arithmetic in the
+same order, one row at a time, so the ancestors are the same integers, four times faster; it
+takes over from :data:`COMPILED_WEIGHTS` weights.
+
+No fastmath, so no FMA contraction and no sum reordered by the vector width: the bits do not
+depend on the CPU (``tests/test_particle_fast.py`` compiles them for plain x86-64 and for
+AVX2 too). numba compiles the kernels on first use (about a second) and caches the machine
+code beside this module (``cache=True``).
 """
 
 from __future__ import annotations
