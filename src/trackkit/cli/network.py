@@ -13,7 +13,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.option_types import at_least
+from trackkit.cli.option_types import Scheduler, Workers, at_least, one_executor
 from trackkit.cli.output import (
     OutputDir,
     default_dir,
@@ -53,9 +53,16 @@ def network(
         "--straight", help="Straight courses: no steering, whatever the scenario says "
         "(for comparison with the steered agents).")] = False,
     agents: Annotated[AgentsMode, typer.Option(
-        "--agents", help="inprocess: every agent in this process (fast); processes: every "
+        "--agents", help="inprocess: every agent in this process, or the Dask worker's "
+        "(fast); processes: every "
         "agent its own operating-system process, talking over ZeroMQ on loopback (same "
         "results without message loss, slower).")] = AgentsMode.inprocess,
+    block: Annotated[int | None, typer.Option(
+        "--block", callback=at_least(1), help="Runs stepped together in process, each block "
+        "one Dask task (results are bit-identical for any block size).",
+        show_default="25, the fastest per run")] = None,
+    workers: Workers = None,
+    scheduler: Scheduler = None,
     compare_straight: Annotated[bool, typer.Option(
         "--compare-straight", help="Also run the same runs on straight courses and report "
         "whether steering pays (twice the time).")] = False,
@@ -96,11 +103,19 @@ def network(
     centralised reference and the PCRLB; write results.json, timings.json, plots and
     report.html.
 
-    The same scenario and seed give byte-identical results.json on one machine."""
+    With --workers or --scheduler the blocks of runs go to Dask, each block one task.
+    The same scenario and seed give byte-identical results.json on one machine, in this
+    process or on any number of Dask workers."""
     with user_errors() as state:
         from trackkit.network.inprocess import check_loss
         from trackkit.network.processes import Deployment
 
+        one_executor(workers, scheduler)
+        if agents == AgentsMode.processes and (workers or scheduler):
+            raise ValueError("--agents processes runs every agent in its own process, driven "
+                             "from this one; --workers and --scheduler send blocks of runs "
+                             "to Dask with the agents in the worker's process: expected "
+                             "--agents inprocess with --workers or --scheduler")
         sc = _load_network(scenario)
         if compare_straight and (straight or not sc.settings.steering):
             raise ValueError("--compare-straight compares steered agents with straight "
@@ -133,6 +148,8 @@ def network(
             _run_network(sc, where.path, runs=runs, seed=seed,
                          steering=False if straight else None, agents=str(agents.value),
                          compare_straight=compare_straight, loss=loss, delay=delay,
+                         workers=workers, scheduler=scheduler,
+                         **({} if block is None else {"block": block}),
                          outages=outages, deployment=Deployment(
                              host=host, advertise=advertise, launch=launchers or None,
                              remote_python=remote_python, curve=curve, keys=keys))
@@ -218,12 +235,11 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
     compare = kwargs.pop("compare_straight", False)
     total = kwargs.get("runs") or sc.run.runs
     given = "--runs" if kwargs.get("runs") else "the scenario's run.runs; --runs N for fewer"
-    where = ("in their own processes" if kwargs.get("agents") == "processes"
-             else "in this process")
+    where = _where(kwargs.get("agents"), kwargs.get("workers"), kwargs.get("scheduler"))
     stderr().print(Text(
         f"{sc.name}: {total} Monte Carlo run{'' if total == 1 else 's'} ({given})"
         + (", then the same runs on straight courses" if compare else "")
-        + f", agents {where} -> {out}", style="bold"), soft_wrap=True)
+        + f", {where} -> {out}", style="bold"), soft_wrap=True)
     with progress_bar(stderr()) as bar:
 
         def monte_carlo(label: str, **more: Any):
@@ -243,3 +259,14 @@ def _run_network(sc: Any, out: Path, **kwargs: Any) -> None:
     with stderr().status("writing the report"):
         paths = write_network_report(mc, sc, out, straight=straight)
     print_network_summary(paths)
+
+
+def _where(agents: str | None, workers: int | None, scheduler: str | None) -> str:
+    """Where the runs' agents execute, for the opening line."""
+    if agents == "processes":
+        return "agents in their own processes"
+    if scheduler:
+        return f"blocks of runs on the Dask scheduler at {scheduler}"
+    if workers:
+        return f"blocks of runs on {workers} local Dask worker{'' if workers == 1 else 's'}"
+    return "agents in this process"

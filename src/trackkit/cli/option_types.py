@@ -49,12 +49,21 @@ def number(lo: float | None = None, hi: float | None = None, *, open_lo: bool = 
     return check
 
 
-#: the Dask options of the commands that run blocks of Monte Carlo runs (run, sweep)
+#: the Dask options of the commands that run blocks of Monte Carlo runs (run, sweep,
+#: network)
 Workers = Annotated[int | None, typer.Option(
     "--workers", "-w", callback=at_least(1), help="Local Dask workers (at least 1).",
     show_default="none: in this process")]
 Scheduler = Annotated[str | None, typer.Option(
     "--scheduler", help="Dask scheduler address, e.g. tcp://host:8786.", show_default="none")]
+
+
+def one_executor(workers: int | None, scheduler: str | None) -> None:
+    """``--workers`` and ``--scheduler`` together are refused: each names where blocks run."""
+    if workers and scheduler:
+        raise ValueError(f"--workers {workers} and --scheduler {scheduler}: give one, "
+                         "--workers for a local Dask cluster or --scheduler for a running "
+                         "one")
 
 
 class OnBad(StrEnum):

@@ -14,7 +14,7 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.option_types import SCENARIO_HELP, Scheduler, Workers, at_least
+from trackkit.cli.option_types import SCENARIO_HELP, Scheduler, Workers, at_least, one_executor
 from trackkit.cli.output import (
     OutputDir,
     default_dir,
@@ -136,10 +136,7 @@ def sweep(
     after an interruption and it resumes, with bit-identical results. A point's seed derives
     from the campaign seed and its values, so adding points leaves the others unchanged."""
     with user_errors() as state:
-        if workers and scheduler:
-            raise ValueError(f"--workers {workers} and --scheduler {scheduler}: give one, "
-                             "--workers for a local Dask cluster or --scheduler for a running "
-                             "one")
+        one_executor(workers, scheduler)
         sc = stages.load(scenario or stages.default_name())
         if stages.kind_of(sc) != "comparison":
             raise ValueError(f"{scenario}: trackkit sweep runs single-target Monte Carlo "

@@ -8,10 +8,12 @@ centralised reference and the centralised PCRLB of that run.
 
 **Runs.** Run r is ``run_network(seed, r, ...)`` with the scenario's agents, targets (drawn
 for run r when random: ``NetworkScenario.target_states``), schedule and settings; it depends
-on (seed, r) alone, so a result is the same whatever else runs, and runs go through a plain
-Python loop (each run is one multi-target problem whose agents execute one at a time).
-With ``agents="processes"`` a run is ``network.processes.run_network_processes`` instead
-(every agent its own OS process over ZeroMQ; the same numbers when the scenario has no loss).
+on (seed, r) alone, so a result is the same whatever else runs. Runs are stepped together
+in blocks of ``NETWORK_BLOCK`` (``network.inprocess.run_network_block``, bit for bit the runs
+one at a time); a block is one task of ``experiments.executors.execute``, in this process or
+on Dask workers (``workers``, ``scheduler``), and the blocks come back in run order. With
+``agents="processes"`` a run is ``network.processes.run_network_processes`` instead (every
+agent its own OS process over ZeroMQ; the same numbers when the scenario has no loss).
 
 **Time axis.** Every agent executes exactly once per period (``sim.sensor_network.schedule``), so
 execution e of every agent lies in slot e, ``[e P, (e + 1) P)``; series are indexed by e and
@@ -68,6 +70,7 @@ from trackkit.network.inprocess import (
 if TYPE_CHECKING:
     from trackkit.network.agents import AgentSettings
     from trackkit.network.processes import Deployment
+    from trackkit.scenario.network import NetworkScenario
 
 __all__ = ["NETWORK_BLOCK", "NetworkMonteCarlo", "RunScores", "run_bound", "run_network_mc",
            "score_run"]
@@ -376,10 +379,12 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
                    outages: Sequence[tuple[int, float, float | None]] = (),
                    deployment: Deployment | None = None,
                    block: int = NETWORK_BLOCK,
+                   workers: int | None = None,
+                   scheduler: str | None = None,
                    ) -> NetworkMonteCarlo:
     """Runs 0 .. runs-1 of a ``scenario.network.NetworkScenario`` (module docstring);
     ``runs``, ``seed``, ``steering`` and ``loss`` override the file's; ``progress(done,
-    runs)`` after every run; ``keep_example`` keeps run 0's ``NetworkResult`` for the
+    runs)`` after every block; ``keep_example`` keeps run 0's ``NetworkResult`` for the
     pictures. ``agents``: "inprocess" (``run_network``, the default) or "processes"
     (``network.processes.run_network_processes``: every agent its own OS process, talking
     over ZeroMQ; without loss, delay and outages the same results bit for bit, only slower),
@@ -388,60 +393,116 @@ def run_network_mc(scenario, runs: int | None = None, seed: int | None = None,
     ``network.processes.Deployment``: the address the environment binds, agents on other
     machines, CURVE: on by default off loopback). In process, ``block`` runs at a time step
     together (``network.inprocess.run_network_block``: the same results bit for bit as one
-    at a time, about half the time per run at 25); ``progress`` is then told after each
-    block, and each run's wall time is its share of its block's."""
+    at a time, about half the time per run at 25), and each run's wall time is its share of
+    its block's. ``workers`` (a local Dask cluster of that many processes) or ``scheduler``
+    (a running one's address) send every block to Dask as one task
+    (``experiments.executors.execute``); the blocks come back in run order, so the results
+    are the same bits whatever the executor and the number of workers."""
     if not (isinstance(block, int) and block >= 1):
         raise ValueError(f"block = {block!r}; expected an integer >= 1 (runs stepped together)")
+    if agents == "processes" and (workers or scheduler):
+        raise ValueError(f"agents = 'processes' with workers = {workers!r}, scheduler = "
+                         f"{scheduler!r}: Dask runs blocks of runs with every agent in the "
+                         "worker's process; expected agents='inprocess' with Dask")
+    job = _job(scenario, runs, seed, steering, keep_example, agents, loss, delay, outages,
+               deployment, block)
+    from trackkit.experiments.executors import execute
+
+    nblocks = -(-job.runs // job.size)
+    blocks = [b for chunk in execute(_run_block, job, [[b] for b in range(nblocks)],
+                                     lambda t: len(job.block_runs(t[0])), job.runs,
+                                     workers=workers, scheduler=scheduler, progress=progress)
+              for b in chunk]
+    example = next((b.example for b in blocks if b.example is not None), (None, None))
+    return _stacked(scenario, [s for b in blocks for s in b.scores], seed=job.seed,
+                    steering=job.options["steering"],
+                    recovered=np.array([r for b in blocks for r in b.recovered], float)
+                    .reshape(job.runs, len(outages)),
+                    wall=np.concatenate([b.wall for b in blocks]), loss=job.options["loss"],
+                    delay=float(delay), outages=tuple(outages), curve=blocks[-1].curve,
+                    refused=np.array([n for b in blocks for n in b.refused], np.int64),
+                    example=example[0], example_targets=example[1])
+
+
+@dataclass(frozen=True)
+class _Job:
+    """What every block of one network Monte Carlo needs (sent once to each Dask worker):
+    the scenario, the run count, the seed, the block size, the agents' initial states,
+    ``runner``'s keywords and the prior of the bound."""
+
+    scenario: NetworkScenario
+    runs: int
+    seed: int
+    size: int
+    states: Array
+    runner: Callable[..., NetworkResult]
+    options: dict
+    prior: Array
+    keep_example: bool
+
+    def block_runs(self, b: int) -> list[int]:
+        """The runs of block ``b``: fixed by the block size alone."""
+        return list(range(b * self.size, min(self.runs, (b + 1) * self.size)))
+
+
+@dataclass
+class _Block:
+    """One block's per-run scores, outage recoveries, refused peers and wall times; whether
+    CURVE secured it; run 0's result and targets when it holds run 0 and they are kept."""
+
+    scores: list[RunScores]
+    recovered: list[list[float]]
+    refused: list[int]
+    wall: Array
+    curve: bool
+    example: tuple[NetworkResult, Array] | None
+
+
+def _job(scenario, runs: int | None, seed: int | None, steering: bool | None,
+         keep_example: bool, agents: str, loss: float | None, delay: float,
+         outages: Sequence[tuple[int, float, float | None]], deployment: Deployment | None,
+         block: int) -> _Job:
+    """The checked run count, seed and options of ``run_network_mc``."""
     runner, extra = _runner(agents, delay, outages, deployment)
     runs = scenario.run.runs if runs is None else int(runs)
     seed = scenario.run.seed if seed is None else int(seed)
-    steer = scenario.settings.steering if steering is None else bool(steering)
     if runs < 1:
         raise ValueError(f"runs = {runs}; expected at least 1")
     if seed < 0:
         raise ValueError(f"seed = {seed}; expected an integer >= 0")
     net, rep = scenario.network, scenario.report
-    states = scenario.agent_states()
-    sigma, mr, cr = scenario.sigma_rad(), scenario.meas_range(), scenario.comm_range()
+    options = dict(duration=net.duration_s, period=net.period_s, sigma=scenario.sigma_rad(),
+                   mr=scenario.meas_range(), cr=scenario.comm_range(),
+                   max_delay=net.max_delay_s, q=net.q, settings=_agent_settings(scenario),
+                   steering=scenario.settings.steering if steering is None else bool(steering),
+                   central=scenario.run.central,
+                   loss=net.loss if loss is None else float(loss), **extra)
     prior = np.diag([rep.prior_pos_std_m**2] * 2 + [rep.prior_vel_std_mps**2] * 2)
-    p_loss = net.loss if loss is None else float(loss)
-    settings = _agent_settings(scenario)
-    per_run: list[RunScores] = []
-    wall: list[float] = []
-    recovered: list[list[float]] = []
-    refused: list[int] = []
-    secured = False
-    example = example_targets = None
-    options = dict(duration=net.duration_s, period=net.period_s, sigma=sigma, mr=mr, cr=cr,
-                   max_delay=net.max_delay_s, q=net.q, settings=settings, steering=steer,
-                   central=scenario.run.central, loss=p_loss, **extra)
-    size = block if runner is run_network else 1
-    for r0 in range(0, runs, size):
-        t0 = _time.perf_counter()
-        block_runs = list(range(r0, min(runs, r0 + size)))
-        targets = [scenario.target_states(seed, r) for r in block_runs]
-        if runner is run_network:
-            results = run_network_block(seed, block_runs, targets, states, **options)
-        else:
-            results = [runner(seed, r0, targets[0], states, **options)]
-        bounds = run_bound(results, sigma, mr, prior, net.q)
-        for r, tg, res, b in zip(block_runs, targets, results, bounds, strict=True):
-            per_run.append(score_run(res, sigma, mr, prior, net.q, rep.c_m, b))
-            recovered.append(list(getattr(res, "recovered", [])))
-            refused.append(getattr(res, "refused", 0))
-            secured = getattr(res, "curve", False)
-            if r == 0 and keep_example:
-                example, example_targets = res, tg
-        share = (_time.perf_counter() - t0) / len(block_runs)
-        wall.extend([share] * len(block_runs))
-        if progress is not None:
-            progress(block_runs[-1] + 1, runs)
-    return _stacked(scenario, per_run, seed=seed, steering=steer,
-                    recovered=np.array(recovered, float).reshape(runs, len(outages)),
-                    wall=np.array(wall), loss=p_loss, delay=float(delay),
-                    outages=tuple(outages), curve=secured,
-                    refused=np.array(refused, np.int64), example=example,
-                    example_targets=example_targets)
+    return _Job(scenario, runs, seed, block if runner is run_network else 1,
+                scenario.agent_states(), runner, options, prior, keep_example)
+
+
+def _run_block(job: _Job, task: list[int], report: Callable[[float], None] | None
+               ) -> list[_Block]:
+    """Block ``task[0]`` of ``job``: its runs (stepped together in process), their bounds
+    and their scores (one executor task; ``report`` unused: a block reports when done)."""
+    t0 = _time.perf_counter()
+    runs = job.block_runs(task[0])
+    sc, o = job.scenario, job.options
+    targets = [sc.target_states(job.seed, r) for r in runs]
+    if job.runner is run_network:
+        results = run_network_block(job.seed, runs, targets, job.states, **o)
+    else:
+        results = [job.runner(job.seed, runs[0], targets[0], job.states, **o)]
+    bounds = run_bound(results, o["sigma"], o["mr"], job.prior, o["q"])
+    scores = [score_run(res, o["sigma"], o["mr"], job.prior, o["q"], sc.report.c_m, b)
+              for res, b in zip(results, bounds, strict=True)]
+    keep = runs[0] == 0 and job.keep_example
+    share = (_time.perf_counter() - t0) / len(runs)
+    return [_Block(scores, [list(getattr(res, "recovered", [])) for res in results],
+                   [getattr(res, "refused", 0) for res in results],
+                   np.full(len(runs), share), getattr(results[-1], "curve", False),
+                   (results[0], targets[0]) if keep else None)]
 
 
 def _runner(agents: str, delay: float, outages: Sequence[tuple[int, float, float | None]],
