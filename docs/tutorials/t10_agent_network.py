@@ -26,6 +26,7 @@ the paper.
 # .. code-block:: bash
 #
 #    trackkit network net-baseline --runs 20
+#    trackkit network net-baseline --runs 100 --workers 2   # blocks of 25 runs on Dask
 #
 # The command calls :func:`trackkit.experiments.network_mc.run_network_mc`, which runs
 # :func:`trackkit.network.inprocess.run_network` for each run (each run is one multi-target
@@ -35,7 +36,10 @@ the paper.
 # with the same numbers bit for bit as one run at a time), beside the centralised reference
 # (:mod:`trackkit.network.central`: one EKF per target fed every bearing, with ideal
 # association) and the centralised PCRLB on the agents' actual, steered paths. The
-# scenario's default is 100 runs; here 2 runs, so the numbers below are noisy.
+# scenario's default is 100 runs; here 2 runs, so the numbers below are noisy. With
+# ``--workers`` or ``--scheduler`` (``workers=``, ``scheduler=``) each block of runs is one
+# task on a Dask cluster (:func:`trackkit.experiments.executors.execute`), the blocks gathered
+# in run order: the same bits as in this process.
 
 import matplotlib.pyplot as plt
 import numpy as np

@@ -163,3 +163,14 @@ def test_options_that_do_not_go_together_are_refused(in_process):
                       ">= 1")
     with pytest.raises(ValueError, match="agents = 'processes' with workers = 2"):
         run_network_mc(load_network("net-baseline"), runs=1, agents="processes", workers=2)
+
+
+def test_the_block_option_shows_the_library_default():
+    """``--block``'s shown default is the library's (the command does not import it)."""
+    import typing
+
+    from trackkit.cli.network import network
+
+    hint = typing.get_type_hints(network, include_extras=True)["block"]
+    option = next(m for m in hint.__metadata__ if hasattr(m, "show_default"))
+    assert option.show_default.startswith(f"{NETWORK_BLOCK}, ")

@@ -54,9 +54,9 @@ def network(
         "(for comparison with the steered agents).")] = False,
     agents: Annotated[AgentsMode, typer.Option(
         "--agents", help="inprocess: every agent in this process, or the Dask worker's "
-        "(fast); processes: every "
-        "agent its own operating-system process, talking over ZeroMQ on loopback (same "
-        "results without message loss, slower).")] = AgentsMode.inprocess,
+        "(fast); processes: every agent its own operating-system process, talking over "
+        "ZeroMQ on loopback (same results without message loss, slower).")]
+        = AgentsMode.inprocess,
     block: Annotated[int | None, typer.Option(
         "--block", callback=at_least(1), help="Runs stepped together in process, each block "
         "one Dask task (results are bit-identical for any block size).",
