@@ -89,6 +89,9 @@ CASES = {
                           after=set()),
     "workers-zero": Case(["run", "cv-position", "--workers", "0"], 2, ["--workers", ": 0;"],
                          after=set()),
+    "workers-and-scheduler": Case(["run", "cv-position", "--workers", "2", "--scheduler",
+                                   "tcp://h:1"], 2, ["--workers 2", "--scheduler tcp://h:1",
+                                                     "give one"], after=set()),
     "unknown-option": Case(["run", "--bogus"], 2, ["--bogus"], after=set()),
     # a run count whose per-run results cannot fit in memory: refused before any compute
     "runs-cannot-fit": Case(["run", "cv-position", "--runs", "1000000000000", "--out", "o"], 2,

@@ -15,7 +15,14 @@ from rich.text import Text
 
 from trackkit.cli import stages
 from trackkit.cli.entry import app
-from trackkit.cli.option_types import SCENARIO_HELP, Scheduler, Workers, at_least, positive_hours
+from trackkit.cli.option_types import (
+    SCENARIO_HELP,
+    Scheduler,
+    Workers,
+    at_least,
+    one_executor,
+    positive_hours,
+)
 from trackkit.cli.output import (
     OutputDir,
     default_dir,
@@ -66,6 +73,7 @@ def run(
     executor and any number of workers; another CPU agrees to rounding (see the README,
     "Determinism")."""
     with user_errors() as state:
+        one_executor(workers, scheduler)
         sc = stages.load(scenario or stages.default_name())
         runner = RUNNERS[stages.kind_of(sc)]
         if runner.command is not None:
