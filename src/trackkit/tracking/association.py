@@ -50,6 +50,8 @@ from trackkit.renamed import renamed_keywords
 from trackkit.tracking.gating import Gate
 
 __all__ = [
+    "BATCH_MAX_EVENTS",
+    "BATCH_MAX_TRACKS",
     "GNN_DENSE_MAX_CELLS",
     "JPDA_MAX_EVENTS",
     "Assignment",
@@ -81,6 +83,16 @@ GNN_DENSE_MAX_CELLS = 50_000
 #: more falls back to loopy belief propagation (Williams and Lau 2014). 2e4 events of a
 #: 10-track cluster take about 5 ms to enumerate
 JPDA_MAX_EVENTS = 20_000
+
+#: clusters of two or more and at most BATCH_MAX_TRACKS tracks whose joint events number at most
+#: BATCH_MAX_EVENTS are enumerated together, every cluster's events in one array, track slot
+#: by track slot (``_joint_events``); a larger cluster is solved on its own (GNN: one
+#: ``linear_sum_assignment``; JPDA: ``_enumerate``, or loopy belief propagation past
+#: ``max_events``). A scan of spread-out targets has thousands of clusters of 2 to 7 tracks
+#: and a few dozen events each: one at a time, their Python loop was a third of a JPDA scan at
+#: 10 000 targets (benchmarks/bench_scale.py)
+BATCH_MAX_TRACKS = 8
+BATCH_MAX_EVENTS = 2_000
 
 #: loopy belief propagation stops when no message changes by more than this (relative), or
 #: after LBP_MAX_ITER sweeps
@@ -359,7 +371,9 @@ def _segment_min(values: Array, seg: Index, n: int) -> Array:
 
 
 def _gnn_clusters(g: Gate, c: Array, miss: Array) -> Index:
-    """Per-cluster dense assignment; one-track clusters by a vectorised argmin."""
+    """Per-cluster least-cost assignment: one-track clusters by a vectorised argmin, the
+    clusters within ``BATCH_MAX_TRACKS`` and ``BATCH_MAX_EVENTS`` by their cheapest joint
+    event, all at once (``_gnn_batched``), and the rest one ``linear_sum_assignment`` each."""
     det = np.full(g.n_tracks, -1, dtype=np.intp)
     if g.size == 0:
         return det
@@ -370,20 +384,209 @@ def _gnn_clusters(g: Gate, c: Array, miss: Array) -> Index:
     first = order[np.r_[True, ts[order][1:] != ts[order][:-1]]] if ts.size else order
     win = cs[first] < miss[ts[first]]
     det[ts[first][win]] = ds[first][win]
-    # the rest, one cluster at a time: [pair costs | diag(miss)], nt x (nd + nt)
-    cm, lt, ld = c[lay.pairs], lay.local_track, lay.local_det
-    pb, tb, db = lay.p_bounds.tolist(), lay.t_bounds.tolist(), lay.d_bounds.tolist()
-    for k in range(len(pb) - 1):
-        p0, p1, t0, t1, d0, d1 = pb[k], pb[k + 1], tb[k], tb[k + 1], db[k], db[k + 1]
-        nt, nd = t1 - t0, d1 - d0
-        M = np.full((nt, nd + nt), np.inf)
-        M[lt[p0:p1], ld[p0:p1]] = cm[p0:p1]
-        tr = lay.tracks[t0:t1]
-        M[np.arange(nt), nd + np.arange(nt)] = miss[tr]
-        r, col = linear_sum_assignment(M)
-        hit = col < nd
-        det[tr[r[hit]]] = lay.dets[d0 + col[hit]]
+    cm = c[lay.pairs]
+    solved = _gnn_batched(lay, cm, miss, det)
+    for k in np.flatnonzero(~solved).tolist():
+        _gnn_cluster(lay, k, cm, miss, det)
     return det
+
+
+def _gnn_cluster(lay: _Layout, k: int, cm: Array, miss: Array, det: Index) -> None:
+    """Cluster k by one dense ``linear_sum_assignment`` on [pair costs | diag(miss)],
+    nt x (nd + nt); its tracks' detections written into ``det``."""
+    p0, p1 = lay.p_bounds[k], lay.p_bounds[k + 1]
+    t0, t1 = lay.t_bounds[k], lay.t_bounds[k + 1]
+    nt, nd = t1 - t0, lay.d_bounds[k + 1] - lay.d_bounds[k]
+    M = np.full((nt, nd + nt), np.inf)
+    M[lay.local_track[p0:p1], lay.local_det[p0:p1]] = cm[p0:p1]
+    tr = lay.tracks[t0:t1]
+    M[np.arange(nt), nd + np.arange(nt)] = miss[tr]
+    r, col = linear_sum_assignment(M)
+    hit = col < nd
+    det[tr[r[hit]]] = lay.dets[lay.d_bounds[k] + col[hit]]
+
+
+#: the cheapest joint event of a cluster is taken only when the next cheapest costs more by
+#: over this much per unit of the cluster's cost scale (sum over its tracks of the largest
+#: |cost|); closer, the two differ by rounding and ``linear_sum_assignment`` decides, as on
+#: the one-at-a-time path
+GNN_TIE = 1e-9
+
+
+def _gnn_batched(lay: _Layout, cm: Array, miss: Array, det: Index) -> NDArray[np.bool_]:
+    """The batched clusters' least-cost assignments, written into ``det``; returns which
+    clusters were solved (the others: too large, or a near tie).
+
+    An assignment of a cluster is a joint event (each track its miss or one of its
+    detections, no detection twice), costing ``sum_i miss_i + sum_(i,j) (c_ij - miss_i)``:
+    the least-cost one is ``linear_sum_assignment``'s optimum."""
+    K = lay.t_bounds.size - 1
+    pair_track = lay.tracks[_pair_slot(lay)]
+    ev = _joint_events(lay, cm - miss[pair_track], BATCH_MAX_EVENTS)
+    if ev.cluster.size == 0:
+        return ev.batched
+    start = np.searchsorted(ev.cluster, np.arange(K + 1))
+    counts = np.diff(start)
+    has = counts > 0
+    order = np.lexsort((ev.logw, ev.cluster))  # by cluster, cheapest first
+    best = order[start[:-1][has]]
+    second = np.full(K, np.inf)
+    many = has & (counts > 1)
+    second[many] = ev.logw[order[start[:-1][many] + 1]]
+    scale = np.zeros(K)
+    top = np.maximum(np.abs(miss[pair_track]), np.abs(cm))
+    track_top = np.zeros(lay.tracks.size)
+    np.maximum.at(track_top, _pair_slot(lay), top)
+    np.add.at(scale, np.repeat(np.arange(K), np.diff(lay.t_bounds)), track_top)
+    tie = np.zeros(K, dtype=bool)
+    tie[has] = second[has] - ev.logw[best] <= GNN_TIE * (1.0 + scale[has])
+    solved = ev.batched & ~tie
+    win = best[solved[ev.cluster[best]]]
+    k = ev.cluster[win]
+    slots = ev.det[win]  # (n, W) local detections, -1 a miss or no such slot
+    nt = np.diff(lay.t_bounds)[k]
+    i = np.arange(slots.shape[1])
+    sel = (i[None, :] < nt[:, None]) & (slots >= 0)
+    rows, cols = np.nonzero(sel)
+    det[lay.tracks[lay.t_bounds[k[rows]] + cols]] = lay.dets[lay.d_bounds[k[rows]]
+                                                             + slots[rows, cols]]
+    return solved
+
+
+# -- joint events, every cluster at once -----------------------------------------------------
+
+
+class _Events(NamedTuple):
+    """The joint events of the clusters ``batched``, grouped by cluster, each cluster's
+    in the order ``_enumerate`` builds them."""
+
+    cluster: Index  # (E,) each event's cluster, ascending
+    det: Index  # (E, W) each track slot's local detection, -1 a miss (and slots past nt)
+    logw: Array  # (E,) the sum of w over the event's detected tracks, in track order
+    batched: NDArray[np.bool_]  # (K,) the clusters enumerated here
+
+
+def _pair_slot(lay: _Layout) -> Index:
+    """Each layout pair's track's position in ``lay.tracks``."""
+    k_pair = np.repeat(np.arange(lay.t_bounds.size - 1), np.diff(lay.p_bounds))
+    return lay.t_bounds[k_pair] + lay.local_track
+
+
+def _joint_events(lay: _Layout, w: Array, cap: int) -> _Events:
+    """Every joint event of the clusters of at most ``BATCH_MAX_TRACKS`` tracks and ``cap``
+    events, with its weight ``sum w`` (w per layout pair), built as ``_enumerate`` builds one
+    cluster's: track slot by slot, each event so far kept (the slot's miss) and extended by
+    each of the slot's detections it has not used, the extensions after the events, in
+    (event, detection) order. The loop runs over the slots, vectorised over every event of
+    every cluster; a cluster whose events pass ``cap`` is dropped (``batched`` False)."""
+    nt = np.diff(lay.t_bounds)
+    batched = nt <= BATCH_MAX_TRACKS
+    slot = _pair_slot(lay)
+    n_opt = np.bincount(slot, minlength=lay.tracks.size)
+    first = np.cumsum(n_opt) - n_opt  # the layout pairs are grouped by track slot
+    cl = np.flatnonzero(batched)
+    W = int(nt[cl].max()) if cl.size else 0
+    ev = np.full((cl.size, W), -1, dtype=np.intp)
+    logw = np.zeros(cl.size)
+    for i in range(W):
+        act = np.flatnonzero(nt[cl] > i)
+        tp = lay.t_bounds[cl[act]] + i
+        cnt = n_opt[tp]
+        e = np.repeat(act, cnt)
+        o = np.arange(e.size) + np.repeat(first[tp] - (np.cumsum(cnt) - cnt), cnt)
+        d = lay.local_det[o]
+        free = ~np.any(ev[e, :i] == d[:, None], axis=1)
+        e, o = e[free], o[free]
+        ext = ev[e]
+        ext[:, i] = lay.local_det[o]
+        ext_cl = cl[e]
+        ext_w = logw[e] + w[o]
+        n = np.bincount(cl, minlength=nt.size) + np.bincount(ext_cl, minlength=nt.size)
+        over = n > cap
+        if over.any():
+            batched &= ~over
+            keep, keep_ext = ~over[cl], ~over[ext_cl]
+            ev, cl, logw = ev[keep], cl[keep], logw[keep]
+            ext, ext_cl, ext_w = ext[keep_ext], ext_cl[keep_ext], ext_w[keep_ext]
+        # each cluster's events so far, then its extensions
+        cl_all = np.concatenate([cl, ext_cl])
+        order = np.argsort(cl_all, kind="stable")
+        ev = np.concatenate([ev, ext])[order]
+        logw = np.concatenate([logw, ext_w])[order]
+        cl = cl_all[order]
+    return _Events(cl, ev, logw, batched)
+
+
+def _jpda_batched(lay: _Layout, lrm: Array, nd: Index, max_events: int, star: bool
+                  ) -> tuple[NDArray[np.bool_], Array, Array]:
+    """The exact marginals of the batched clusters, as ``_enumerate`` gives each: returns
+    (batched (K,), beta over the layout pairs, beta0 over the layout tracks), the last two
+    meaningful on the batched clusters only.
+
+    Each cluster's normalisation is the sum of its events' probabilities in its events'
+    order; clusters with equally many events are stacked and summed along rows (numpy sums a
+    row of a C-ordered stack as it sums the row alone), so every number is ``_enumerate``'s,
+    bit for bit."""
+    nt = np.diff(lay.t_bounds)
+    K = nt.size
+    ev = _joint_events(lay, lrm, min(BATCH_MAX_EVENTS, max_events))
+    cl, dets, logw = ev.cluster, ev.det, ev.logw
+    if cl.size == 0:
+        return ev.batched, np.zeros(lay.pairs.size), np.ones(lay.tracks.size)
+    width = nd + 1
+    boff = np.cumsum(nt * width) - nt * width  # each cluster's (nt, nd + 1) table in one array
+    W = dets.shape[1]
+    i = np.arange(W)
+    live = i[None, :] < nt[cl][:, None]
+    if star:
+        keep = _star_keep_batched(lay, lrm, cl, dets, boff, width)
+        cl, dets, logw, live = cl[keep], dets[keep], logw[keep], live[keep]
+    start = np.searchsorted(cl, np.arange(K + 1))
+    counts = np.diff(start)
+    has = counts > 0
+    mx = np.full(K, -np.inf)
+    mx[has] = np.maximum.reduceat(logw, start[:-1][has])
+    p = np.exp(logw - mx[cl])
+    total = np.zeros(K)
+    for E in np.unique(counts[has]).tolist():
+        rows = np.flatnonzero(counts == E)
+        total[rows] = p[start[rows][:, None] + np.arange(E)].sum(axis=1)
+    p /= total[cl]
+    flat = (boff[cl] + 1)[:, None] + i[None, :] * width[cl][:, None] + dets
+    B = np.bincount(flat[live], np.broadcast_to(p[:, None], live.shape)[live],
+                    minlength=int((nt * width).sum()))
+    k_pair = np.repeat(np.arange(K), np.diff(lay.p_bounds))
+    beta = B[boff[k_pair] + lay.local_track * width[k_pair] + lay.local_det + 1]
+    k_track = np.repeat(np.arange(K), nt)
+    local = np.arange(lay.tracks.size) - lay.t_bounds[k_track]
+    beta0 = B[boff[k_track] + local * width[k_track]]
+    return ev.batched, beta, beta0
+
+
+def _star_keep_batched(lay: _Layout, lrm: Array, cl: Index, dets: Index, boff: Index,
+                       width: Index) -> NDArray[np.bool_]:
+    """``_star_keep`` of every batched cluster at once: the events in which no two detected
+    tracks i < k (detections j, l) have a gated swap more likely,
+    ``lr_il + lr_kj > lr_ij + lr_kl``; a cluster that would keep none keeps all."""
+    nt = np.diff(lay.t_bounds)
+    K = nt.size
+    k_pair = np.repeat(np.arange(K), np.diff(lay.p_bounds))
+    L = np.full(int((nt * width).sum()), -np.inf)  # column 0: the miss, never swapped
+    L[boff[k_pair] + lay.local_track * width[k_pair] + lay.local_det + 1] = lrm
+    W = dets.shape[1]
+    a, b = np.triu_indices(W, 1)
+    base = boff[cl][:, None]
+    wd = width[cl][:, None]
+    j, m = dets[:, a] + 1, dets[:, b] + 1
+    both = (j > 0) & (m > 0)  # a slot past the cluster's tracks holds -1, a miss
+    Lam, Lbj = L[np.where(both, base + a * wd + m, 0)], L[np.where(both, base + b * wd + j, 0)]
+    Laj, Lbm = L[np.where(both, base + a * wd + j, 0)], L[np.where(both, base + b * wd + m, 0)]
+    with np.errstate(invalid="ignore"):
+        better = Lam + Lbj > Laj + Lbm
+    keep = ~np.any(both & better, axis=1)
+    # in exact arithmetic the most probable event has no better swap; guard against rounding
+    kept = np.bincount(cl[keep], minlength=K)
+    return keep | (kept[cl] == 0)
 
 
 # -- JPDA ------------------------------------------------------------------------------------
@@ -449,8 +652,13 @@ def jpda_probabilities(g: Gate, pd: float, clutter_density: float, p_gate: float
     beta0[has] = b0[has]
     lrm, lt, ld = lr[lay.pairs], lay.local_track, lay.local_det
     pb, tb, db = lay.p_bounds.tolist(), lay.t_bounds.tolist(), lay.d_bounds.tolist()
+    done, bb, bb0 = _jpda_batched(lay, lrm, np.diff(lay.d_bounds), max_events, star)
+    on_pair = np.repeat(done, np.diff(lay.p_bounds))
+    beta[lay.pairs[on_pair]] = bb[on_pair]
+    on_track = np.repeat(done, np.diff(lay.t_bounds))
+    beta0[lay.tracks[on_track]] = bb0[on_track]
     lbp_pairs = []
-    for k in range(len(pb) - 1):
+    for k in np.flatnonzero(~done).tolist():
         p0, p1, t0, t1 = pb[k], pb[k + 1], tb[k], tb[k + 1]
         B = _enumerate(lt[p0:p1], ld[p0:p1], lrm[p0:p1], t1 - t0, db[k + 1] - db[k],
                        max_events, star)
