@@ -421,7 +421,8 @@ def _gnn_batched(lay: _Layout, cm: Array, miss: Array, det: Index) -> NDArray[np
     detections, no detection twice), costing ``sum_i miss_i + sum_(i,j) (c_ij - miss_i)``:
     the least-cost one is ``linear_sum_assignment``'s optimum."""
     K = lay.t_bounds.size - 1
-    pair_track = lay.tracks[_pair_slot(lay)]
+    slot = _pair_slot(lay)
+    pair_track = lay.tracks[slot]
     ev = _joint_events(lay, cm - miss[pair_track], BATCH_MAX_EVENTS)
     if ev.cluster.size == 0:
         return ev.batched
@@ -433,11 +434,10 @@ def _gnn_batched(lay: _Layout, cm: Array, miss: Array, det: Index) -> NDArray[np
     second = np.full(K, np.inf)
     many = has & (counts > 1)
     second[many] = ev.logw[order[start[:-1][many] + 1]]
-    scale = np.zeros(K)
+    # every track of a cluster of two or more has a pair, and the pairs are grouped by track
     top = np.maximum(np.abs(miss[pair_track]), np.abs(cm))
-    track_top = np.zeros(lay.tracks.size)
-    np.maximum.at(track_top, _pair_slot(lay), top)
-    np.add.at(scale, np.repeat(np.arange(K), np.diff(lay.t_bounds)), track_top)
+    track_top = np.maximum.reduceat(top, np.flatnonzero(np.r_[True, slot[1:] != slot[:-1]]))
+    scale = np.add.reduceat(track_top, lay.t_bounds[:-1])
     tie = np.zeros(K, dtype=bool)
     tie[has] = second[has] - ev.logw[best] <= GNN_TIE * (1.0 + scale[has])
     solved = ev.batched & ~tie
