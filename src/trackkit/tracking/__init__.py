@@ -17,6 +17,8 @@ Typical use::
 """
 
 from trackkit.tracking.association import (
+    BATCH_MAX_EVENTS,
+    BATCH_MAX_TRACKS,
     GNN_DENSE_MAX_CELLS,
     JPDA_MAX_EVENTS,
     Assignment,
@@ -76,6 +78,7 @@ from trackkit.tracking.tracker import (
 )
 
 __all__ = [
+    "BATCH_MAX_EVENTS", "BATCH_MAX_TRACKS",
     "GNN_DENSE_MAX_CELLS", "JPDA_MAX_EVENTS", "Assignment", "Clusters", "Costs", "JPDAResult",
     "clusters",
     "distance_costs", "gnn_assign", "jpda_probabilities", "loglik_costs",

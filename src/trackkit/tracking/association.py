@@ -284,11 +284,14 @@ def gnn_assign(g: Gate, costs: Costs,
     """Least-cost assignment of gated pairs, each track taking one detection or its miss.
 
     With rows = tracks and columns = detections plus one miss column per track (the miss
-    block diagonal), minimise ``sum_i c_i,col(i)``. ``method="clusters"`` solves each
-    cluster of two or more tracks with a dense ``linear_sum_assignment`` and the tracks alone
-    in their cluster by one vectorised argmin; ``"sparse"`` solves the whole scan as one
-    sparse problem (scipy's LAPJVsp, ``min_weight_full_bipartite_matching``); ``"dense"``
-    solves the whole scan as one dense problem. All give the optimum. ``"auto"``, the
+    block diagonal), minimise ``sum_i c_i,col(i)``. ``method="clusters"`` solves the tracks
+    alone in their cluster by one vectorised argmin, the small clusters (``BATCH_MAX_TRACKS``,
+    ``BATCH_MAX_EVENTS``) by their cheapest joint event, all at once, and each other cluster
+    with a dense ``linear_sum_assignment`` (as it does a small cluster whose two cheapest
+    events tie to within rounding, so the result is always the per-cluster solver's);
+    ``"sparse"`` solves the whole scan as one sparse problem (scipy's LAPJVsp,
+    ``min_weight_full_bipartite_matching``); ``"dense"`` solves the whole scan as one dense
+    problem. All give the optimum. ``"auto"``, the
     default, takes "dense" up to ``GNN_DENSE_MAX_CELLS`` cells, where the cluster search's
     fixed cost dominates, and "clusters" above, where the per-cluster cost grows linearly with
     the clusters (benchmarks/bench_association.py).
@@ -624,9 +627,10 @@ def jpda_probabilities(g: Gate, pd: float, clutter_density: float, p_gate: float
         \beta_{i0} = \frac{\sum_{\theta:\, i \text{ missed}} w(\theta)}{\sum_\theta w(\theta)}
 
     Events are enumerated exactly within each cluster (a track alone in its cluster in closed
-    form, the PDA); a cluster with more than ``max_events`` events falls back to loopy belief
-    propagation (Williams and Lau 2014, exact on clusters without cycles), reported in
-    ``approximated``.
+    form, the PDA; the clusters within ``BATCH_MAX_TRACKS`` and ``BATCH_MAX_EVENTS`` all in one
+    array, with the same numbers bit for bit); a cluster with more than ``max_events`` events
+    falls back to loopy belief propagation (Williams and Lau 2014, exact on clusters without
+    cycles), reported in ``approximated``.
 
     ``star=True`` is JPDA* (Blom and Bloem 2000), against track coalescence: the exact
     enumeration drops every event theta in which two tracks i, k take detections j, l while
