@@ -3,10 +3,11 @@ numbers in the same order as ``Generator.standard_normal`` at a third of its cos
 systematic resampling's ancestors in one pass per row.
 
 A particle filter's floor under numpy is its random numbers: ``Generator.standard_normal``
-fills an array at about 10 ns a draw on a 2-core AMD EPYC, and a 4-state prediction draws
-four per particle (38 of a position step's 101 ns per particle, ``benchmarks/RESULTS.md``).
-numba compiles NumPy's own ziggurat against the same bit generator (it reads and advances the
-generator's state through its C interface) at 3.5 ns a draw there. The numbers are numpy's,
+fills an array at about 10 ns a draw (on a 2-core Intel Xeon and a 2-core AMD EPYC alike),
+and a 4-state prediction draws four per particle (38 of a position step's 101 ns per particle
+on the EPYC, ``benchmarks/RESULTS.md``). numba compiles NumPy's own ziggurat against the same
+bit generator (it reads and advances the generator's state through its C interface) at 3.2-3.5
+ns a draw on the Xeon. The numbers are numpy's,
 bit for bit, and the generator is left where numpy would leave it, so a run's random stream
 and every result drawn from it are unchanged. The textbook form is ``rng.standard_normal``
 itself; :func:`standard_normals` takes over from :data:`COMPILED_DRAWS` draws, below which
