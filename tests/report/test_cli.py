@@ -106,16 +106,20 @@ def test_help_shows_the_defaults(command, defaults):
     assert res.output.count("[default:") >= len(defaults)
 
 
-def test_run_writes_everything(fake, tmp_path):
+@pytest.mark.parametrize("executor, workers, scheduler", [
+    (["--workers", "2"], 2, None),
+    (["--scheduler", "tcp://h:8786"], None, "tcp://h:8786"),
+])
+def test_run_writes_everything(fake, tmp_path, executor, workers, scheduler):
     out = tmp_path / "out"
     res = runner.invoke(cli.app, ["run", "other", "--runs", "4", "--seed", "3", "--out",
-                                  str(out), "--workers", "2", "--scheduler", "tcp://h:8786",
+                                  str(out), *executor,
                                   "--max-hours", "2"], env=WIDE)  # the path fits one line
     assert res.exit_code == 0, res.output
     assert fake.load == ["other"]
     (kwargs,) = fake.run
     assert {k: v for k, v in kwargs.items() if "progress" not in k} == {
-        "runs": 4, "seed": 3, "workers": 2, "scheduler": "tcp://h:8786",
+        "runs": 4, "seed": 3, "workers": workers, "scheduler": scheduler,
         "max_seconds": 7200.0}
     assert {p.name for p in out.iterdir()} == ALL_FILES | {"manifest.json"}
     doc = json.loads((out / "results.json").read_text())
