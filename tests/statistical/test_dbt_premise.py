@@ -39,7 +39,7 @@ def _run(name):
     d = s.model_dump()
     d["run"]["block"] = BLOCK  # ten blocks of ten runs: the jackknife's batches
     s = S.parse(d, name)
-    parts = run_blocks(s, list(range(s.run.runs // BLOCK)))
+    parts = run_blocks(s, list(range(s.run.runs // BLOCK)), together=True)  # one pass
     return combine(s, parts), parts
 
 

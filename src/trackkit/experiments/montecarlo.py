@@ -168,14 +168,18 @@ class BlockResult:
 
 
 class _StepWindow:
-    """A filter's estimates and innovations over a window of consecutive steps of a block,
+    """A filter's estimates and innovations over a window of consecutive steps of a batch,
     handed to ``MonteCarloMetrics.add_steps`` at once (``metrics.WINDOW_ROWS`` run-steps: one
-    numpy pass per quantity over the window instead of one per step). The windows depend on
+    numpy pass per quantity over the window instead of one per step), each block's runs
+    (``parts``: accumulator and rows) to its own accumulator. A window holds as many steps as
+    ``WINDOW_ROWS`` run-steps of the largest block, whatever the batch: the windows depend on
     the block size and the steps alone, so the sums are the same bits on any executor."""
 
-    def __init__(self, acc: MonteCarloMetrics, plan: Plan, truth: Array, groups: dict) -> None:
-        self.acc, self.plan, self.truth, self.groups = acc, plan, truth, groups
-        self.size = max(1, _metrics.WINDOW_ROWS // max(truth.shape[1], 1))
+    def __init__(self, parts: list[tuple[MonteCarloMetrics, slice]], plan: Plan, truth: Array,
+                 groups: dict) -> None:
+        self.parts, self.plan, self.truth, self.groups = parts, plan, truth, groups
+        runs = max(len(range(truth.shape[1])[rows]) for _, rows in parts)
+        self.size = max(1, _metrics.WINDOW_ROWS // max(runs, 1))
         self.k0, self.used = 0, 0
         self.buffers: list[Array] | None = None
 
@@ -214,8 +218,13 @@ class _StepWindow:
             saved = bearing.origin
             bearing.origin = self.plan.observer_states[0, k0 + 1:k0 + u + 1, None, :2]
         try:
-            self.acc.add_steps(k0, self.truth[k0 + 1:k0 + u + 1], Gaussian._make(b[:2]),
-                               Innovation(*b[2:]) if len(b) == 4 else None)
+            truth = self.truth[k0 + 1:k0 + u + 1]
+            # the means and innovations have a run axis; a covariance shared by the runs not
+            per_run = [True, b[1].ndim == 4, True, len(b) == 4 and b[3].ndim == 4]
+            for acc, rows in self.parts:
+                x = [a[:, rows] if r else a for a, r in zip(b, per_run)]  # noqa: B905
+                acc.add_steps(k0, truth[:, rows], Gaussian._make(x[:2]),
+                              Innovation(*x[2:]) if len(x) == 4 else None)
         finally:
             if bearing is not None:
                 bearing.origin = saved
@@ -261,13 +270,53 @@ def run_block(scenario: Scenario, block: int,
               progress: Callable[[float], None] | None = None) -> BlockResult:
     """Simulate, filter and evaluate block ``block`` of the scenario's runs; ``progress`` is
     told the fraction of the block done, after every ``PROGRESS_STEPS`` steps of a filter."""
-    plan = plan_of(scenario)
-    s = plan.scenario
+    return _run_batch(scenario, [block], progress)[0]
+
+
+def _span(s: Scenario, block: int) -> tuple[int, int]:
     r0 = block * s.run.block
     r1 = min(s.run.runs, r0 + s.run.block)
     if not 0 <= r0 < r1:
         raise ValueError(f"block {block} is outside the {s.run.runs} runs")
-    data = simulate_block(plan, r0, r1)
+    return r0, r1
+
+
+def _check_together(plan: Plan) -> None:
+    """Blocks filtered as one batch must give each block's own runs: refused where a block's
+    result depends on more than its runs' truths and measurements (``report.matching`` is
+    refused before the plan is compiled)."""
+    for name, f in zip(plan.filter_names, plan.filters, strict=True):
+        if getattr(f, "stochastic", False):
+            raise ValueError(f"filter {name!r} draws from its block's own generator "
+                             "(filter_rng): its blocks cannot be filtered together")
+
+
+def _joined(datas: list[BlockData]) -> BlockData:
+    if len(datas) == 1:
+        return datas[0]
+    return BlockData(np.concatenate([d.truth for d in datas], axis=1),
+                     np.concatenate([d.z for d in datas], axis=1),
+                     np.concatenate([d.prior_offset for d in datas], axis=0))
+
+
+def _run_batch(scenario: Scenario, blocks: list[int],
+               progress: Callable[[float], None] | None = None) -> list[BlockResult]:
+    """Blocks ``blocks``, each simulated on its own (its runs' data are the bits of
+    ``run_block``), filtered as one batch of their runs, each evaluated on its own runs."""
+    if len(blocks) > 1 and scenario.report.matching:
+        raise ValueError("report.matching scores each block's runs on their own: its blocks "
+                         "cannot be filtered together")
+    plan = plan_of(scenario)
+    s = plan.scenario
+    spans = [_span(s, b) for b in blocks]
+    if len(blocks) > 1:
+        _check_together(plan)
+    datas = [simulate_block(plan, r0, r1) for r0, r1 in spans]
+    data = _joined(datas)
+    edges = np.cumsum([0] + [r1 - r0 for r0, r1 in spans])
+    rows = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)] \
+        if len(blocks) > 1 else [slice(None)]
+    B = int(edges[-1])
     T, n, d = plan.steps, plan.n, plan.dim
     if plan.gap_mask is not None:
         data.z[plan.gap_mask] = np.nan  # the radar saw nothing: every filter's data alike
@@ -276,34 +325,42 @@ def run_block(scenario: Scenario, block: int,
     angular = None
     if s.report.angle_states:
         angular = tuple(j in s.report.angle_states for j in range(n))
-    metrics, seconds = {}, {}
-    example = None
-    keep = r0 == 0
-    ga_start = _ga_start(plan, data, r0, r1) if s.prior.initialiser == "ga" else None
+    P = len(blocks)
+    metrics: list[dict] = [{} for _ in blocks]
+    seconds: list[dict] = [{} for _ in blocks]
+    gaps: list[dict] = [{} for _ in blocks]
+    classes: list[dict] = [{} for _ in blocks]
+    keep = spans[0][0] == 0  # run 0's example, the first row of the batch
+    ga_start = None
+    if s.prior.initialiser == "ga":  # each block's GA on its own runs and generators
+        starts = [_ga_start(plan, dj, r0, r1) for dj, (r0, r1) in zip(datas, spans,
+                                                                        strict=True)]
+        ga_start = Gaussian(np.concatenate([g.mean for g in starts]),
+                            np.concatenate([g.cov for g in starts]))
     est_hist: dict[str, tuple[Array, Array]] = {}
     matching = {} if s.report.matching else None
     logs = {}
-    gaps: dict[str, dict] = {}
     pseudo_hist: dict[str, Array] = {}
-    classes: dict[str, dict] = {}
     m = plan.sensors[0].dim_z
     for i, (name, f, motion, (mean0, P0)) in enumerate(zip(
             plan.filter_names, plan.filters, plan.filter_motions, plan.priors, strict=True)):
-        acc = MonteCarloMetrics(groups=groups, angular=angular)
-        window = _StepWindow(acc, plan, data.truth, groups)
-        match = None if matching is None else MatchingMetrics(r1 - r0, n, m, T, log=keep)
+        accs = [MonteCarloMetrics(groups=groups, angular=angular) for _ in blocks]
+        window = _StepWindow(list(zip(accs, rows, strict=True)), plan, data.truth, groups)
+        match = None if matching is None else MatchingMetrics(B, n, m, T, log=keep)
         if ga_start is not None:  # every filter from the same GA estimate (the paper's)
             prior = Gaussian(ga_start.mean.copy(), ga_start.cov.copy())
         else:
             prior = data.prior(P0, mean0)
-        b = f.init(prior, rng=filter_rng(s.run.seed, block, i)) if getattr(
+        b = f.init(prior, rng=filter_rng(s.run.seed, blocks[0], i)) if getattr(
             f, "stochastic", False) else f.init(prior)
         elapsed = 0.0
         handler = plan.gap_handlers[i] if plan.gap_handlers else None
-        gap = _GapAccumulator(groups, gap_windows, r1 - r0, T, handler is not None, angular)
+        sizes = [(r1 - r0, r) for (r0, r1), r in zip(spans, rows, strict=True)]
+        gap = [_GapAccumulator(groups, gap_windows, runs, T, handler is not None, angular, r)
+               for runs, r in sizes]
         names = getattr(f, "class_names", None)
-        cls = None if names is None else _ClassAccumulator(names, s.report.true_class, r1 - r0,
-                                                           T)
+        cls = None if names is None else [
+            _ClassAccumulator(names, s.report.true_class, runs, T, r) for runs, r in sizes]
         if keep:
             hm, hP = np.empty((T, n)), np.empty((T, n, n))
             hz = np.full((T, m), np.nan)
@@ -318,9 +375,11 @@ def run_block(scenario: Scenario, block: int,
             window.add(k, g, innov)
             if "bearing" in groups:
                 groups["bearing"].origin = plan.observer_states[0, k + 1, :2]
-            gap.add(k, data.truth[k + 1], g.mean, b)
+            for part in gap:
+                part.add(k, data.truth[k + 1], g.mean, b)
             if cls is not None:
-                cls.add(k, b.class_prob)  # the classifier's own belief (class_names above)
+                for part in cls:
+                    part.add(k, b.class_prob)  # the classifier's own belief (class_names)
             if keep and handler is not None:
                 hz[k] = b.z_pseudo[0]
             if match is not None:
@@ -330,11 +389,13 @@ def run_block(scenario: Scenario, block: int,
             if progress is not None and (k + 1) % PROGRESS_STEPS == 0:
                 progress((i + (k + 1) / T) / len(plan.filters))
         window.flush()  # the last steps
-        acc.flush()  # their batch totals into the exact sums, before the block is kept or sent
-        metrics[name], seconds[name] = acc, elapsed
-        gaps[name] = gap.result(handler)
-        if cls is not None:
-            classes[name] = cls.result()
+        for j in range(P):
+            accs[j].flush()  # the batch totals into the exact sums, before a block is sent
+            metrics[j][name] = accs[j]
+            seconds[j][name] = elapsed * (spans[j][1] - spans[j][0]) / B  # its runs' share
+            gaps[j][name] = gap[j].result(handler)
+            if cls is not None:
+                classes[j][name] = cls[j].result()
         if keep and handler is not None:
             pseudo_hist[name] = hz
         if match is not None:
@@ -345,7 +406,7 @@ def run_block(scenario: Scenario, block: int,
             est_hist[name] = (hm, hP)
         if progress is not None:
             progress((i + 1) / len(plan.filters))
-    info, grads = _pcrlb_ingredients(plan, data.truth, groups)
+    example = None
     if keep:
         example = Example(times=plan.times[1:], truth=data.truth[1:, 0],
                           observer=plan.observer_states[0, 1:, :d], estimates=est_hist,
@@ -354,8 +415,13 @@ def run_block(scenario: Scenario, block: int,
     if matching is not None:
         z_true = np.stack([plan.sensors[k].h(data.truth[k + 1]) for k in range(T)])
         j1 = measurement_noise_rms(data.z, z_true, plan.sensors[0])
-    return BlockResult(block, r1 - r0, metrics, seconds, info, grads, example, matching, j1,
-                       gaps, classes)
+    out = []
+    for j, (block, r) in enumerate(zip(blocks, rows, strict=True)):
+        info, grads = _pcrlb_ingredients(plan, data.truth[:, r], groups)
+        out.append(BlockResult(block, spans[j][1] - spans[j][0], metrics[j], seconds[j], info,
+                               grads, example if j == 0 else None, matching, j1, gaps[j],
+                               classes[j]))
+    return out
 
 
 def ga_rng(seed: int, run: int) -> np.random.Generator:
@@ -426,11 +492,13 @@ def _gap_windows(plan: Plan) -> tuple[Array, Array] | None:
 class _GapAccumulator:
     """Per-run sums of squared errors per group over the gap steps and the steps after
     them, and the runs fed a pseudo-measurement at each step. Each run's sums add its own
-    steps in time order, so they do not depend on how runs are split into blocks."""
+    steps in time order, so they do not depend on how runs are split into blocks. ``rows``:
+    the block's runs in the batch it was filtered in."""
 
     def __init__(self, groups: dict, windows: tuple[Array, Array] | None, runs: int,
-                 steps: int, handler: bool, angular: tuple[bool, ...] | None) -> None:
-        self.groups, self.handler = groups, handler
+                 steps: int, handler: bool, angular: tuple[bool, ...] | None,
+                 rows: slice = slice(None)) -> None:
+        self.groups, self.handler, self.rows = groups, handler, rows
         self.angular = None if angular is None else np.asarray(angular)
         self.where = np.zeros(steps, np.int8)  # 1: gap, 2: after
         if windows is not None:
@@ -441,11 +509,12 @@ class _GapAccumulator:
 
     def add(self, k: int, truth: Array, mean: Array, belief) -> None:
         if self.handler:
-            self.pseudo[k] = int(np.count_nonzero(belief.pseudo))
+            self.pseudo[k] = int(np.count_nonzero(np.asarray(belief.pseudo)[self.rows]))
         w = self.where[k]
         if not w:
             return
         sse = self.sse[w - 1]
+        truth, mean = truth[self.rows], mean[self.rows]
         e_all = truth - mean
         if self.angular is not None:  # as MonteCarloMetrics wraps them
             e_all = np.where(self.angular, wrap(e_all), e_all)
@@ -466,18 +535,18 @@ class _ClassAccumulator:
     """The class probabilities of a filter that classifies (its belief's ``class_prob``,
     ``(runs, C)`` per step): their sum over runs per step, each run's last ones and, when the
     scenario names the true class, each run's probability of it at every step (for its
-    percentiles over runs)."""
+    percentiles over runs). ``rows``: the block's runs in the batch it was filtered in."""
 
     def __init__(self, names: tuple[str, ...], true_class: str | None, runs: int,
-                 steps: int) -> None:
-        self.names = tuple(names)
+                 steps: int, rows: slice = slice(None)) -> None:
+        self.names, self.rows = tuple(names), rows
         self.true = self.names.index(true_class) if true_class in self.names else None
         self.sum = np.zeros((steps, len(self.names)))
         self.history = None if self.true is None else np.empty((runs, steps))
         self.final = np.full((runs, len(self.names)), np.nan)
 
     def add(self, k: int, prob: Array) -> None:
-        p = np.asarray(prob, dtype=float).reshape(-1, len(self.names))
+        p = np.asarray(prob, dtype=float).reshape(-1, len(self.names))[self.rows]
         self.sum[k] = p.sum(0)
         self.final = p
         if self.history is not None:
@@ -489,8 +558,24 @@ class _ClassAccumulator:
 
 
 def run_blocks(scenario: Scenario, blocks: list[int],
-               progress: Callable[[float], None] | None = None) -> list[BlockResult]:
-    """A chunk of blocks (one executor task); ``progress`` is told the runs done in it."""
+               progress: Callable[[float], None] | None = None, *,
+               together: bool = False) -> list[BlockResult]:
+    """A chunk of blocks (one executor task); ``progress`` is told the runs done in it.
+
+    ``together``: the blocks' runs filtered as one batch, one pass over the steps instead of
+    one per block (small blocks, the batches of a batch-means or jackknife error, cost what
+    one large block costs), each block still simulated and evaluated on its own runs. Every
+    block's truths, measurements and priors are the bits of ``run_block``; its estimates and
+    statistics agree with ``run_block``'s to the rounding a run's place in a batch changes
+    (numpy's SIMD loops round a loop's body and its tail apart, and a filter's recursion
+    carries that on: within 1e-8 relative, tests/experiments/test_blocks_together.py), and
+    its ``seconds`` are the batch's time shared by runs. Refused for a stochastic filter (it draws
+    from its block's generator) and for ``report.matching``.
+    """
+    if together:
+        runs = sum(_span(scenario, b)[1] - _span(scenario, b)[0] for b in blocks)
+        tell = None if progress is None else (lambda f: progress(f * runs))
+        return _run_batch(scenario, list(blocks), tell)
     size = scenario.run.block
     out = []
     for b in blocks:
