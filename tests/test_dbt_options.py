@@ -119,7 +119,7 @@ def test_ga_start_is_the_ga_position_the_velocity_guess_and_the_first_frequency(
                                                                        6.0, 4.0]})
     plan = mc.plan_of(s)
     data = simulate_block(plan, 0, 4)
-    g = mc._ga_start(plan, data, 0, 4)
+    g = mc._ga_start(plan, data, [0, 1, 2, 3])
     assert g.mean.shape == (4, 5) and g.cov.shape == (4, 5, 5)
     np.testing.assert_array_equal(g.mean[:, 2:4], np.broadcast_to([1.0, -2.0], (4, 2)))
     np.testing.assert_array_equal(g.mean[:, 4], data.z[0, :, 1])  # the first measured tone
@@ -132,8 +132,8 @@ def test_ga_start_is_the_ga_position_the_velocity_guess_and_the_first_frequency(
 def test_a_runs_ga_start_does_not_depend_on_its_block():
     s = _dbt(ga=SMALL_GA)
     plan = mc.plan_of(s)
-    whole = mc._ga_start(plan, simulate_block(plan, 0, 4), 0, 4)
-    halves = [mc._ga_start(plan, simulate_block(plan, r, r + 2), r, r + 2) for r in (0, 2)]
+    whole = mc._ga_start(plan, simulate_block(plan, 0, 4), [0, 1, 2, 3])
+    halves = [mc._ga_start(plan, simulate_block(plan, r, r + 2), [r, r + 1]) for r in (0, 2)]
     # each run's GA draws from its own generator (seed, run): only the batch's rounding
     # could differ, and it does not here
     np.testing.assert_allclose(np.concatenate([h.mean for h in halves]), whole.mean,

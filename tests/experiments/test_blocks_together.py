@@ -112,7 +112,8 @@ def test_gap_handlers_score_each_blocks_runs():
 
 
 def test_the_ga_start_is_each_blocks_own():
-    # the GA searches each block's runs with each run's generator, as block by block
+    # the GA searches all the runs at once, each with its own generator: each block gets the
+    # start it gets alone
     s = _scenario("dbt-approaching", runs=2, block=1, duration=900.0, initialiser="ga")
     alone = [run_block(s, b) for b in range(2)]
     together = run_blocks(s, [0, 1], together=True)

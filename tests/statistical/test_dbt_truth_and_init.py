@@ -115,8 +115,8 @@ def starts():
     found = {}
     original = mc._ga_start
 
-    def keep(plan, data, r0, r1):
-        g = original(plan, data, r0, r1)
+    def keep(plan, data, runs):
+        g = original(plan, data, runs)
         found.setdefault(plan.scenario.name, []).append(g.mean[:, :2] - data.truth[0][:, :2])
         return g
 

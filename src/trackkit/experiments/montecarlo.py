@@ -332,11 +332,8 @@ def _run_batch(scenario: Scenario, blocks: list[int],
     classes: list[dict] = [{} for _ in blocks]
     keep = spans[0][0] == 0  # run 0's example, the first row of the batch
     ga_start = None
-    if s.prior.initialiser == "ga":  # each block's GA on its own runs and generators
-        starts = [_ga_start(plan, dj, r0, r1) for dj, (r0, r1) in zip(datas, spans,
-                                                                        strict=True)]
-        ga_start = Gaussian(np.concatenate([g.mean for g in starts]),
-                            np.concatenate([g.cov for g in starts]))
+    if s.prior.initialiser == "ga":  # each run's GA with the run's own generator
+        ga_start = _ga_start(plan, data, [r for r0, r1 in spans for r in range(r0, r1)])
     est_hist: dict[str, tuple[Array, Array]] = {}
     matching = {} if s.report.matching else None
     logs = {}
@@ -431,8 +428,9 @@ def ga_rng(seed: int, run: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([seed, 0x67615F69, run]))
 
 
-def _ga_start(plan: Plan, data: BlockData, r0: int, r1: int) -> Gaussian:
-    """Every run's GA start (``prior.initialiser = "ga"``): the position the GA finds from
+def _ga_start(plan: Plan, data: BlockData, runs: list[int]) -> Gaussian:
+    """Every run's GA start (``prior.initialiser = "ga"``; ``runs``: the runs of ``data``,
+    whose generators it draws from): the position the GA finds from
     the first K measurements (``trackkit.filters.initialise.ga_initial_position``, the
     auxiliary filter predicting with the first filter's motion), the velocity guess and the
     run's first measured frequency, with ``P0 = diag(prior.ga.std^2)``; at the prior time.
@@ -452,15 +450,15 @@ def _ga_start(plan: Plan, data: BlockData, r0: int, r1: int) -> Gaussian:
     freq = z[..., 1]
     seen = ~np.isnan(freq)
     if not seen.any(0).all():
-        lost = int(np.flatnonzero(~seen.any(0))[0]) + r0
+        lost = runs[int(np.flatnonzero(~seen.any(0))[0])]
         raise ValueError(f"run {lost} has no frequency measurement among the first "
                          f"prior.ga.measurements = {K}; the GA initialiser needs one (its f0 "
                          "guess): expected more measurements or a higher p_detect")
-    f0 = freq[np.argmax(seen, axis=0), np.arange(r1 - r0)]
+    f0 = freq[np.argmax(seen, axis=0), np.arange(len(runs))]
     v0 = np.asarray(ga.velocity_guess_mps, dtype=float)
     result = ga_initial_position(
         z, plan.sensors[:K], plan.filter_motions[0], plan.dt,
-        rngs=[ga_rng(s.run.seed, r) for r in range(r0, r1)], velocity_guess=v0,
+        rngs=[ga_rng(s.run.seed, r) for r in runs], velocity_guess=v0,
         f0_guess=f0, cov=np.diag(np.square(ga.aux_std)), max_range=ga.max_range_m,
         ga=GA(ga.population, ga.generations, ga.crossover, ga.mutation), cost=ga.cost,
         block=ga.block)
