@@ -50,6 +50,7 @@ from trackkit.filters.base import (
 from trackkit.filters.imm import combine, mixture_innovation
 from trackkit.filters.kalman import EKF, condition, jacobian_predict
 from trackkit.filters.particle import PF, resample_rows
+from trackkit.filters.particle_fast import standard_normals
 from trackkit.linalg import gaussian_loglik, mm, mmT, psd_factor, solve_psd, symmetrize
 from trackkit.models.motion import ConstantVelocity
 from trackkit.models.protocols import MotionModel, SensorModel
@@ -794,7 +795,7 @@ def conditioned_on_bearing(x: Array, P: Array, origin: Array, beta: Array, sigma
     from scipy.special import log_ndtr, ndtr, ndtri
 
     batch, n, N = x.shape[:-1], x.shape[-1], n_particles
-    b = beta[..., None] + sigma[..., None] * rng.standard_normal(batch + (N,))
+    b = beta[..., None] + sigma[..., None] * standard_normals(rng, batch + (N,))
     u = np.stack([np.sin(b), np.cos(b)], -1)  # (..., N, 2)
     Lam = np.linalg.inv(P[..., :2, :2])
     d = x[..., :2] - origin
@@ -812,7 +813,7 @@ def conditioned_on_bearing(x: Array, P: Array, origin: Array, beta: Array, sigma
         G = P[..., 2:, :2] @ Lam  # P_vp Lambda
         Xv = x[..., None, 2:] + (X[..., :2] - x[..., None, :2]) @ G.mT
         L = psd_factor(P[..., 2:, 2:] - G @ P[..., :2, 2:], "PF.update: prior velocity")
-        X[..., 2:] = Xv + rng.standard_normal(batch + (N, n - 2)) @ L.mT
+        X[..., 2:] = Xv + standard_normals(rng, batch + (N, n - 2)) @ L.mT
     dLd = (d * (Lam @ d[..., None])[..., 0]).sum(-1)
     lw = -0.5 * (dLd[..., None] - a * mu * mu) + log_ndtr(mu / s) - 0.5 * np.log(a) + np.log(r)
     lw, _ = rs.normalise_log_weights(lw)
@@ -936,7 +937,7 @@ class RangePF(Filter):
                              f"{self.r_max}] is empty for the prior's line of sight; "
                              "expected r_max > r_min > 0")
         r = _log_uniform_ranges(lo, hi, batch + (N,), rng)
-        b = beta[..., None] + sign * sigma_b[..., None] * rng.standard_normal(batch + (N,))
+        b = beta[..., None] + sign * sigma_b[..., None] * standard_normals(rng, batch + (N,))
         X = np.empty(batch + (N, n))
         X[..., 0] = o[..., None, 0] + r * np.sin(b)
         X[..., 1] = o[..., None, 1] + r * np.cos(b)
