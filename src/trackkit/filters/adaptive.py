@@ -43,6 +43,7 @@ from trackkit.filters.kalman import (
     dim_x_of,
     jacobian_predict,
     kalman_gain,
+    linearize,
     sandwich,
 )
 from trackkit.linalg import mm, mmT, quadratic_form, solve_psd, symmetrize
@@ -140,13 +141,23 @@ def second_order_jacobian(sensor: SensorModel, x: Array) -> Array:
     the paper's heuristic. For the DBT sensor at a few km it is about 1e-4 of the Jacobian's
     entries, so its effect on the estimates is negligible there.
     """
-    J = np.asarray(sensor.jacobian(x))
-    Hs = np.asarray(sensor.hessian(x))
-    return J + 0.5 * np.diagonal(Hs, axis1=-2, axis2=-1)
+    return _with_half_hessian(np.asarray(sensor.jacobian(x)), sensor, x)
+
+
+def _with_half_hessian(J: Array, sensor: SensorModel, x: Array) -> Array:
+    return J + 0.5 * np.diagonal(np.asarray(sensor.hessian(x)), axis1=-2, axis2=-1)
 
 
 def _jacobian(sensor: SensorModel, x: Array, second_order: bool) -> Array:
-    return second_order_jacobian(sensor, x) if second_order else np.asarray(sensor.jacobian(x))
+    J = np.asarray(sensor.jacobian(x))
+    return _with_half_hessian(J, sensor, x) if second_order else J
+
+
+def _linearize(sensor: SensorModel, x: Array, second_order: bool) -> tuple[Array, Array]:
+    """``(h(x), H)``: the sensor's fused ``linearize``, with the paper's half Hessian added
+    when ``second_order``."""
+    zhat, J = linearize(sensor, x)
+    return zhat, _with_half_hessian(J, sensor, x) if second_order else J
 
 
 def _mc_update(x: Array, P: Array, r: Array, H: Array, R: Array, sensor: SensorModel,
@@ -391,9 +402,9 @@ class MCEKF(Linearised):
                sensor: SensorModel) -> tuple[Gaussian, Innovation]:
         x, P, z = self._inputs(belief, z, sensor)
         miss = missing_rows(z)
-        H = _jacobian(sensor, x, self.second_order)
+        zhat, H = _linearize(sensor, x, self.second_order)
         R = sensor.noise
-        r = sensor.residual(z, sensor.h(x))
+        r = sensor.residual(z, zhat)
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
         xn, Pn, S, _, _ = _mc_update(x, P, r, H, R, sensor, self.second_order)
@@ -516,9 +527,9 @@ class AMCEKF(Filter):
         x, P = check_belief(b, None, f"{self.name}.update belief")
         z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
         miss = missing_rows(z)
-        H = _jacobian(sensor, x, self.second_order)
+        zhat, H = _linearize(sensor, x, self.second_order)
         R = b.r_scale[..., None, None] * sensor.noise  # R(t)
-        r = sensor.residual(z, sensor.h(x))  # (14), z - h(x-)
+        r = sensor.residual(z, zhat)  # (14), z - h(x-)
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
         xn, Pn, S, _, delta = _mc_update(x, P, r, H, R, sensor, self.second_order)
@@ -635,8 +646,8 @@ class AEKF(Filter):
         z = check_measurement(z, sensor.dim_z, f"{self.name}.update", x.shape[:-1])
         m = sensor.dim_z
         miss = missing_rows(z)
-        H = np.asarray(sensor.jacobian(x))
-        r = sensor.residual(z, sensor.h(x))
+        zhat, H = linearize(sensor, x)
+        r = sensor.residual(z, zhat)
         if miss is not None:
             r = np.where(np.isnan(r), 0.0, r)
         batch = np.broadcast_shapes(x.shape[:-1], r.shape[:-1])

@@ -505,6 +505,27 @@ class BearingFrequency(SensorBase):
         )
         return np.stack([rb, rf], -2)
 
+    def linearize(self, x: Array) -> tuple[Array, Array]:
+        """``(h(x), jacobian(x))``, the shared terms once and the rows written in place: the
+        same operations, so the same bits (a Doppler-bearing EKF calls it every step)."""
+        self._check(x)
+        d, dv = x[..., :2] - self.origin, x[..., 2:4] - self.velocity
+        u, v = d[..., 0], d[..., 1]
+        r = np.hypot(u, v)
+        vd = (d * dv).sum(-1) / r
+        z = np.empty(x.shape[:-1] + (2,))
+        z[..., 0] = np.arctan2(u, v)
+        z[..., 1] = x[..., 4] * (1 - vd / self.c)
+        k = x[..., 4] / self.c
+        cross = dv[..., 0] * v - dv[..., 1] * u
+        r2, r3 = r**2, r**3
+        H = np.zeros(x.shape[:-1] + (2, 5))
+        H[..., 0, 0], H[..., 0, 1] = v / r2, -u / r2
+        H[..., 1, 0], H[..., 1, 1] = -k * v * cross / r3, k * u * cross / r3
+        H[..., 1, 2], H[..., 1, 3] = -k * u / r, -k * v / r
+        H[..., 1, 4] = 1 - vd / self.c
+        return z, H
+
     def hessian(self, x: Array) -> Array:
         """Analytic. With V_D(d, dv) = dv.d / r: grad_d V_D = dv/r - (dv.d) d / r^3 and
         Hess_dd V_D = -(dv d^T + d dv^T)/r^3 - (dv.d) I / r^3 + 3 (dv.d) d d^T / r^5,
