@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 from trackkit.experiments import network_mc
+from trackkit.linalg import CHOL_MIN_BATCH_FULL
 from trackkit.network import lockstep
 from trackkit.network.agents import Call, cv_predict, run_inline
 from trackkit.network.inprocess import run_network, run_network_block
+from trackkit.network.tracks import duplicates
 from trackkit.scenario.network import load_network
 
 RUNS = 4
@@ -79,7 +81,7 @@ def test_a_block_of_runs_equals_the_runs_one_at_a_time(name, loss, checked_kerne
     print(dict(seen))
     # the steered network exercises every batched kernel except the one-row composites
     assert set(seen) >= {"associate", "predict_tracks", "cv_predict", "match_tracks",
-                         "update_tracks", "combine_call", "steer_call"}
+                         "update_tracks", "combine_call", "steer_call", "duplicates"}
     bad = {k: v for k, v in differ.items() if v}
     assert not bad, f"batched kernels that differ from their single calls: {bad}"
     # the runs really do differ from each other (no run's answer handed to another)
@@ -114,6 +116,23 @@ def test_a_batched_kernel_one_ulp_off_is_caught(monkeypatch):
     monkeypatch.setitem(lockstep.BATCHED, cv_predict, off)
     block = run_network_block(2026, [0, 1], targets, sc.agent_states(), **opts)
     assert [_fingerprint(b) for b in block] != one
+
+
+def test_batched_duplicates_equal_the_single_calls_on_both_sides_of_the_threshold():
+    rng = np.random.default_rng(7)
+    big = int(np.ceil(np.sqrt(CHOL_MIN_BATCH_FULL)))  # T * T pairs at the threshold: alone
+
+    def tracks(T: int):
+        # clustered tracks, so that some pairs fall inside the gate and some do not
+        x = rng.normal(scale=[30, 30, 1, 1], size=(T, 4))
+        A = rng.normal(size=(T, 4, 4))
+        return x, A @ A.mT + 4 * np.eye(4) * [100, 100, 1, 1]
+
+    calls = [(*tracks(T), 9.0) for T in (1, 3, 5, big, 2, 0, 4)]
+    got = lockstep.BATCHED[duplicates](calls)
+    want = [duplicates(*c) for c in calls]
+    assert all(_same(g, w) for g, w in zip(got, want, strict=True))
+    assert any(w.any() for w in want) and not all(w.all() for w in want if w.size)
 
 
 def test_drive_answers_programs_that_branch_differently():

@@ -475,18 +475,18 @@ def _compact(tracks: Tracks, t: float, max_age: float) -> Tracks:
     if tracks.bz.shape[1] == 0:
         return tracks
     keep = ~np.isnan(tracks.bz) & (tracks.bt >= t - max_age)
-    order = np.argsort(~keep, axis=1, kind="stable")
     width = int(keep.sum(1).max()) if keep.size else 0
-    order = order[:, :width]
-    k = np.take_along_axis(keep, order, 1)
+    # each row's gather as a (row, column) index pair: take_along_axis's own index building
+    # costs more than the gather on a few tracks
+    rows = np.arange(keep.shape[0])[:, None]
+    order = np.argsort(~keep, axis=1, kind="stable")[:, :width]
+    k = keep[rows, order]
 
     def take(a: Array) -> Array:
-        v = np.take_along_axis(a, order, 1)
-        return np.where(k, v, np.nan)
+        return np.where(k, a[rows, order], np.nan)
 
-    sen = np.take_along_axis(tracks.bsensor, order[..., None], 1)
     return tracks._replace(bz=take(tracks.bz), bt=take(tracks.bt), bsigma=take(tracks.bsigma),
-                           bsensor=np.where(k[..., None], sen, np.nan))
+                           bsensor=np.where(k[..., None], tracks.bsensor[rows, order], np.nan))
 
 
 class CompositeStep(NamedTuple):

@@ -428,7 +428,7 @@ class Motion:
         """Agent a's position and velocity at its execution time t (moving it there)."""
         if self.steering:
             p, c = move(self.pos[a], self.course[a], self.speed[a], self.cmd[a],
-                        t - self.last_t[a], TURN_RATE)
+                        t - self.last_t[a], TURN_RATE, check=False)
             self.pos[a], self.course[a], self.last_t[a] = p, float(c), t
             here = self.pos[a].copy()
         else:
@@ -441,7 +441,7 @@ class Motion:
         if not self.steering:
             return self.ag0[:, :2] + t * self.ag0[:, 2:]
         return move(self.pos, self.course, self.speed, self.cmd, t - self.last_t,
-                    TURN_RATE)[0]
+                    TURN_RATE, check=False)[0]
 
 
 def relay_to_hub(hub: Agent, rec: Recorder, payload: Payload, t: float,

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from trackkit.belief import Gaussian
+from trackkit.linalg import CHOL_MIN_BATCH_FULL
 from trackkit.models.sensors import Bearing
 from trackkit.network.agents import (
     Call,
@@ -43,7 +44,13 @@ from trackkit.network.agents import (
 )
 from trackkit.network.composite import Composite, composite_measurement
 from trackkit.network.steering import CourseCommand
-from trackkit.network.tracks import Matches, match_tracks, matches_within
+from trackkit.network.tracks import (
+    Matches,
+    duplicates,
+    match_tracks,
+    matches_within,
+    uncertainty,
+)
 from trackkit.tracking import (
     gate_pairs,
     gate_threshold,
@@ -252,12 +259,42 @@ def _match_tracks_many(calls: list[tuple]) -> list[Matches]:
     return out
 
 
+def _duplicates_many(calls: list[tuple]) -> list[np.ndarray]:
+    """``duplicates`` of several agents' tracks: every agent's pair similarities in one
+    stacked solve (LAPACK's per-matrix Cholesky, as a call of fewer than
+    ``CHOL_MIN_BATCH_FULL`` pairs uses); a call with more pairs, none, leading axes, or a
+    non-finite track (``duplicates`` names it) is answered alone."""
+    alone = [len(c) != 3 or np.ndim(c[0]) != 2 or not 0 < len(c[0]) ** 2 < CHOL_MIN_BATCH_FULL
+             or not (np.isfinite(c[0]).all() and np.isfinite(c[1]).all()) for c in calls]
+    out: list[Any] = [duplicates(*c) if a else None for c, a in zip(calls, alone, strict=True)]
+    mine = [i for i, a in enumerate(alone) if not a]
+    if not mine:
+        return out
+    d = np.concatenate([(calls[i][0][:, None] - calls[i][0][None]).reshape(-1, 4)
+                        for i in mine])
+    C = np.concatenate([(calls[i][1][:, None] + calls[i][1][None]).reshape(-1, 4, 4)
+                        for i in mine])
+    L = np.linalg.cholesky(C)
+    y = np.linalg.solve(L.mT, np.linalg.solve(L, d[..., None]))[..., 0]
+    S_all = np.einsum("...i,...i->...", d, y)
+    sizes = [len(calls[i][0]) for i in mine]
+    for i, T, S in zip(mine, sizes, _split(S_all, [T * T for T in sizes]), strict=True):
+        x, P, gate = calls[i]
+        U = uncertainty(P)
+        idx = np.arange(T)
+        better = (U[:, None] < U[None, :]) | ((U[:, None] == U[None, :])
+                                              & (idx[:, None] < idx[None, :]))
+        out[i] = ((S.reshape(T, T) <= gate) & better).any(axis=-2)
+    return out
+
+
 BATCHED[composites] = _composites_many
 BATCHED[composite_measurement] = _composite_measurement_many
 BATCHED[cv_predict] = _cv_predict_many
 BATCHED[predict_tracks] = _predict_tracks_many
 BATCHED[steer_call] = _steer_many
 BATCHED[match_tracks] = _match_tracks_many
+BATCHED[duplicates] = _duplicates_many
 
 
 def _combine_many(calls: list[tuple]) -> list[Any]:

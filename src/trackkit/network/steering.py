@@ -227,7 +227,8 @@ def _arc(position: Array, course: Array, speed: Array, delta: Array, dt: Array,
 
 
 def move(position: ArrayLike, course: ArrayLike, speed: ArrayLike, commanded: ArrayLike,
-         dt: ArrayLike, turn_rate: float = TURN_RATE) -> tuple[Array, Array]:
+         dt: ArrayLike, turn_rate: float = TURN_RATE, check: bool = True
+         ) -> tuple[Array, Array]:
     """Move agents for dt at constant speed towards a commanded course.
 
     The agent turns the short way at the full rate w (``turn_rate``) until it reaches the
@@ -238,8 +239,14 @@ def move(position: ArrayLike, course: ArrayLike, speed: ArrayLike, commanded: Ar
 
     ``position`` ``(..., 2)``; ``course``, ``speed``, ``commanded``, ``dt`` broadcast to
     ``(...)``. Returns ``(position, course)``. Moving for dt1 then dt2 with the same command
-    equals moving for dt1 + dt2.
+    equals moving for dt1 + dt2. ``check=False`` skips the checks of the arguments (for the
+    simulator's own float arrays, moved twice per agent execution; the same numbers).
     """
+    if not check:
+        p, C, v, cmd, T = (np.asarray(a, dtype=float) for a in (position, course, speed,
+                                                                 commanded, dt))
+        return _moved(p, C, v, cmd, T, turn_rate, np.broadcast_shapes(
+            p.shape[:-1], C.shape, v.shape, cmd.shape, T.shape))
     p = _array(position, "position")
     if p.ndim < 1 or p.shape[-1] != 2:
         raise ValueError(f"position has shape {p.shape}; expected (..., 2), east and north")
@@ -253,6 +260,12 @@ def move(position: ArrayLike, course: ArrayLike, speed: ArrayLike, commanded: Ar
         raise ValueError(f"turn_rate = {turn_rate!r}; expected a finite number > 0 (rad/s)")
     shape = _broadcast({"position[..., 0]": p.shape[:-1], "course": C.shape, "speed": v.shape,
                         "commanded": cmd.shape, "dt": T.shape})
+    return _moved(p, C, v, cmd, T, turn_rate, shape)
+
+
+def _moved(p: Array, C: Array, v: Array, cmd: Array, T: Array, turn_rate: float,
+           shape: tuple[int, ...]) -> tuple[Array, Array]:
+    """``move`` of checked arguments broadcasting to ``shape``."""
     reach = turn_rate * T
     delta = np.clip(wrap(cmd - C), -reach, reach)
     new = _arc(np.broadcast_to(p, shape + (2,)), C, v, delta, T, turn_rate)
