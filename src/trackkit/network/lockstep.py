@@ -46,6 +46,7 @@ from trackkit.network.composite import Composite, composite_measurement
 from trackkit.network.steering import CourseCommand
 from trackkit.network.tracks import (
     Matches,
+    dominated,
     duplicates,
     match_tracks,
     matches_within,
@@ -279,12 +280,8 @@ def _duplicates_many(calls: list[tuple]) -> list[np.ndarray]:
     S_all = np.einsum("...i,...i->...", d, y)
     sizes = [len(calls[i][0]) for i in mine]
     for i, T, S in zip(mine, sizes, _split(S_all, [T * T for T in sizes]), strict=True):
-        x, P, gate = calls[i]
-        U = uncertainty(P)
-        idx = np.arange(T)
-        better = (U[:, None] < U[None, :]) | ((U[:, None] == U[None, :])
-                                              & (idx[:, None] < idx[None, :]))
-        out[i] = ((S.reshape(T, T) <= gate) & better).any(axis=-2)
+        _, P, gate = calls[i]
+        out[i] = dominated(S.reshape(T, T), uncertainty(P), gate)
     return out
 
 

@@ -34,7 +34,7 @@ from scipy.optimize import linear_sum_assignment
 from trackkit.linalg import solve_psd
 
 __all__ = ["DEFAULT_GATE", "similarity", "uncertainty", "Matches", "match_tracks",
-           "matches_within", "duplicates", "Message", "MessageMemory"]
+           "matches_within", "duplicates", "dominated", "Message", "MessageMemory"]
 
 Array = NDArray[np.float64]
 
@@ -123,10 +123,14 @@ def duplicates(x: ArrayLike, P: ArrayLike, gate: float = DEFAULT_GATE) -> NDArra
     if not (isinstance(gate, int | float) and math.isfinite(gate) and gate > 0):
         raise ValueError(f"duplicates: gate = {gate!r}; expected a number > 0")
     x, P = _tracks(x, P, "duplicates")
-    U = uncertainty(P)
-    S = similarity(x, P, x, P)
-    T = x.shape[-2]
-    idx = np.arange(T)
+    return dominated(similarity(x, P, x, P), uncertainty(P), gate)
+
+
+def dominated(S: Array, U: Array, gate: float) -> NDArray[np.bool_]:
+    """The pruning rule of ``duplicates`` on given similarities ``S`` ``(..., T, T)`` and
+    uncertainties ``U`` ``(..., T)``: track j when some i has ``S_ij <= gate`` and
+    ``U_i < U_j``, or ``U_i = U_j`` and i < j."""
+    idx = np.arange(U.shape[-1])
     better = (U[..., :, None] < U[..., None, :]) | (
         (U[..., :, None] == U[..., None, :]) & (idx[:, None] < idx[None, :]))
     return ((S <= gate) & better).any(axis=-2)
