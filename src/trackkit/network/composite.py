@@ -36,7 +36,10 @@ measurement is z_c = X_ML(t_f) with covariance R_c = J(X_ML)^{-1} (the CRLB at t
 and H_c = I_4 (eqs. 42-43).
 
 Every function is batched over leading axes (targets, runs), and no Python loop runs over
-them: the rows iterate together, each with its own mu, and leave the loop when done.
+them. ``composite_measurement`` fits its rows in a compiled loop (``composite_fast``: each
+row on its own, its missing bearings skipped, so its bits do not depend on its batch); the
+numpy form below (``_fit_numpy``: the rows iterate together, each with its own mu, and leave
+the loop when done) is the textbook it is pinned to.
 """
 
 from __future__ import annotations
@@ -49,6 +52,8 @@ from numpy.typing import ArrayLike, NDArray
 from trackkit.angles import wrap
 from trackkit.linalg import symmetrize
 from trackkit.models.sensors import check_convention, wrap_small
+from trackkit.network import composite_fast
+from trackkit.network.composite_fast import MU_MAX, MU_MIN, MU_REFUSED, ROUND
 
 __all__ = [
     "CONVERGED",
@@ -77,17 +82,6 @@ NOT_CONVERGED = 1
 SINGULAR = 2
 #: the name of each status code
 STATUS_NAMES = {CONVERGED: "converged", NOT_CONVERGED: "not converged", SINGULAR: "singular"}
-
-#: least damping, relative to J_s's unit diagonal: keeps J_s + mu I positive definite when
-#: J_s is singular to rounding, and changes a Gauss-Newton step by about 1e-12 relative
-_MU_MIN = 1e-12
-#: damping after the first refused step (then ten times more per refusal)
-_MU_REFUSED = 1e-3
-#: a row whose damping passes this has no downhill step left: it stops
-_MU_MAX = 1e10
-#: rounding error of one residual z_k - h_k (rad): atan2's last place near pi, and the
-#: subtraction's
-_ROUND = 4.0 * float(np.spacing(np.pi))
 
 
 class Composite(NamedTuple):
@@ -409,7 +403,7 @@ def _solve(
         sub = p.take(rows)
         Xw, cw, Jw, gw = _cols(X, rows), cost[rows], _cols(J, rows), _cols(g, rows)
     w2 = (sub.w * sub.w).sum(0)
-    mu = np.full(rows.size, _MU_MIN)
+    mu = np.full(rows.size, MU_MIN)
     it = np.zeros(rows.size, dtype=np.int64)
     st = np.full(rows.size, NOT_CONVERGED, dtype=np.int8)
     on = np.ones(rows.size, dtype=bool)
@@ -425,14 +419,14 @@ def _solve(
         Jd.reshape(16, -1)[::5] *= 1.0 + mu
         delta = _spd_solve(Jd, gw[:, None])[:, 0]  # nan where J + mu D is not definite
         # at mu = mu_min, delta is the Gauss-Newton step and g^T delta its decrement.
-        # lambda carries a rounding error of about _ROUND sum_k |r_k| / sigma_k, at most
-        # _ROUND sqrt(2 lambda sum_k sigma_k^-2): a predicted decrease (decrement / 2) below
+        # lambda carries a rounding error of about ROUND sum_k |r_k| / sigma_k, at most
+        # ROUND sqrt(2 lambda sum_k sigma_k^-2): a predicted decrease (decrement / 2) below
         # it cannot be seen by comparing costs, so the iteration also stops there. The last
         # step is taken without a new linearisation: it moves X by less than tol standard
         # deviations (or to the rounding floor), so J and lambda barely change
         decrement = (gw * delta).sum(0)
-        floor = np.maximum(tol * tol, 2.0 * _ROUND * np.sqrt(2.0 * cw * w2))
-        done = on & (mu <= _MU_MIN) & (decrement <= floor)
+        floor = np.maximum(tol * tol, 2.0 * ROUND * np.sqrt(2.0 * cw * w2))
+        done = on & (mu <= MU_MIN) & (decrement <= floor)
         np.add(Xw, delta, out=Xw, where=done)
         it += done
         st[done] = CONVERGED
@@ -457,9 +451,9 @@ def _solve(
         for old, new in ((Xw, Xt), (cw, ct), (Jw, Jt), (gw, gt)):
             np.copyto(old, new, where=better)
         worse = on & ~better
-        mu = np.where(better, _MU_MIN, np.where(worse, np.maximum(10.0 * mu, _MU_REFUSED), mu))
+        mu = np.where(better, MU_MIN, np.where(worse, np.maximum(10.0 * mu, MU_REFUSED), mu))
         it += on
-        on &= ~(worse & (mu > _MU_MAX))
+        on &= ~(worse & (mu > MU_MAX))
     write_back(np.zeros(rows.size, dtype=bool))
     return X, J, cost, status, iterations
 
@@ -581,8 +575,17 @@ def composite_measurement(
     if not 0 < rcond < 1:
         raise ValueError(f"rcond = {rcond!r}; expected a number in (0, 1)")
     batch, X, p, count = _prepare(x0, t, sensor_pos, sigma, t_f, z, None, convention, "x0")
-    X, J, cost, status, iterations = _solve(X, p, count, max_iter, tol)
+    out = composite_fast.fit(p.z, p.dt, p.xs, p.ys, p.w, p.pad, p.sign, X, max_iter, tol, rcond)
+    return Composite(*(a.reshape(batch + a.shape[1:]) for a in out))
 
+
+def _fit_numpy(X: Array, p: _Problem, count: NDArray[np.intp], max_iter: int, tol: float,
+               rcond: float) -> tuple[Array, Array, Array, NDArray[np.int8], NDArray[np.int64],
+                                      Array]:
+    """The fit of every row in numpy, all rows iterating together (the textbook form of
+    ``composite_fast.fit``, which returns the same to rounding): ``mean (N, 4)``, ``cov``,
+    ``information``, ``status``, ``iterations`` and ``cost``, as ``Composite``."""
+    X, J, cost, status, iterations = _solve(X, p, count, max_iter, tol)
     # the conditioning of J on the unit-diagonal scale, and J^-1
     s, Js = _scaled(J)
     Js_inv = _spd_solve(Js, np.broadcast_to(np.eye(4)[:, :, None], J.shape))
@@ -593,12 +596,4 @@ def composite_measurement(
     status[~well] = SINGULAR
     cov = Js_inv * s[:, None] * s[None, :]
     cov[..., ~well] = np.nan
-    cov = symmetrize(cov.transpose(2, 0, 1))
-    return Composite(
-        X.T.reshape(batch + (4,)),
-        cov.reshape(batch + (4, 4)),
-        J.transpose(2, 0, 1).reshape(batch + (4, 4)),
-        status.reshape(batch),
-        iterations.reshape(batch),
-        cost.reshape(batch),
-    )
+    return X.T, symmetrize(cov.transpose(2, 0, 1)), J.transpose(2, 0, 1), status, iterations, cost

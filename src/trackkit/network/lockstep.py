@@ -163,26 +163,26 @@ def _split(a: np.ndarray, counts: Sequence[int]) -> list[np.ndarray]:
 
 def _composite_measurement_many(calls: list[tuple]) -> list[Composite]:
     """``composite_measurement(z, t, sensor_pos, sigma, t_f, x0)`` of several problems as
-    one: the rows stacked, each with its own t_f, grouped by the number of bearing slots and
-    whether any is missing (the layout a row's sums see)."""
-    def key(c: tuple) -> tuple:
-        z = np.asarray(c[0])
-        return z.shape[-1], bool(np.isnan(z).any()), np.ndim(c[3])
-    return _grouped(calls, key, _composite_stack)
-
-
-def _composite_stack(calls: list[tuple]) -> list[Composite]:
+    one: the rows stacked, each with its own t_f, and padded with missing bearings to the
+    most slots (a row's fit skips its missing bearings, so its bits do not change)."""
+    if not calls:
+        return []
     rows = [np.atleast_2d(np.asarray(c[0], float)) for c in calls]
     n = [r.shape[0] for r in rows]
-    M = rows[0].shape[1]
-    t = np.concatenate([np.broadcast_to(c[1], (k, M)) for c, k in zip(calls, n, strict=True)])
-    S = np.concatenate([np.broadcast_to(c[2], (k, M, 2)) for c, k in zip(calls, n,
-                                                                          strict=True)])
-    sig = np.concatenate([np.broadcast_to(c[3], (k, M)) for c, k in zip(calls, n,
-                                                                        strict=True)])
+    M = max(r.shape[1] for r in rows)
+
+    def stacked(i: int, fill: float, tail: tuple[int, ...] = ()) -> np.ndarray:
+        out = np.full((sum(n), M) + tail, fill)
+        at = 0
+        for c, k in zip(calls, n, strict=True):
+            m = np.shape(c[0])[-1]
+            out[at:at + k, :m] = np.broadcast_to(c[i], (k, m) + tail)
+            at += k
+        return out
+    z, t, S, sig = stacked(0, np.nan), stacked(1, 0.0), stacked(2, 0.0, (2,)), stacked(3, 1.0)
     tf = np.repeat([float(c[4]) for c in calls], n)
     x0 = np.concatenate([np.reshape(c[5], (k, 4)) for c, k in zip(calls, n, strict=True)])
-    out = composite_measurement(np.concatenate(rows), t, S, sig, tf, x0)
+    out = composite_measurement(z, t, S, sig, tf, x0)
     parts = [Composite(*f) for f in zip(*(_split(a, n) for a in out), strict=True)]
     return [p if np.ndim(c[0]) > 1 else Composite(*(a[0] for a in p))
             for p, c in zip(parts, calls, strict=True)]
