@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 from trackkit.network.agents import (
     Agent,
     AgentSettings,
+    Call,
     Payload,
     Program,
     StepReport,
@@ -304,9 +305,9 @@ class NetworkRunState:
         w, motion = self.w, self.motion
         a, e = w.order[k]
         t = float(w.times[a, e])
-        here, vel = motion.at(a, t)
+        here, vel = yield from motion.at(a, t)
         truth = w.sim.target_at_bearing[0, a, e]
-        z, _ = bearings_at(here, truth, w.noise[a, e], w.sig[a], w.MR[a])
+        z, _ = yield Call(bearings_at, (here, truth, w.noise[a, e], w.sig[a], w.MR[a]))
         self.Zc[a, e], self.Sc[a, e] = z, here
         own = own_bearings(z, t, here, float(w.sig[a]), a)
         msg, rep = yield from self.nodes[a].program(t, own, here, vel)
@@ -318,7 +319,7 @@ class NetworkRunState:
                 here, float(motion.course[a]), float(motion.speed[a]), dt_next)
 
         # delivery over the disk graph at time t
-        where = motion.where(t)
+        where = yield from motion.where(t)
         self.spacing.add(where)
         links = disk_graph(where, w.CR)[a]
         for b in np.flatnonzero(links).tolist():
@@ -424,11 +425,12 @@ class Motion:
         self.cmd = self.course.copy()
         self.last_t = np.zeros(len(ag0))
 
-    def at(self, a: int, t: float) -> tuple[Array, Array]:
-        """Agent a's position and velocity at its execution time t (moving it there)."""
+    def at(self, a: int, t: float) -> Program:
+        """Agent a's position and velocity at its execution time t (moving it there), as a
+        program (its move a :class:`~trackkit.network.agents.Call`)."""
         if self.steering:
-            p, c = move(self.pos[a], self.course[a], self.speed[a], self.cmd[a],
-                        t - self.last_t[a], TURN_RATE, check=False)
+            p, c = yield Call(move, (self.pos[a], self.course[a], self.speed[a], self.cmd[a],
+                                     t - self.last_t[a], TURN_RATE, False))
             self.pos[a], self.course[a], self.last_t[a] = p, float(c), t
             here = self.pos[a].copy()
         else:
@@ -436,12 +438,14 @@ class Motion:
         course = self.course[a]
         return here, self.speed[a] * np.array([math.sin(course), math.cos(course)])
 
-    def where(self, t: float) -> Array:
-        """Every agent's position at t, the others extrapolated on their current commands."""
+    def where(self, t: float) -> Program:
+        """Every agent's position at t, the others extrapolated on their current commands
+        (a program, as ``at``)."""
         if not self.steering:
             return self.ag0[:, :2] + t * self.ag0[:, 2:]
-        return move(self.pos, self.course, self.speed, self.cmd, t - self.last_t,
-                    TURN_RATE, check=False)[0]
+        p, _ = yield Call(move, (self.pos, self.course, self.speed, self.cmd, t - self.last_t,
+                                 TURN_RATE, False))
+        return p
 
 
 def relay_to_hub(hub: Agent, rec: Recorder, payload: Payload, t: float,

@@ -43,7 +43,7 @@ from trackkit.network.agents import (
     update_tracks,
 )
 from trackkit.network.composite import Composite, composite_measurement
-from trackkit.network.steering import CourseCommand
+from trackkit.network.steering import CourseCommand, move
 from trackkit.network.tracks import (
     Matches,
     dominated,
@@ -52,6 +52,7 @@ from trackkit.network.tracks import (
     matches_within,
     uncertainty,
 )
+from trackkit.sim.sensor_network import bearings_at
 from trackkit.tracking import (
     gate_pairs,
     gate_threshold,
@@ -325,5 +326,39 @@ def _update_tracks_many(calls: list[tuple]) -> list[Any]:
     return out
 
 
+def _move_many(calls: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``move(position, course, speed, commanded, dt, turn_rate, check)`` of several
+    programs (an agent moved to its execution, or all agents to a delivery): every call's
+    agents flattened and stacked, one move (elementwise: each agent's numbers are its own)."""
+    def stack(group: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
+        shapes = [np.broadcast_shapes(np.shape(c[0])[:-1], *map(np.shape, c[1:5]))
+                  for c in group]
+        n = [int(np.prod(s, dtype=np.int64)) for s in shapes]
+        p = np.concatenate([np.broadcast_to(c[0], s + (2,)).reshape(-1, 2)
+                            for c, s in zip(group, shapes, strict=True)])
+        rest = [np.concatenate([np.broadcast_to(c[k], s).reshape(-1)
+                                for c, s in zip(group, shapes, strict=True)])
+                for k in range(1, 5)]
+        pos, course = move(p, *rest, group[0][5], group[0][6])
+        return [(x.reshape(s + (2,)), c.reshape(s)) for x, c, s in
+                zip(_split(pos, n), _split(course, n), shapes, strict=True)]
+    return _grouped(calls, lambda c: c[5:], stack)
+
+
+def _bearings_many(calls: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``bearings_at(sensor_pos, targets, noise, sigma, mr)`` of several executions (one
+    agent each) as one batch of executions."""
+    def stack(group: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
+        if len(group[0]) != 5 or group[0][2] is None:  # a convention, or noise-free
+            return [bearings_at(*c) for c in group]
+        z, seen = bearings_at(*(np.stack([np.asarray(c[k], float) for c in group])
+                                for k in range(5)))
+        return list(zip(z, seen, strict=True))
+    return _grouped(calls, lambda c: (np.shape(c[0]), np.shape(c[1]), np.shape(c[2]),
+                                      np.shape(c[3]), np.shape(c[4]), len(c)), stack)
+
+
+BATCHED[move] = _move_many
+BATCHED[bearings_at] = _bearings_many
 BATCHED[combine_call] = _combine_many
 BATCHED[update_tracks] = _update_tracks_many

@@ -806,7 +806,7 @@ class _Exchange:
         w, t = self.w, float(self.w.times[a, e])
         if a in self.kills:
             self._outage(a, t)
-        here, vel = self.motion.at(a, t)
+        here, vel = run_inline(self.motion.at(a, t))
         truth = w.sim.target_at_bearing[0, a, e]
         if not self.alive[a]:
             self.rec[a].add(_Confirmed(t, None), truth, here,  # type: ignore[arg-type]
@@ -876,7 +876,7 @@ class _Exchange:
     def _broadcast(self, a: int, t: float, pd: dict[str, Any]) -> None:
         """Agent a's payload to every neighbour in communication range: lost with
         probability ``loss`` or to a dead agent, else in flight for ``delay``."""
-        where = self.motion.where(t)
+        where = run_inline(self.motion.where(t))
         self.spacing.add(where)
         links = disk_graph(where, self.w.CR)[a]
         for b in np.flatnonzero(links).tolist():
