@@ -81,7 +81,8 @@ def test_a_block_of_runs_equals_the_runs_one_at_a_time(name, loss, checked_kerne
     print(dict(seen))
     # the steered network exercises every batched kernel except the one-row composites
     assert set(seen) >= {"associate", "predict_tracks", "cv_predict", "match_tracks",
-                         "update_tracks", "combine_call", "steer_call", "duplicates"}
+                         "update_tracks", "combine_call", "steer_call", "duplicates",
+                         "composites", "move", "bearings_at"}
     bad = {k: v for k, v in differ.items() if v}
     assert not bad, f"batched kernels that differ from their single calls: {bad}"
     # the runs really do differ from each other (no run's answer handed to another)

@@ -328,21 +328,14 @@ def _update_tracks_many(calls: list[tuple]) -> list[Any]:
 
 def _move_many(calls: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
     """``move(position, course, speed, commanded, dt, turn_rate, check)`` of several
-    programs (an agent moved to its execution, or all agents to a delivery): every call's
-    agents flattened and stacked, one move (elementwise: each agent's numbers are its own)."""
+    programs (an agent moved to its execution, or all agents to a delivery), those of one
+    shape stacked on a new leading axis: one move (elementwise: each agent's numbers are its
+    own)."""
     def stack(group: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
-        shapes = [np.broadcast_shapes(np.shape(c[0])[:-1], *map(np.shape, c[1:5]))
-                  for c in group]
-        n = [int(np.prod(s, dtype=np.int64)) for s in shapes]
-        p = np.concatenate([np.broadcast_to(c[0], s + (2,)).reshape(-1, 2)
-                            for c, s in zip(group, shapes, strict=True)])
-        rest = [np.concatenate([np.broadcast_to(c[k], s).reshape(-1)
-                                for c, s in zip(group, shapes, strict=True)])
-                for k in range(1, 5)]
-        pos, course = move(p, *rest, group[0][5], group[0][6])
-        return [(x.reshape(s + (2,)), c.reshape(s)) for x, c, s in
-                zip(_split(pos, n), _split(course, n), shapes, strict=True)]
-    return _grouped(calls, lambda c: c[5:], stack)
+        pos, course = move(*(np.stack([np.asarray(c[k], float) for c in group])
+                             for k in range(5)), group[0][5], group[0][6])
+        return list(zip(pos, course, strict=True))
+    return _grouped(calls, lambda c: tuple(map(np.shape, c[:5])) + c[5:], stack)
 
 
 def _bearings_many(calls: list[tuple]) -> list[tuple[np.ndarray, np.ndarray]]:
