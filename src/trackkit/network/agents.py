@@ -80,10 +80,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from trackkit.angles import wrap
 from trackkit.belief import Gaussian
+from trackkit.eval.metrics import chi2_ppf
 from trackkit.models.sensors import Bearing
 from trackkit.network.composite import CONVERGED, composite_measurement
 from trackkit.network.diffusion import COMBINATIONS, adapt, combine
@@ -535,7 +535,7 @@ def composite_step(T: int, rows: NDArray[np.intp], c: Any, bz: Array,
     if c is None:
         return CompositeStep(z, R, made, dropped)
     M = (~np.isnan(bz)).sum(1)
-    limit = chi2.ppf(settings.fit_p, np.maximum(M - 4, 1))
+    limit = chi2_ppf(settings.fit_p, np.maximum(M - 4, 1))
     ok = c.status == CONVERGED
     # a composite faster than any target (beyond its own uncertainty) is a mixed or wrongly
     # associated batch as surely as one that fails the fit: dropped too
@@ -856,7 +856,7 @@ class Agent:
             x0, _ = cv_predict(ini.mean, np.eye(4), t - float(part.t[kk]), 0.0)
             b = part.take(sup)
             c = yield Call(composite_measurement, (b.z, b.t, b.sensor, b.sigma, t, x0))
-            if c.status != CONVERGED or 2.0 * c.cost > chi2.ppf(s.fit_p, max(b.size - 4, 1)):
+            if c.status != CONVERGED or 2.0 * c.cost > chi2_ppf(s.fit_p, max(b.size - 4, 1)):
                 continue
             ids, self.counter = self.counter.issue(1)
             lg = s.logic.init(t, 1)

@@ -62,9 +62,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from trackkit.belief import Gaussian
+from trackkit.eval.metrics import chi2_ppf
 from trackkit.filters import CKF, EKF, IEKF, UKF
 from trackkit.models import Bearing, ConstantVelocity
 from trackkit.network.composite import CONVERGED, composite_measurement
@@ -214,7 +214,7 @@ def _starts(z: Array, t: Array, S: Array, sig: Array, s: CentralSettings
     c = composite_measurement(zc, tc, np.broadcast_to(Sw[:, :, None], zc.shape + (2,)), sc,
                               t_f, x0)
     M_c = keep.sum(-1)
-    fit = 2.0 * c.cost <= chi2.ppf(s.fit_p, np.maximum(M_c - 4, 1))
+    fit = 2.0 * c.cost <= chi2_ppf(s.fit_p, np.maximum(M_c - 4, 1))
     centre = np.nanmean(np.where(keep[..., None], Sw[:, :, None], np.nan), -2)
     rng_ = np.hypot(*(c.mean[..., :2] - centre).transpose(3, 0, 1, 2))
     with np.errstate(invalid="ignore"):
