@@ -33,6 +33,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from trackkit.filters.imm_fast import wrap_angle
+
 __all__ = ["MU_MAX", "MU_MIN", "MU_REFUSED", "ROUND", "fit"]
 
 Array = NDArray[np.float64]
@@ -47,23 +49,6 @@ MU_MAX = 1e10
 #: rounding error of one residual z_k - h_k (rad): atan2's last place near pi, and the
 #: subtraction's
 ROUND = 4.0 * float(np.spacing(np.pi))
-
-_PI = math.pi
-_TWO_PI = 2.0 * math.pi
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _wrap(a: float) -> float:
-    """``angles.wrap`` of one angle (the identity within (-3, 3), as ``wrap_small``)."""
-    if -3.0 < a < 3.0:
-        return a
-    w = a - _TWO_PI * math.ceil((a - _PI) / _TWO_PI)
-    if w > _PI:
-        w -= _TWO_PI
-    if w <= -_PI:
-        w += _TWO_PI
-    return w
-
 
 @numba.njit(cache=True, error_model="numpy")
 def _normal(X: Array, z: Array, dt: Array, xs: Array, ys: Array, w: Array,
@@ -80,7 +65,7 @@ def _normal(X: Array, z: Array, dt: Array, xs: Array, ys: Array, w: Array,
         u = d * X[2] + X[0] - xs[k, n]
         v = d * X[3] + X[1] - ys[k, n]
         h = math.atan2(u, v) if sign > 0 else math.atan2(v, u)
-        r = _wrap(z[k, n] - h) * w[k, n]
+        r = wrap_angle(z[k, n] - h) * w[k, n]
         q = w[k, n] / (u * u + v * v)  # 1 / (sigma_k r^2); inf for a target on a sensor
         if sign > 0:
             A[0], A[1] = v * q, u * -q  # eqs. 30-31, whitened
