@@ -53,7 +53,15 @@ from trackkit.angles import wrap
 from trackkit.linalg import symmetrize
 from trackkit.models.sensors import check_convention, wrap_small
 from trackkit.network import composite_fast
-from trackkit.network.composite_fast import MU_MAX, MU_MIN, MU_REFUSED, ROUND
+from trackkit.network.composite_fast import (
+    CONVERGED,
+    MU_MAX,
+    MU_MIN,
+    MU_REFUSED,
+    NOT_CONVERGED,
+    ROUND,
+    SINGULAR,
+)
 
 __all__ = [
     "CONVERGED",
@@ -68,18 +76,6 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-#: The Gauss-Newton decrement ``g^T J^{-1} g`` fell to ``tol**2`` or below (or to the rounding
-#: floor of lambda): the estimate is at the maximum of the likelihood to a small fraction of
-#: its own standard deviation.
-CONVERGED = 0
-#: ``max_iter`` steps were spent, or no step could lower lambda any more (mu above 1e10),
-#: before the decrement test passed; ``mean`` is the last iterate.
-NOT_CONVERGED = 1
-#: J at the last iterate is rank-deficient or ill-conditioned (the reciprocal condition number
-#: of the unit-diagonal J_s below ``rcond``, or J not finite), or the row has fewer than 4
-#: bearings: the geometry does not observe the state (e.g. one sensor that does not manoeuvre).
-#: ``cov`` is nan; ``mean`` is the last iterate (x0 for fewer than 4 bearings).
-SINGULAR = 2
 #: the name of each status code
 STATUS_NAMES = {CONVERGED: "converged", NOT_CONVERGED: "not converged", SINGULAR: "singular"}
 

@@ -35,7 +35,8 @@ from numpy.typing import NDArray
 
 from trackkit.filters.imm_fast import wrap_angle
 
-__all__ = ["MU_MAX", "MU_MIN", "MU_REFUSED", "ROUND", "fit"]
+__all__ = ["CONVERGED", "MU_MAX", "MU_MIN", "MU_REFUSED", "NOT_CONVERGED", "ROUND", "SINGULAR",
+           "fit"]
 
 Array = NDArray[np.float64]
 
@@ -49,6 +50,20 @@ MU_MAX = 1e10
 #: rounding error of one residual z_k - h_k (rad): atan2's last place near pi, and the
 #: subtraction's
 ROUND = 4.0 * float(np.spacing(np.pi))
+
+#: The Gauss-Newton decrement ``g^T J^{-1} g`` fell to ``tol**2`` or below (or to the rounding
+#: floor of lambda): the estimate is at the maximum of the likelihood to a small fraction of
+#: its own standard deviation.
+CONVERGED = 0
+#: ``max_iter`` steps were spent, or no step could lower lambda any more (mu above 1e10),
+#: before the decrement test passed; ``mean`` is the last iterate.
+NOT_CONVERGED = 1
+#: J at the last iterate is rank-deficient or ill-conditioned (the reciprocal condition number
+#: of the unit-diagonal J_s below ``rcond``, or J not finite), or the row has fewer than 4
+#: bearings: the geometry does not observe the state (e.g. one sensor that does not manoeuvre).
+#: ``cov`` is nan; ``mean`` is the last iterate (x0 for fewer than 4 bearings).
+SINGULAR = 2
+
 
 @numba.njit(cache=True, error_model="numpy")
 def _normal(X: Array, z: Array, dt: Array, xs: Array, ys: Array, w: Array,
@@ -130,7 +145,7 @@ def _iterate(X: Array, z: Array, dt: Array, xs: Array, ys: Array, w: Array,
             count += 1
             w2 += w[k, n] * w[k, n]
     if count < 4 or not (np.isfinite(cost) and np.isfinite(_trace(J))):
-        return cost, 1, 0
+        return cost, NOT_CONVERGED, 0
     mu, it = MU_MIN, 0
     for _ in range(max_iter):
         Jd[:] = J
@@ -145,7 +160,7 @@ def _iterate(X: Array, z: Array, dt: Array, xs: Array, ys: Array, w: Array,
         if mu <= MU_MIN and decrement <= floor:
             for i in range(4):
                 X[i] += delta[i]
-            return cost, 0, it + 1
+            return cost, CONVERGED, it + 1
         for i in range(4):
             Xt[i] = X[i] + delta[i]
         ct = _normal(Xt, z, dt, xs, ys, w, present, n, sign, Jt, gt)
@@ -159,7 +174,7 @@ def _iterate(X: Array, z: Array, dt: Array, xs: Array, ys: Array, w: Array,
             mu = max(10.0 * mu, MU_REFUSED)
             if mu > MU_MAX:
                 break
-    return cost, 1, it
+    return cost, NOT_CONVERGED, it
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -214,7 +229,7 @@ def _fit(z: Array, dt: Array, xs: Array, ys: Array, w: Array, present: NDArray[n
             if present[k, n]:
                 count += 1
         well = _bound(J[n], rcond, cov[n]) and count >= 4
-        status[n] = st if well else 2
+        status[n] = st if well else SINGULAR
         if not well:
             cov[n] = np.nan
 
