@@ -21,6 +21,7 @@ method the single call uses. A block's runs are therefore the one-at-a-time runs
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from itertools import accumulate
 from typing import Any
 
 import numpy as np
@@ -152,14 +153,17 @@ def _associate_stacked(calls: list[tuple], q: float, p_gate: float, k1: float, k
                    angular=(True,))
     a = gnn_assign(g, saturating_costs(g, k1, k2)).det
     return [np.where(seg >= 0, seg - o, -1) for seg, o in
-            zip(np.split(a, np.cumsum(T)[:-1]), d0, strict=True)]
+            zip(_split(a, T), d0, strict=True)]
 
 
 BATCHED[associate] = _associate_many
 
 
 def _split(a: np.ndarray, counts: Sequence[int]) -> list[np.ndarray]:
-    return np.split(a, np.cumsum(counts)[:-1])
+    """``a``'s leading axis cut into consecutive views of ``counts`` rows: ``np.split``'s
+    views, without its per-call overhead (some 25 us, at tens of thousands of calls a run)."""
+    ends = list(accumulate(int(k) for k in counts))
+    return [a[start:end] for start, end in zip([0, *ends[:-1]], ends, strict=True)]
 
 
 def _composite_measurement_many(calls: list[tuple]) -> list[Composite]:
