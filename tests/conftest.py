@@ -89,6 +89,23 @@ SCHEDULING_UNITS = {
 }
 
 
+def scheduling_unit(nodeid: str) -> str:
+    """The unit a test is scheduled with: its ``SCHEDULING_UNITS`` entry, else its file."""
+    for prefix, unit in SCHEDULING_UNITS.items():
+        if nodeid.startswith(prefix):
+            return nodeid if unit is None else unit
+    return nodeid.split("::", 1)[0]
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The units holding a ``slow`` test first, each kept in collection order: the workers
+    start on the long Monte Carlo and command-line files and end on the many short unit-test
+    files, which even out their ends (a long file collected late, as ``test_readme.py``'s
+    two minutes of commands were, leaves one worker running it alone)."""
+    slow = {scheduling_unit(i.nodeid) for i in items if i.get_closest_marker("slow")}
+    items.sort(key=lambda i: scheduling_unit(i.nodeid) not in slow)
+
+
 @pytest.hookimpl(tryfirst=True, optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log):
     """``--dist loadfile`` with the units of ``SCHEDULING_UNITS``: a file's tests stay on one
@@ -98,17 +115,14 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log):
         return None
     from xdist.scheduler import LoadFileScheduling
 
-    # units go out in collection order, where the long statistical files come before the many
-    # short unit-test files that then even out the workers' ends; xdist's default order (most
-    # tests first) would leave the long few-test files to the end, one worker running alone
+    # units go out in collection order, the slow ones first (pytest_collection_modifyitems);
+    # xdist's default order (most tests first) would leave the long few-test files to the
+    # end, one worker running alone
     config.option.loadscopereorder = False
 
     class UnitScheduling(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            for prefix, unit in SCHEDULING_UNITS.items():
-                if nodeid.startswith(prefix):
-                    return nodeid if unit is None else unit
-            return super()._split_scope(nodeid)
+            return scheduling_unit(nodeid)
 
     return UnitScheduling(config, log)
 

@@ -143,6 +143,7 @@ def test_version_prints_the_installed_package_version():
     assert ran.code == 0 and ran.out.strip() == f"trackkit {version('trackkit')}", ran.text
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["run", "sweep"])
 def test_ctrl_c_with_workers_says_interrupted_once_and_leaves_no_process(command, tmp_path):
     """Ctrl-C in a terminal reaches the whole process group, the Dask workers too: the

@@ -86,6 +86,7 @@ def test_a_campaign_writes_its_table_figures_and_report(reference):
     assert table.column("filters.EKF.motion.q").to_pylist()[::21] == [1e-5, 1e-4, 1e-3]
 
 
+@pytest.mark.slow
 def test_ctrl_c_then_the_same_command_resumes_bit_for_bit(scenario_file, reference, tmp_path):
     out = tmp_path / "campaign"
     cmd = [sys.executable, "-m", "trackkit.cli", "sweep", str(scenario_file), *ARGS, "--out",

@@ -11,6 +11,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[2]
 
 CONF = f"""
@@ -115,6 +117,7 @@ def build_gallery(tmp: Path, script: str) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_a_gallery_script_over_its_budget_fails_the_build(tmp_path):
     p = build_gallery(tmp_path, '''
         """
