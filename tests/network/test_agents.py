@@ -22,6 +22,7 @@ from trackkit.network.agents import (
     combine_with_neighbours,
     composites,
     empty_bearings,
+    new_tracks,
     own_bearings,
 )
 from trackkit.network.inprocess import run_network
@@ -309,3 +310,21 @@ def test_steered_run_keeps_its_tracks():
     straight = AGENTS[:, None, :2] + r.sim.bearings.time[0][..., None] * AGENTS[:, None, 2:]
     moved = np.stack([tr.position for tr in r.agents])
     assert np.abs(moved - straight).max() > 100.0
+
+
+def test_taking_tracks_by_a_mask_or_by_indices_gives_the_same_tracks():
+    """``Tracks.take``: a mask keeping every track (its shortcut) and one dropping some give
+    the tracks the same indices give, field by field."""
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(5, 4, 4))
+    tr = new_tracks(np.arange(5), rng.normal(size=(5, 4)), A @ A.mT,
+                    TimerLogic(3, 5).init(2.0, 5), 2.0)
+
+    def fields(t: Tracks) -> list[np.ndarray]:
+        return [*t[:3], *t.logic, *t[4:]]
+
+    for mask in (np.ones(5, bool), np.array([True, False, True, True, False])):
+        for got, want in zip(fields(tr.take(mask)), fields(tr.take(np.flatnonzero(mask))),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
+            assert got.dtype == want.dtype

@@ -8,6 +8,7 @@ import itertools
 
 import numpy as np
 import pytest
+from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from trackkit.network.tracks import (
@@ -16,6 +17,7 @@ from trackkit.network.tracks import (
     MessageMemory,
     duplicates,
     match_tracks,
+    matches_within,
     similarity,
     uncertainty,
 )
@@ -90,6 +92,28 @@ def test_matching_takes_the_most_gated_pairs_at_the_least_cost():
         assert len(set(m.a)) == k and len(set(m.b)) == k
         np.testing.assert_allclose(m.s.sum(), total, rtol=1e-12, atol=1e-12)
         np.testing.assert_array_equal(m.s, S[m.a, m.b])
+
+
+def test_pairs_sharing_no_track_skip_the_assignment_with_its_answer():
+    """``matches_within``'s shortcut (the pairs inside the gate share no track, so the optimum
+    holds them all) gives the assignment's pairs, order and similarities bit for bit, on 5 000
+    random problems of up to 5 x 5 tracks that take either path."""
+    rng = np.random.default_rng(11)
+    paths = {True: 0, False: 0}
+    for _ in range(5000):
+        S = rng.exponential(2.0 * DEFAULT_GATE, size=tuple(rng.integers(1, 6, size=2)))
+        inside = S <= DEFAULT_GATE
+        if not inside.any():
+            continue
+        big = 1.0 + DEFAULT_GATE * min(S.shape)
+        rows, cols = linear_sum_assignment(np.where(inside, S, big))
+        keep = inside[rows, cols]
+        m = matches_within(S, DEFAULT_GATE)
+        for got, want in ((m.a, rows[keep]), (m.b, cols[keep]), (m.s, S[rows[keep], cols[keep]])):
+            assert got.dtype == want.dtype
+            np.testing.assert_array_equal(got, want)
+        paths[bool(inside.sum(0).max() == 1 and inside.sum(1).max() == 1)] += 1
+    assert min(paths.values()) > 1000, paths
 
 
 def test_nothing_inside_the_gate_matches_nothing():

@@ -293,6 +293,12 @@ class Tracks(NamedTuple):
         return int(self.ids.shape[0])
 
     def take(self, idx: ArrayLike) -> Tracks:
+        """The tracks at ``idx`` (indices, or a mask of T). A mask that keeps every track
+        returns these tracks themselves: the agent never writes a track's arrays in place,
+        and most executions delete nothing."""
+        if (isinstance(idx, np.ndarray) and idx.dtype == bool and idx.shape == self.ids.shape
+                and idx.all()):
+            return self
         lg = TimerState(*(np.asarray(a)[idx] for a in self.logic))
         return Tracks(self.ids[idx], self.mean[idx], self.cov[idx], lg, self.bz[idx],
                       self.bt[idx], self.bsensor[idx], self.bsigma[idx], self.seen[idx])

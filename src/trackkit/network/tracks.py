@@ -111,6 +111,11 @@ def matches_within(S: Array, gate: float) -> Matches:
     # a pair outside the gate costs more than any set of pairs inside it, so the optimum
     # takes the most pairs inside first; the outside ones are dropped afterwards
     big = 1.0 + gate * min(S.shape)
+    if inside.sum(0).max() == 1 and inside.sum(1).max() == 1:
+        # the usual case, no two pairs inside share a track: the optimum holds them all
+        # (leaving one out costs big, more than all of them together), in rows' order
+        rows, cols = np.nonzero(inside)
+        return Matches(rows, cols, S[rows, cols])
     rows, cols = linear_sum_assignment(np.where(inside, S, big))
     keep = inside[rows, cols]
     return Matches(rows[keep].astype(np.intp), cols[keep].astype(np.intp), S[rows[keep],

@@ -303,9 +303,10 @@ def target_truth(x0: ArrayLike, times: ArrayLike, q: float = 0.0,
     out = np.empty((R, K, Nt, 4))
     out[:, 0] = x0
     dts = np.diff(t, axis=-1)
+    # every step's F(dt) at once, (R, K - 1, 1, 4, 4): one step per run, shared by its targets
+    F = cv.jacobian(x0, dts[:, :, None])
     for k in range(K - 1):
-        dt = dts[:, k, None]  # (R, 1): one step per run, shared by its targets
-        out[:, k + 1] = cv.f(out[:, k], dt)
+        out[:, k + 1] = np.einsum("...ij,...j->...i", F[:, k], out[:, k])
         if q > 0:
             out[:, k + 1] += np.einsum("rij,rtj->rti", cv_noise_factor(q, dts[:, k]), w[:, k])
     return out
